@@ -1,0 +1,62 @@
+"""Typed configurations, and their field docstrings as `--help` text."""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import inspect
+from dataclasses import dataclass
+from functools import cache
+
+VARIANTS = ("auto", "cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    """How a scene is rendered; every field changes pixels, so all enter the cache key."""
+
+    width: int = 640
+    """Image width in pixels."""
+    height: int = 480
+    """Image height in pixels."""
+    spp: int = 25
+    """Samples per pixel (multi-jittered) for the path-traced image and the ground-truth
+    layers, which come from the same pass."""
+    max_depth: int = 3
+    """Longest light path the path tracer follows (3 = direct light and one bounce)."""
+    variant: str = "auto"
+    """Mitsuba variant: auto (cuda_ad_rgb if a GPU renders, else llvm_ad_rgb if a probe
+    renders, else scalar_rgb), or one of them by name."""
+
+    def validate(self) -> RenderConfig:
+        from bench import BenchError
+
+        for name in ("width", "height", "spp", "max_depth"):
+            if getattr(self, name) <= 0:
+                raise BenchError(f"{name} must be positive, got {getattr(self, name)}")
+        if self.variant not in VARIANTS:
+            raise BenchError(f"unknown variant {self.variant!r}; valid: {', '.join(VARIANTS)}")
+        return self
+
+
+QUICK_RENDER = RenderConfig(width=160, height=120, spp=16, max_depth=2)
+"""The tiny render of `--quick` runs and of the tests."""
+
+
+@cache
+def field_docs(cls: type) -> dict[str, str]:
+    """The docstring written under each field of a dataclass, keyed by field name."""
+    docs: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        if not dataclasses.is_dataclass(klass):
+            continue
+        body = ast.parse(inspect.cleandoc("\n" + inspect.getsource(klass))).body[0].body
+        for node, nxt in zip(body, body[1:]):
+            if (
+                isinstance(node, ast.AnnAssign)
+                and isinstance(node.target, ast.Name)
+                and isinstance(nxt, ast.Expr)
+                and isinstance(nxt.value, ast.Constant)
+            ):
+                docs[node.target.id] = " ".join(str(nxt.value.value).split())
+    return docs

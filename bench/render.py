@@ -1,0 +1,221 @@
+"""The render stage: a scene description to a cached `renders/` entry, through Mitsuba.
+
+This is the only module that talks to Mitsuba, and `mitsuba_sensor` is the only place
+where the OpenCV camera convention is converted to Mitsuba's (x left, y up, z forward).
+One render per view yields the path-traced image and the ground-truth layers (an `aov`
+integrator around `path`, box filter).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from importlib.metadata import version
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from bench import cache, scene, scenes, shapes, textures
+from bench.camera import Camera, write_colmap_rig
+from bench.config import RenderConfig
+from bench.scene import N_VIEWS, SceneDescription, SceneSpec, build_scene, load_spec
+from bench.variant import resolve_variant
+
+MITSUBA_FROM_OPENCV = np.diag([-1.0, -1.0, 1.0])
+AOVS = "dd:depth,pp:position,nn:sh_normal,si:shape_index"
+GT_LAYERS = ("range", "z", "position", "normal", "shape_index")
+
+
+def _mi():
+    import mitsuba as mi
+
+    return mi
+
+
+def mitsuba_sensor(cam: Camera, spp: int) -> dict:
+    """The Mitsuba perspective sensor of an OpenCV camera (centred principal point, fx = fy)."""
+    if cam.fx != cam.fy or (cam.cx, cam.cy) != (cam.width / 2, cam.height / 2):
+        raise ValueError("the Mitsuba sensor needs fx == fy and a centred principal point")
+    to_world = np.eye(4)
+    to_world[:3, :3] = cam.R.T @ MITSUBA_FROM_OPENCV
+    to_world[:3, 3] = cam.center
+    return {
+        "type": "perspective",
+        "fov_axis": "x",
+        "fov": math.degrees(2 * math.atan(cam.width / (2 * cam.fx))),
+        "to_world": _mi().ScalarTransform4f(to_world),
+        "near_clip": 0.01,
+        "far_clip": 1000.0,
+        "film": {
+            "type": "hdrfilm",
+            "width": cam.width,
+            "height": cam.height,
+            "rfilter": {"type": "box"},
+            "pixel_format": "rgb",
+        },
+        "sampler": {"type": "multijitter", "sample_count": spp},
+    }
+
+
+def _mitsuba_mesh(m: scene.Mesh, view: int):
+    mi = _mi()
+    if m.material.texture is not None:
+        albedo = {"type": "bitmap", "data": mi.TensorXf(m.material.texture), "raw": True}
+    else:
+        albedo = {"type": "rgb", "value": list(m.material.color)}
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict(
+        {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": albedo}}
+    )
+    if m.material.emission is not None:
+        props["emitter"] = mi.load_dict(
+            {"type": "area", "radiance": {"type": "rgb", "value": list(m.material.emission)}}
+        )
+    mesh = mi.Mesh(m.name, len(m.vertices), len(m.faces), props=props, has_vertex_texcoords=True)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = mi.Float(np.ravel(m.vertices_in_view(view)).astype(np.float32))
+    params["faces"] = mi.UInt32(np.ravel(m.faces).astype(np.uint32))
+    params["vertex_texcoords"] = mi.Float(np.ravel(m.uv).astype(np.float32))
+    params.update()
+    return mesh
+
+
+def mitsuba_scene_dict(desc: SceneDescription, view: int, cfg: RenderConfig) -> dict:
+    """The Mitsuba scene dictionary of one view (geometry may move between views)."""
+    d = {
+        "type": "scene",
+        "integrator": {
+            "type": "aov",
+            "aovs": AOVS,
+            "image": {"type": "path", "max_depth": cfg.max_depth},
+        },
+        "sensor": mitsuba_sensor(desc.cameras[view], cfg.spp),
+    }
+    for m in desc.meshes:
+        d[m.name] = _mitsuba_mesh(m, view)
+    if desc.sun is not None:
+        d["sun"] = {
+            "type": "directional",
+            "direction": list(desc.sun["direction"]),
+            "irradiance": {"type": "rgb", "value": list(desc.sun["irradiance"])},
+        }
+    return d
+
+
+def split_layers(img: np.ndarray, cam: Camera) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Split the 11-channel AOV render into linear RGB and the ground-truth layers."""
+    if img.shape[-1] != 11:
+        raise RuntimeError(f"expected 11 channels from the AOV integrator, got {img.shape[-1]}")
+    hit = img[..., 3] > 0
+    pos = np.where(hit[..., None], img[..., 4:7], np.nan)
+    normal = img[..., 7:10]
+    normal = normal / np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-12)
+    gt = {
+        "range": np.linalg.norm(pos - cam.center, axis=-1),
+        "z": cam.to_camera(pos.reshape(-1, 3))[:, 2].reshape(pos.shape[:2]),
+        "position": pos,
+        "normal": np.where(hit[..., None], normal, np.nan),
+        "shape_index": np.where(hit, img[..., 10], -1.0),
+    }
+    return img[..., :3], {k: v.astype(np.float32) for k, v in gt.items()}
+
+
+def srgb8(linear: np.ndarray) -> np.ndarray:
+    """Linear RGB to 8-bit sRGB."""
+    x = np.clip(linear, 0, 1)
+    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return (s * 255 + 0.5).astype(np.uint8)
+
+
+def render_view(desc: SceneDescription, view: int, cfg: RenderConfig, variant: str):
+    """Path-trace one view: (linear RGB, ground-truth layers, shape names by shape index)."""
+    mi = _mi()
+    mi.set_variant(variant)
+    sc = mi.load_dict(mitsuba_scene_dict(desc, view, cfg))
+    img = np.array(mi.render(sc, seed=desc.seed * 1000 + view))
+    rgb, gt = split_layers(img, desc.cameras[view])
+    return rgb, gt, [s.id() for s in sc.shapes()]
+
+
+def render_key(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -> str:
+    """Hash of everything that changes pixels: scene, seed, rig, settings, code, renderer."""
+    code = cache.source_hash(
+        scene, scenes, shapes, textures, sys.modules[__name__], sys.modules["bench.camera"]
+    )
+    return cache.content_key(
+        {
+            "scene": spec.name,
+            "params": spec.params,
+            "seed": seed,
+            "width": cfg.width,
+            "height": cfg.height,
+            "spp": cfg.spp,
+            "max_depth": cfg.max_depth,
+            "variant": variant,
+            "code": code,
+            "mitsuba": version("mitsuba"),
+            "drjit": version("drjit"),
+        }
+    )
+
+
+def log(msg: str) -> None:
+    print(f"bench: {msg}", file=sys.stderr, flush=True)
+
+
+def render_scene(
+    name: str, seed: int, cfg: RenderConfig, renders_dir: Path, force: bool = False
+) -> Path:
+    """The cache entry of (scene, seed, settings), rendered only if missing or damaged."""
+    cfg.validate()
+    spec = load_spec(name)
+    renders_dir = Path(renders_dir)
+    variant, why = resolve_variant(cfg.variant, renders_dir)
+    log(why)
+    entry = renders_dir / f"{name}-s{seed}-{render_key(spec, seed, cfg, variant)}"
+    with cache.locked(entry):
+        problem = cache.entry_problem(entry) if entry.exists() else None
+        if entry.exists() and problem is None and not force:
+            return entry
+        if problem:
+            log(f"damaged cache entry {entry.name} ({problem}); rendering it again")
+        desc = build_scene(spec, seed, cfg.width, cfg.height)
+        with cache.atomic_dir(entry) as tmp:
+            seconds, names = [], None
+            for v in range(N_VIEWS):
+                t0 = time.perf_counter()
+                rgb, gt, names = render_view(desc, v, cfg, variant)
+                cv2.imwrite(str(tmp / f"view_{v:02d}.png"), srgb8(rgb)[..., ::-1])
+                np.savez(tmp / f"gt_{v:02d}.npz", **gt)
+                seconds.append(time.perf_counter() - t0)
+                log(
+                    f"rendered {name} seed {seed} view {v + 1}/{N_VIEWS} in {seconds[-1]:.1f} s ({variant})"
+                )
+            write_colmap_rig(desc.cameras, tmp, [f"view_{v:02d}.png" for v in range(N_VIEWS)])
+            cache.write_meta(
+                tmp,
+                {
+                    "scene": name,
+                    "seed": seed,
+                    "params": spec.params,
+                    "width": cfg.width,
+                    "height": cfg.height,
+                    "spp": cfg.spp,
+                    "max_depth": cfg.max_depth,
+                    "variant": variant,
+                    "versions": {"mitsuba": version("mitsuba"), "drjit": version("drjit")},
+                    "seconds_per_view": seconds,
+                    "shape_names": names,
+                    "gt_layers": {
+                        k: "float32; NaN (shape_index -1) where the pixel saw nothing"
+                        for k in GT_LAYERS
+                    },
+                    "cameras": [
+                        {"K": c.K.tolist(), "R_cam_from_world": c.R.tolist(), "t": c.t.tolist()}
+                        for c in desc.cameras
+                    ],
+                },
+            )
+    return entry

@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Idempotent set-up: a virtual environment in .venv with the package installed,
+# and (where the machine allows it) a libLLVM that Mitsuba's LLVM variant can use.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+# Mitsuba's LLVM variant aborts with libLLVM 15/16 and is off with 14; Debian's
+# libllvm19 works. Install it when we are root and apt-get exists; never fatal.
+if ! ls /usr/lib/*/libLLVM.so.19* /usr/lib/*/libLLVM-19.so >/dev/null 2>&1; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+        echo "setup: installing libllvm19 for Mitsuba's LLVM variant"
+        (apt-get install -y -q libllvm19 >/dev/null 2>&1 \
+            || (apt-get update -q >/dev/null 2>&1 && apt-get install -y -q libllvm19 >/dev/null 2>&1)) \
+            || echo "setup: could not install libllvm19; rendering will fall back to scalar_rgb"
+    else
+        echo "setup: libLLVM 19 not found and cannot install it here; rendering may use scalar_rgb"
+    fi
+fi
+
+PY=${PYTHON:-python3}
+[ -x .venv/bin/python ] || "$PY" -m venv .venv
+stamp=.venv/.bench-installed
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+    echo "setup: installing the package and its dependencies into .venv"
+    .venv/bin/python -m pip install -q --disable-pip-version-check -e '.[test]'
+    touch "$stamp"
+fi

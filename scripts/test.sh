@@ -1,0 +1,8 @@
+#!/usr/bin/env bash
+# Set everything up, check lint and format, then run the test suite.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+.venv/bin/ruff check bench tests
+.venv/bin/ruff format --check bench tests
+exec .venv/bin/python -m pytest "$@"

@@ -1,0 +1,31 @@
+"""Shared fixtures: tiny real renders (real Mitsuba path tracing, few pixels and samples)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from bench.config import RenderConfig
+
+TINY = RenderConfig(width=96, height=72, spp=16, max_depth=2)
+
+
+@pytest.fixture(scope="session")
+def renders_dir(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("renders")
+
+
+@pytest.fixture(scope="session")
+def tiny_entry(renders_dir):
+    """Render (once per session) a tiny entry of a scene and seed; returns its directory."""
+    from bench.render import render_scene
+
+    made: dict[tuple[str, int], Path] = {}
+
+    def get(scene: str, seed: int = 0) -> Path:
+        if (scene, seed) not in made:
+            made[scene, seed] = render_scene(scene, seed, TINY, renders_dir)
+        return made[scene, seed]
+
+    return get

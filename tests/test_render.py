@@ -1,0 +1,212 @@
+"""The render stage: camera convention, ground truth, determinism, cache, variant choice."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from bench import BenchError, render, variant
+from bench.camera import look_at, read_colmap_rig
+from bench.cli import main
+from bench.scene import build_scene, load_spec, scene_names
+from tests.conftest import TINY
+
+
+@pytest.mark.parametrize("scene", scene_names())
+def test_ground_truth_projects_onto_its_pixels(tiny_entry, scene):
+    entry = tiny_entry(scene)
+    cams = read_colmap_rig(entry)
+    assert len(cams) == 6
+    for v, cam in enumerate(cams):
+        gt = np.load(entry / f"gt_{v:02d}.npz")
+        si = gt["shape_index"]
+        interior = (si >= 0) & (si == np.round(si))  # one surface over the whole pixel
+        vv, uu = np.nonzero(interior)
+        uv, z = cam.project(gt["position"][vv, uu].astype(float))
+        centres = np.stack([uu + 0.5, vv + 0.5], 1)
+        err = np.linalg.norm(uv - centres, axis=1)
+        assert interior.mean() > 0.5
+        assert np.median(err) < 0.1, f"view {v}: median reprojection error {np.median(err):.3f} px"
+        # range and z-depth agree with the exported intrinsics: range / z = |K^-1 (u, v, 1)|
+        ray = np.stack([(centres[:, 0] - cam.cx) / cam.fx, (centres[:, 1] - cam.cy) / cam.fy], 1)
+        expect = np.sqrt(1 + (ray**2).sum(1))
+        ratio = gt["range"][vv, uu] / gt["z"][vv, uu]
+        assert np.median(np.abs(ratio / expect - 1)) < 2e-3
+        np.testing.assert_allclose(z, gt["z"][vv, uu], rtol=1e-4)
+
+
+def test_mitsuba_sensor_is_the_only_conversion():
+    cam = look_at((1.0, -5.0, 2.0), (0.0, 0.0, 1.0), width=64, height=48, fov_x_deg=50)
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    sensor = mi.load_dict(render.mitsuba_sensor(cam, 1))
+    M = np.array(sensor.world_transform().matrix)
+    np.testing.assert_allclose(M[:3, 3], cam.center, atol=1e-5)
+    # Mitsuba looks down its +z, which must be the OpenCV camera's +z (forward)
+    np.testing.assert_allclose(M[:3, 2], cam.R[2], atol=1e-5)
+
+
+@pytest.mark.parametrize("scene", scene_names())
+def test_same_seed_same_scene_other_seed_differs(scene):
+    spec = load_spec(scene)
+    a, b, c = (build_scene(spec, s, 64, 48) for s in (3, 3, 4))
+
+    def fingerprint(d):
+        return [
+            (
+                m.name,
+                m.vertices.tobytes(),
+                None if m.material.texture is None else m.material.texture.tobytes(),
+            )
+            for m in d.meshes
+        ]
+
+    assert fingerprint(a) == fingerprint(b)
+    assert fingerprint(a) != fingerprint(c)
+
+
+def test_rendering_is_deterministic(tmp_path):
+    a = render.render_scene("table", 1, TINY, tmp_path / "a")
+    b = render.render_scene("table", 1, TINY, tmp_path / "b")
+    assert a.name == b.name
+    for v in (0, 5):
+        assert np.array_equal(
+            cv2.imread(str(a / f"view_{v:02d}.png")), cv2.imread(str(b / f"view_{v:02d}.png"))
+        )
+
+
+@pytest.fixture
+def counted(monkeypatch):
+    calls = []
+    real = render.render_view
+
+    def wrapper(desc, view, cfg, var):
+        calls.append(view)
+        return real(desc, view, cfg, var)
+
+    monkeypatch.setattr(render, "render_view", wrapper)
+    return calls
+
+
+def test_cache_hit_renders_nothing(tiny_entry, renders_dir, counted):
+    entry = tiny_entry("table")
+    assert render.render_scene("table", 0, TINY, renders_dir) == entry
+    assert counted == []
+
+
+def test_damaged_entry_is_detected_and_rendered_again(tmp_path, counted, capsys):
+    entry = render.render_scene("table", 2, TINY, tmp_path)
+    assert len(counted) == 6
+    gt = entry / "gt_03.npz"
+    gt.write_bytes(gt.read_bytes()[:100])  # truncated
+    assert render.render_scene("table", 2, TINY, tmp_path) == entry
+    assert len(counted) == 12 and "damaged cache entry" in capsys.readouterr().err
+    (entry / "view_01.png").unlink()
+    render.render_scene("table", 2, TINY, tmp_path)
+    assert len(counted) == 18
+    np.load(entry / "gt_03.npz")["position"]  # whole again
+    (entry / "meta.json").write_text("{not json")
+    render.render_scene("table", 2, TINY, tmp_path)
+    assert len(counted) == 24 and json.loads((entry / "meta.json").read_text())["seed"] == 2
+
+
+def test_interrupted_render_leaves_no_entry(tmp_path, monkeypatch):
+    real = render.render_view
+
+    def dies_at_view_3(desc, view, cfg, var):
+        if view == 3:
+            raise KeyboardInterrupt
+        return real(desc, view, cfg, var)
+
+    monkeypatch.setattr(render, "render_view", dies_at_view_3)
+    with pytest.raises(KeyboardInterrupt):
+        render.render_scene("table", 5, TINY, tmp_path)
+    assert [p.name for p in tmp_path.iterdir() if not p.name.startswith(".")] == []
+    assert not list(tmp_path.glob(".tmp-*"))
+
+
+def test_two_processes_rendering_one_entry(tmp_path):
+    cmd = [
+        sys.executable,
+        "-m",
+        "bench.cli",
+        "render",
+        "table",
+        "--seed",
+        "6",
+        "--renders",
+        str(tmp_path),
+    ]
+    cmd += ["--width", "48", "--height", "36", "--spp", "4", "--max-depth", "2"]
+    procs = [
+        subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        for _ in range(2)
+    ]
+    outs = [p.communicate(timeout=300) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0]
+    assert outs[0][0] == outs[1][0]  # the same entry
+    assert sum(err.count("rendered table") for _, err in outs) == 6  # rendered once
+    from pathlib import Path
+
+    from bench.cache import entry_problem
+
+    assert entry_problem(Path(outs[0][0].strip())) is None
+
+
+def test_variant_probe_abort_falls_back_to_scalar(tmp_path, monkeypatch):
+    monkeypatch.setattr(variant, "PROBE_CODE", "import os; os.abort()")
+    monkeypatch.setattr(variant, "_gpu_present", lambda: False)
+    chosen, why = variant.resolve_variant("auto", tmp_path)
+    assert chosen == "scalar_rgb" and "fallback" in why and "\n" not in why
+    with pytest.raises(BenchError, match="does not render here"):
+        variant.resolve_variant("llvm_ad_rgb", tmp_path)
+    # the answer is remembered: a second call does not probe again
+    monkeypatch.setattr(variant, "probe", lambda v: pytest.fail("probed twice"))
+    assert variant.resolve_variant("auto", tmp_path)[0] == "scalar_rgb"
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["render", "nope"], "unknown scene 'nope'; valid: "),
+        (["render", "table", "--spp", "0"], "spp must be positive"),
+        (["render", "table", "--width", "-4"], "width must be positive"),
+        (["render", "table", "--variant", "optix"], "invalid choice: 'optix'"),
+    ],
+)
+def test_cli_bad_input_is_one_clear_line(argv, message, tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        sys.exit(main([*argv, "--renders", str(tmp_path / "r")]))
+    assert e.value.code != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+    assert not (tmp_path / "r").exists() or not any((tmp_path / "r").glob("table-*"))
+
+
+def test_cli_unwritable_output_directory(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    assert (
+        main(
+            [
+                "render",
+                "table",
+                "--width",
+                "8",
+                "--height",
+                "8",
+                "--spp",
+                "1",
+                "--renders",
+                str(blocker / "r"),
+            ]
+        )
+        == 2
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("bench: error: cannot write to")
