@@ -75,9 +75,12 @@ def _mitsuba_mesh(m: scene.Mesh, view: int):
         )
     mesh = mi.Mesh(m.name, len(m.vertices), len(m.faces), props=props, has_vertex_texcoords=True)
     params = mi.traverse(mesh)
-    params["vertex_positions"] = mi.Float(np.ravel(m.vertices_in_view(view)).astype(np.float32))
-    params["faces"] = mi.UInt32(np.ravel(m.faces).astype(np.uint32))
-    params["vertex_texcoords"] = mi.Float(np.ravel(m.uv).astype(np.float32))
+    for key, values in (
+        ("vertex_positions", m.vertices_in_view(view).astype(np.float32)),
+        ("faces", m.faces.astype(np.uint32)),
+        ("vertex_texcoords", m.uv.astype(np.float32)),
+    ):
+        params[key] = type(params[key])(np.ravel(values))  # the variant's own flat array type
     params.update()
     return mesh
 

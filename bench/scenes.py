@@ -71,7 +71,7 @@ def table(p: dict, rng: np.random.Generator, width: int, height: int):
     floor = textures.tint(
         textures.noise(rng, 256, (2, 8, 64)), (0.25, 0.18, 0.12), (0.45, 0.33, 0.22)
     )
-    meshes = _room(rng, 20.0, 7.0, p["light"], wall, floor)
+    meshes = _room(rng, 16.0, 7.0, p["light"], wall, floor)
     wood = textures.tint(
         textures.noise(rng, 512, (3, 12, 96, 256)), (0.35, 0.2, 0.1), (0.6, 0.4, 0.22)
     )

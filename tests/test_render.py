@@ -210,3 +210,12 @@ def test_cli_unwritable_output_directory(tmp_path, capsys):
     )
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("bench: error: cannot write to")
+
+
+def test_scalar_fallback_renders_the_same_layout(tmp_path):
+    cfg = type(TINY)(width=32, height=24, spp=4, max_depth=2, variant="scalar_rgb")
+    entry = render.render_scene("vegetation", 0, cfg, tmp_path)
+    meta = json.loads((entry / "meta.json").read_text())
+    assert meta["variant"] == "scalar_rgb"
+    gt = np.load(entry / "gt_00.npz")
+    assert gt["position"].shape == (24, 32, 3) and np.isfinite(gt["range"]).mean() > 0.9

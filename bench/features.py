@@ -1,0 +1,100 @@
+"""The candidate pool: one set of keypoints and descriptors per view, shared by all policies.
+
+Keypoints are stored in COLMAP's pixel convention (pixel (0, 0)'s centre at (0.5, 0.5));
+OpenCV's keypoints have it at (0, 0), so 0.5 is added once, here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from bench import BenchError
+from bench.views import View
+
+DETECTORS = ("sift", "orb", "akaze")
+
+
+@dataclass(frozen=True)
+class DetectorConfig:
+    """The detector that builds every view's candidate pool."""
+
+    detector: str = "sift"
+    """Keypoint detector and descriptor: sift, orb or akaze."""
+    sift_contrast: float = 0.005
+    """SIFT contrast threshold (OpenCV's default is 0.04; low, so that the pool is several
+    times the budget even on the weakly textured corridor)."""
+    orb_features: int = 5000
+    """ORB: number of keypoints to keep."""
+    akaze_threshold: float = 0.0002
+    """AKAZE detector response threshold."""
+
+    def validate(self) -> DetectorConfig:
+        if self.detector not in DETECTORS:
+            raise BenchError(f"unknown detector {self.detector!r}; valid: {', '.join(DETECTORS)}")
+        return self
+
+    def create(self):
+        if self.detector == "sift":
+            return cv2.SIFT_create(contrastThreshold=self.sift_contrast)
+        if self.detector == "orb":
+            return cv2.ORB_create(nfeatures=self.orb_features)
+        akaze = getattr(cv2, "AKAZE_create", None) or cv2.xfeatures2d.AKAZE_create  # OpenCV 5: contrib
+        return akaze(threshold=self.akaze_threshold)
+
+    @property
+    def binary(self) -> bool:
+        """Whether descriptors are binary strings (Hamming distance)."""
+        return self.detector in ("orb", "akaze")
+
+
+@dataclass
+class Candidates:
+    """The candidate keypoints of one view."""
+
+    xy: np.ndarray
+    """(N, 2) float, COLMAP pixel convention."""
+    size: np.ndarray
+    """(N,) keypoint diameter in pixels (the detector's scale)."""
+    angle: np.ndarray
+    response: np.ndarray
+    descriptors: np.ndarray
+    """(N, D): float32 unit-length for SIFT, uint8 bit strings for ORB/AKAZE."""
+
+    def __len__(self) -> int:
+        return len(self.xy)
+
+    def subset(self, idx: np.ndarray) -> Candidates:
+        return Candidates(
+            *(getattr(self, f)[idx] for f in ("xy", "size", "angle", "response", "descriptors"))
+        )
+
+
+def keypoint_arrays(kps) -> tuple[np.ndarray, ...]:
+    xy = np.array([k.pt for k in kps], float).reshape(-1, 2) + 0.5
+    return (
+        xy,
+        np.array([k.size for k in kps], float),
+        np.array([k.angle for k in kps], float),
+        np.array([k.response for k in kps], float),
+    )
+
+
+def detect(view: View, cfg: DetectorConfig) -> Candidates:
+    """Detect and describe one view's candidates."""
+    kps, desc = cfg.create().detectAndCompute(view.gray, None)
+    xy, size, angle, response = keypoint_arrays(kps)
+    if desc is None:
+        desc = np.zeros((0, 32 if cfg.binary else 128), np.uint8 if cfg.binary else np.float32)
+    if not cfg.binary:
+        desc = desc / np.maximum(np.linalg.norm(desc, axis=1, keepdims=True), 1e-12)
+    return Candidates(
+        xy, size, angle, response, desc.astype(np.uint8 if cfg.binary else np.float32)
+    )
+
+
+def detect_points(gray: np.ndarray, cfg: DetectorConfig) -> np.ndarray:
+    """Keypoint locations only (COLMAP convention), for re-detection under perturbations."""
+    return keypoint_arrays(cfg.create().detect(gray, None))[0]

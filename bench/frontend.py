@@ -1,0 +1,77 @@
+"""The front-end stage: a render entry's views to candidate pools with their five signals.
+
+Cached (npz beside the render cache) by the render entry, the detector and signal settings
+and the code that computes them; the seconds measured when it was computed are stored with
+it, so reported front-end times do not depend on whether the cache was warm.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from bench import BenchError, features, signals
+from bench.cache import content_key, source_hash
+from bench.features import Candidates, DetectorConfig
+from bench.signals import SIGNALS, SignalConfig, Signals, compute_signals
+from bench.views import View, load_views
+
+_CAND = [f.name for f in fields(Candidates)]
+
+
+@dataclass
+class FrontEnd:
+    """Everything the policies and the back end may see of one render entry."""
+
+    views: list[View]
+    pools: list[Candidates]
+    signals: list[Signals]
+    seconds: dict[str, float]
+    """Measured seconds over the six views: 'detect' and one per signal."""
+    cached: bool
+
+
+def front_end(entry: Path, det: DetectorConfig, sig: SignalConfig, cache_dir: Path) -> FrontEnd:
+    """Candidates and signals of every view of `entry`, computed or read from the cache."""
+    entry = Path(entry)
+    views = load_views(entry)
+    key = content_key(
+        {
+            "entry": entry.name,
+            "detector": asdict(det),
+            "signals": asdict(sig),
+            "opencv": cv2.__version__,
+            "code": source_hash(features, signals),
+        }
+    )
+    path = Path(cache_dir) / f"{entry.name}-{det.detector}-{key}.npz"
+    if path.is_file():
+        try:
+            with np.load(path) as z:
+                pools = [Candidates(*(z[f"{f}_{v}"] for f in _CAND)) for v in range(len(views))]
+                sigs = [Signals(*(z[f"{s}_{v}"] for s in SIGNALS)) for v in range(len(views))]
+                seconds = {k: float(z[f"seconds_{k}"]) for k in ("detect", *SIGNALS)}
+            return FrontEnd(views, pools, sigs, seconds, cached=True)
+        except (OSError, ValueError, KeyError):
+            print(f"bench: damaged front-end cache {path.name}; computing it again")
+    t = time.perf_counter()
+    pools = [features.detect(v, det) for v in views]
+    seconds = {"detect": time.perf_counter() - t}
+    sigs, sig_seconds = compute_signals(views, pools, det, sig)
+    seconds.update(sig_seconds)
+    arrays = {f"{f}_{v}": getattr(c, f) for v, c in enumerate(pools) for f in _CAND}
+    arrays |= {f"{s}_{v}": getattr(g, s) for v, g in enumerate(sigs) for s in SIGNALS}
+    arrays |= {f"seconds_{k}": np.float64(s) for k, s in seconds.items()}
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
+        np.savez(tmp, **arrays)
+        tmp.replace(path)
+    except OSError as e:
+        raise BenchError(f"cannot write the front-end cache {path}: {e.strerror}") from e
+    return FrontEnd(views, pools, sigs, seconds, cached=False)

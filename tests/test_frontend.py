@@ -1,0 +1,243 @@
+"""The candidate pool, the five signals and the four policies (plus `all`)."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+import bench
+from bench import BenchError
+from bench.camera import look_at
+from bench.features import DetectorConfig, detect
+from bench.frontend import front_end
+from bench.policies import POLICIES, PolicyConfig, PolicyInput, select, tile_of
+from bench.signals import (
+    SIGNALS,
+    SignalConfig,
+    Signals,
+    _same_view_distances,
+    ambiguity,
+    distinctiveness,
+    parallax,
+)
+from bench.views import View
+
+BUDGET = 64
+
+
+@pytest.fixture(scope="module")
+def table_front(tiny_entry, tmp_path_factory):
+    from bench.render import render_scene
+    from tests.conftest import TINY
+
+    entry = render_scene(
+        "table",
+        0,
+        type(TINY)(width=320, height=240, spp=4, max_depth=2),
+        tiny_entry("table").parent,
+    )
+    fe = front_end(entry, DetectorConfig(), SignalConfig(), tmp_path_factory.mktemp("fe"))
+    fe.entry = entry
+    return fe
+
+
+def _inputs(fe):
+    return [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
+
+
+def test_pool_is_several_times_the_budget_and_in_colmap_convention(table_front):
+    for view, cand in zip(table_front.views, table_front.pools):
+        assert len(cand) > 3 * BUDGET
+        kps = cv2.SIFT_create(contrastThreshold=DetectorConfig().sift_contrast).detect(
+            view.gray, None
+        )
+        np.testing.assert_allclose(
+            np.sort(cand.xy[:, 0])[:5], np.sort([k.pt[0] + 0.5 for k in kps])[:5]
+        )
+        assert cand.descriptors.shape == (len(cand), 128)
+
+
+@pytest.mark.parametrize("detector", ["orb", "akaze"])
+def test_other_detectors_give_a_pool(table_front, detector):
+    cand = detect(table_front.views[0], DetectorConfig(detector=detector))
+    assert len(cand) > BUDGET and cand.descriptors.dtype == np.uint8
+
+
+def test_signals_are_in_unit_interval(table_front):
+    for cand, sig in zip(table_front.pools, table_front.signals):
+        for name in SIGNALS:
+            x = getattr(sig, name)
+            assert x.shape == (len(cand),) and np.all((x >= 0) & (x <= 1)), name
+            if name != "parallax":  # every candidate of the table arc has ample parallax
+                assert x.max() > x.min(), f"{name} does not discriminate"
+
+
+def test_front_end_cache_hit_gives_identical_arrays(table_front, tmp_path):
+    first = front_end(table_front.entry, DetectorConfig(), SignalConfig(), tmp_path)
+    again = front_end(table_front.entry, DetectorConfig(), SignalConfig(), tmp_path)
+    assert not first.cached and again.cached and again.seconds == first.seconds
+    for a, b in zip(first.signals, again.signals):
+        assert all(np.array_equal(getattr(a, s), getattr(b, s)) for s in SIGNALS)
+    assert np.array_equal(first.pools[2].descriptors, again.pools[2].descriptors)
+
+
+@pytest.mark.parametrize("name", list(POLICIES))
+def test_exact_budget_distinct_indices(table_front, name):
+    for inp in _inputs(table_front):
+        idx = select(name, inp, BUDGET, np.random.default_rng(0))
+        want = len(inp.candidates) if name == "all" else BUDGET
+        assert len(idx) == want == len(set(idx.tolist()))
+        small = select(name, inp, 10**6, np.random.default_rng(0))
+        assert len(small) == len(inp.candidates)  # budget above the pool: the whole pool
+
+
+@pytest.mark.parametrize("name", list(POLICIES))
+def test_deterministic_per_seed(table_front, name):
+    inp = _inputs(table_front)[1]
+    a, b = (select(name, inp, BUDGET, np.random.default_rng(7)) for _ in range(2))
+    assert np.array_equal(a, b)
+    if name == "random":
+        assert not np.array_equal(
+            np.sort(a), np.sort(select(name, inp, BUDGET, np.random.default_rng(8)))
+        )
+
+
+def test_grid_fills_every_tile_that_has_a_candidate(table_front):
+    cfg = PolicyConfig()
+    for inp in _inputs(table_front):
+        cam = inp.view.camera
+        tiles = tile_of(inp.candidates.xy, cam.width, cam.height, cfg.tiles)
+        idx = select("grid", inp, BUDGET, np.random.default_rng(0), cfg)
+        assert set(tiles[idx]) == set(tiles)
+
+
+def test_adaptive_never_exceeds_its_tile_cap(table_front):
+    cfg = PolicyConfig()
+    for inp in _inputs(table_front):
+        cam = inp.view.camera
+        tiles = tile_of(inp.candidates.xy, cam.width, cam.height, cfg.tiles)
+        idx = select("adaptive", inp, BUDGET, np.random.default_rng(0), cfg)
+        cap = int(np.ceil(cfg.cap_factor * BUDGET / len(np.unique(tiles))))
+        assert np.bincount(tiles[idx]).max() <= cap
+        # texture-only, for contrast, does concentrate somewhere beyond that cap
+    texture = select("texture", _inputs(table_front)[0], BUDGET, np.random.default_rng(0))
+    tiles0 = tile_of(table_front.pools[0].xy, 320, 240, cfg.tiles)
+    assert np.bincount(tiles0[texture]).max() > int(
+        np.ceil(cfg.cap_factor * BUDGET / len(np.unique(tiles0)))
+    )
+
+
+def _motif_image() -> tuple[np.ndarray, np.ndarray]:
+    """A noisy image with one motif repeated eight times and eight unique motifs."""
+    rng = np.random.default_rng(0)
+    img = (rng.normal(128, 3, (240, 480))).clip(0, 255).astype(np.uint8)
+    motif = (rng.random((24, 24)) * 255).astype(np.uint8)
+    centres = []
+    for k in range(16):
+        x, y = 40 + (k % 8) * 55, 60 if k < 8 else 180
+        patch = motif if k < 8 else (rng.random((24, 24)) * 255).astype(np.uint8)
+        img[y - 12 : y + 12, x - 12 : x + 12] = cv2.resize(
+            patch, (24, 24), interpolation=cv2.INTER_NEAREST
+        )
+        centres.append((x, y))
+    return cv2.GaussianBlur(img, (0, 0), 0.8), np.array(centres, float)
+
+
+def test_repeated_motif_is_ambiguous_unique_motif_is_distinctive():
+    img, centres = _motif_image()
+    cam = look_at((0, -7, 0), (0, 0, 0), width=480, height=240)
+    view = View(0, np.repeat(img[..., None], 3, 2), cam)
+    cand = detect(view, DetectorConfig(sift_contrast=0.02))
+    d, owner = (
+        np.linalg.norm(cand.xy[:, None] - centres[None] - 0.5, axis=2).min(1),
+        np.linalg.norm(cand.xy[:, None] - centres[None] - 0.5, axis=2).argmin(1),
+    )
+    near = d < 14
+    repeated, unique = near & (owner < 8), near & (owner >= 8)
+    assert repeated.sum() >= 8 and unique.sum() >= 8
+    D = _same_view_distances(cand)
+    a = ambiguity(D, [cand], 0, [cam], "sift", 7.0)
+    q = distinctiveness(D)
+    assert a[repeated].mean() > a[unique].mean() + 0.2
+    assert q[repeated].mean() < q[unique].mean() - 0.2
+    n = len(cand)
+    flat = np.full(n, 0.5)
+    sig = Signals(texture=flat, repeatability=flat, distinctiveness=q, ambiguity=a, parallax=flat)
+    k = int(unique.sum())
+    idx = select(
+        "adaptive",
+        PolicyInput(view, cand, sig),
+        k,
+        np.random.default_rng(0),
+        PolicyConfig(tiles=(1, 1)),
+    )
+    assert unique[idx].mean() > 0.75
+
+
+def test_parallax_is_low_near_the_epipole():
+    # two cameras, the second 1 unit straight ahead: the epipole is the image centre
+    a = look_at((0, 0, 0), (0, 10, 0), width=400, height=300)
+    b = look_at((0, 1, 0), (0, 11, 0), width=400, height=300)
+    xy = np.array([[200.5, 150.5], [210.5, 150.5], [260.5, 150.5], [330.5, 150.5]])
+    from bench.features import Candidates
+
+    cand = Candidates(xy, np.ones(4), np.zeros(4), np.ones(4), np.zeros((4, 128), np.float32))
+    p = parallax(cand, [a, b], 0, 7.0)
+    assert p[0] < 0.02 and np.all(np.diff(p) > 0)
+
+
+def test_bad_policy_input_is_a_clear_error(table_front):
+    inp = _inputs(table_front)[0]
+    with pytest.raises(
+        BenchError, match="unknown policy 'best'; valid: random, texture, grid, adaptive, all"
+    ):
+        select("best", inp, BUDGET, np.random.default_rng(0))
+    with pytest.raises(BenchError, match="budget must be positive"):
+        select("random", inp, 0, np.random.default_rng(0))
+    with pytest.raises(BenchError, match="weights must be five numbers"):
+        PolicyConfig(weights=(0.1, "x", 0, 0, 0)).validate()
+    with pytest.raises(BenchError, match="unknown detector 'surf'; valid: sift, orb, akaze"):
+        DetectorConfig(detector="surf").validate()
+
+
+FIREWALLED = ["views", "features", "signals", "policies", "frontend"]
+GROUND_TRUTH = {
+    "bench.evaluate",
+    "bench.groundtruth",
+    "bench.render",
+    "bench.scene",
+    "bench.scenes",
+}
+
+
+@pytest.mark.parametrize("module", FIREWALLED)
+def test_front_end_cannot_reach_ground_truth(module):
+    src = (Path(bench.__file__).parent / f"{module}.py").read_text()
+    imported = set()
+    for node in ast.walk(ast.parse(src)):
+        if isinstance(node, ast.Import):
+            imported |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            imported |= {node.module} | {f"{node.module}.{a.name}" for a in node.names}
+    assert not imported & GROUND_TRUTH, imported & GROUND_TRUTH
+    assert "gt_" not in src  # the ground-truth files of a render entry
+
+
+def test_policy_input_has_no_ground_truth_fields():
+    import dataclasses
+
+    from bench.features import Candidates
+
+    assert [f.name for f in dataclasses.fields(PolicyInput)] == ["view", "candidates", "signals"]
+    assert [f.name for f in dataclasses.fields(View)] == ["index", "image", "camera"]
+    assert [f.name for f in dataclasses.fields(Candidates)] == [
+        "xy",
+        "size",
+        "angle",
+        "response",
+        "descriptors",
+    ]

@@ -1,0 +1,86 @@
+"""Each scene type has the property the benchmark tests it for."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bench.camera import read_colmap_rig
+from bench.features import DetectorConfig, detect
+from bench.render import render_scene
+from bench.scene import build_scene, load_spec, scene_names
+from bench.signals import DUPLICATE_DISTANCE, _same_view_distances
+from bench.views import load_views
+from tests.conftest import TINY
+
+
+def test_all_four_scene_types_are_declared():
+    assert scene_names() == ["corridor", "facade", "table", "vegetation"]
+    for name in scene_names():
+        spec = load_spec(name)
+        assert spec.description and spec.params
+        assert set(spec.docs) == set(spec.params), f"{name}: every parameter is documented"
+
+
+@pytest.mark.parametrize("scene", scene_names())
+def test_median_camera_to_surface_distance_is_5_to_10_units(tiny_entry, scene):
+    entry = tiny_entry(scene)
+    ranges = np.concatenate([np.load(entry / f"gt_{v:02d}.npz")["range"].ravel() for v in range(6)])
+    assert 5 <= np.nanmedian(ranges) <= 10
+
+
+def _median_parallax_deg(entry) -> float:
+    cams = read_colmap_rig(entry)
+    angles = []
+    for v in range(5):
+        X = np.load(entry / f"gt_{v:02d}.npz")["position"].reshape(-1, 3)[::7]
+        X = X[np.isfinite(X).all(1)]
+        a, b = cams[v].center - X, cams[v + 1].center - X
+        cos = (a * b).sum(1) / np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1)
+        angles.append(np.degrees(np.arccos(np.clip(cos, -1, 1))))
+    return float(np.median(np.concatenate(angles)))
+
+
+def test_corridor_has_less_parallax_than_table(tiny_entry):
+    corridor, table = (
+        _median_parallax_deg(tiny_entry("corridor")),
+        _median_parallax_deg(tiny_entry("table")),
+    )
+    assert corridor < 0.8 * table, (corridor, table)
+
+
+@pytest.fixture(scope="module")
+def sift_entries(renders_dir):
+    """Facade and table at a size where SIFT has something to find."""
+    cfg = type(TINY)(width=320, height=240, spp=4, max_depth=2)
+    return {s: render_scene(s, 0, cfg, renders_dir) for s in ("facade", "table")}
+
+
+def _near_duplicate_fraction(entry) -> float:
+    fractions = []
+    for view in load_views(entry)[:3]:
+        D = _same_view_distances(detect(view, DetectorConfig()))
+        fractions.append(np.mean(D.min(1) < DUPLICATE_DISTANCE["sift"]))
+    return float(np.mean(fractions))
+
+
+def test_facade_descriptors_have_more_near_duplicates_than_table(sift_entries):
+    facade, table = (_near_duplicate_fraction(sift_entries[s]) for s in ("facade", "table"))
+    assert facade > table + 0.15, (facade, table)
+
+
+def test_wind_moves_leaves_between_views_and_not_the_ground():
+    spec = load_spec("vegetation")
+    windy = build_scene(spec, 0, 64, 48)
+    leaves = [m for m in windy.meshes if m.name.startswith("leaves")]
+    assert leaves and all(m.motion is not None for m in leaves)
+    moved = np.linalg.norm(leaves[0].vertices_in_view(1) - leaves[0].vertices_in_view(0), axis=1)
+    assert np.median(moved) > 0.5 * spec.params["wind"]
+    for m in windy.meshes:
+        if not m.name.startswith("leaves"):
+            assert np.array_equal(m.vertices_in_view(0), m.vertices_in_view(5)), m.name
+    still = build_scene(
+        type(spec)(spec.name, spec.description, {**spec.params, "wind": 0.0}), 0, 64, 48
+    )
+    for m in still.meshes:
+        assert np.array_equal(m.vertices_in_view(0), m.vertices_in_view(3))
