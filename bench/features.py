@@ -41,7 +41,9 @@ class DetectorConfig:
             return cv2.SIFT_create(contrastThreshold=self.sift_contrast)
         if self.detector == "orb":
             return cv2.ORB_create(nfeatures=self.orb_features)
-        akaze = getattr(cv2, "AKAZE_create", None) or cv2.xfeatures2d.AKAZE_create  # OpenCV 5: contrib
+        akaze = (
+            getattr(cv2, "AKAZE_create", None) or cv2.xfeatures2d.AKAZE_create
+        )  # OpenCV 5: contrib
         return akaze(threshold=self.akaze_threshold)
 
     @property

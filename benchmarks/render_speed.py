@@ -52,8 +52,14 @@ def main() -> None:
             cfg = RenderConfig(variant=variant)
             bare_seconds(a.scene, cfg, variant, 1)  # warm-up: kernel compilation, caches
             # interleaved, so that drift of the machine affects both alike
-            stage = (stage_seconds(a.scene, cfg, a.views, tmp) + stage_seconds(a.scene, cfg, a.views, tmp)) / 2
-            bare = (bare_seconds(a.scene, cfg, variant, a.views) + bare_seconds(a.scene, cfg, variant, a.views)) / 2
+            stage = (
+                stage_seconds(a.scene, cfg, a.views, tmp)
+                + stage_seconds(a.scene, cfg, a.views, tmp)
+            ) / 2
+            bare = (
+                bare_seconds(a.scene, cfg, variant, a.views)
+                + bare_seconds(a.scene, cfg, variant, a.views)
+            ) / 2
             print(
                 f"{a.scene} {variant}: stage {stage:.2f} s/view, bare mitsuba.render {bare:.2f} s/view, overhead {100 * (stage / bare - 1):+.1f}%"
             )

@@ -29,3 +29,21 @@ def tiny_entry(renders_dir):
         return made[scene, seed]
 
     return get
+
+
+MEDIUM = RenderConfig(width=320, height=240, spp=16, max_depth=2)
+"""Big enough for SIFT to find a few hundred candidates per view."""
+
+
+@pytest.fixture(scope="session")
+def medium_entry(renders_dir):
+    from bench.render import render_scene
+
+    made: dict[str, Path] = {}
+
+    def get(scene: str) -> Path:
+        if scene not in made:
+            made[scene] = render_scene(scene, 0, MEDIUM, renders_dir)
+        return made[scene]
+
+    return get

@@ -7,11 +7,9 @@ import pytest
 
 from bench.camera import read_colmap_rig
 from bench.features import DetectorConfig, detect
-from bench.render import render_scene
 from bench.scene import build_scene, load_spec, scene_names
 from bench.signals import DUPLICATE_DISTANCE, _same_view_distances
 from bench.views import load_views
-from tests.conftest import TINY
 
 
 def test_all_four_scene_types_are_declared():
@@ -50,10 +48,9 @@ def test_corridor_has_less_parallax_than_table(tiny_entry):
 
 
 @pytest.fixture(scope="module")
-def sift_entries(renders_dir):
+def sift_entries(medium_entry):
     """Facade and table at a size where SIFT has something to find."""
-    cfg = type(TINY)(width=320, height=240, spp=4, max_depth=2)
-    return {s: render_scene(s, 0, cfg, renders_dir) for s in ("facade", "table")}
+    return {s: medium_entry(s) for s in ("facade", "table")}
 
 
 def _near_duplicate_fraction(entry) -> float:

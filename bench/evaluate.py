@@ -1,0 +1,229 @@
+"""Evaluation against the rendered ground truth: the only stage that reads it.
+
+Metrics (DESIGN.md), for one run (scene, seed, policy, budget):
+
+* point error e(X) = min_s |X - s| over the ground-truth surface samples s (the world
+  positions of every single-surface pixel of all six views).
+* rmse = sqrt(mean_X e(X)^2) over all reconstructed points (outliers count);
+  median_error = median_X e(X).
+* ground-truth correspondence: candidate k of view i and candidate l of view j correspond
+  when P_k (the 3D point under k's pixel) is visible in j (in front, inside, and its depth
+  within 1% + 0.01 of view j's z-map there) and projects within 3 px of l, or the same
+  with i and j swapped. Candidates on occlusion edges (mixed pixels) have no P_k.
+* reconstructable points of a scene: connected components of the correspondence graph over
+  the whole candidate pool (each candidate linked to its nearest corresponding candidate in
+  each other view) that span at least two views. The same for every policy.
+* acc_completeness_pct@tau = 100 * #{X : e(X) < tau} / reconstructable points, for tau in
+  0.02, 0.05, 0.10 (the headline) and 0.20 scene units.
+* inlier_pct = 100 * verified matches / tentative matches, summed over all pairs.
+* match_precision_pct = 100 * ground-truth-correct verified matches / verified matches.
+* coverage_pct = 100 * mean over views of the share of the 16 x 12 image grid's cells that
+  hold at least one selected feature.
+* mean_track_length = mean number of views observing a point; mean_tri_angle_deg = mean
+  over points of the largest angle between two of its viewing rays.
+* runtime_proxy (thousands of elementary operations, deterministic) = scoring + matching
+  + robust, where scoring = sum_views N_pool * (signals the policy reads), matching =
+  sum_pairs n_i * n_j descriptor comparisons, robust = sum_pairs M_pair * T(w_pair) with
+  M the tentative matches, w the measured inlier ratio and T(w) = log(0.001) /
+  log(1 - w^5) the expected 5-point RANSAC iterations at 99.9% confidence, clipped
+  to COLMAP's RANSAC bounds [100, 10000].
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from itertools import combinations
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from bench.backend import Reconstruction, expected_ransac_iterations
+from bench.camera import Camera
+from bench.features import Candidates
+from bench.groundtruth import GroundTruth
+
+THRESHOLDS = (0.02, 0.05, 0.10, 0.20)
+CORRESPONDENCE_PX = 3.0
+COVERAGE_GRID = (16, 12)
+
+
+def point_error(X: np.ndarray, surface: cKDTree) -> np.ndarray:
+    """Distance from each point (N, 3) to the nearest ground-truth surface sample."""
+    return surface.query(X)[0] if len(X) else np.zeros(0)
+
+
+def rmse(errors: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(errors**2))) if len(errors) else math.nan
+
+
+def completeness_pct(errors: np.ndarray, reconstructable: int, tau: float) -> float:
+    return 100.0 * float(np.sum(errors < tau)) / reconstructable if reconstructable else math.nan
+
+
+def coverage_pct(
+    xy_per_view: list[np.ndarray], width: int, height: int, grid=COVERAGE_GRID
+) -> float:
+    shares = []
+    for xy in xy_per_view:
+        cx = np.clip((xy[:, 0] / width * grid[0]).astype(int), 0, grid[0] - 1)
+        cy = np.clip((xy[:, 1] / height * grid[1]).astype(int), 0, grid[1] - 1)
+        shares.append(len(set(zip(cx.tolist(), cy.tolist()))) / (grid[0] * grid[1]))
+    return 100.0 * float(np.mean(shares))
+
+
+def runtime_proxy(
+    pool_sizes, n_signals: int, selected_sizes, tentative, verified
+) -> dict[str, float]:
+    scoring = sum(pool_sizes) * n_signals
+    matching = sum(a * b for a, b in combinations(selected_sizes, 2))
+    robust = sum(m * expected_ransac_iterations(v / m) for m, v in zip(tentative, verified) if m)
+    parts = {
+        "runtime_scoring": scoring / 1e3,
+        "runtime_matching": matching / 1e3,
+        "runtime_robust": robust / 1e3,
+    }
+    return {"runtime_proxy": sum(parts.values()), **parts}
+
+
+def _visible(X: np.ndarray, cam: Camera, gt: GroundTruth) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels of X (N, 3) in `cam`, and whether X is visible there by the depth test."""
+    uv, z = cam.project(X)
+    ok = (
+        np.isfinite(uv).all(1)
+        & (z > 0)
+        & (uv[:, 0] >= 0)
+        & (uv[:, 0] < cam.width)
+        & (uv[:, 1] >= 0)
+        & (uv[:, 1] < cam.height)
+    )
+    col = np.clip(np.nan_to_num(uv[:, 0]), 0, cam.width - 1).astype(int)
+    row = np.clip(np.nan_to_num(uv[:, 1]), 0, cam.height - 1).astype(int)
+    zmap = gt.z[row, col]
+    ok &= np.isfinite(zmap) & (np.abs(zmap - z) < 0.01 * np.abs(z) + 0.01)
+    return uv, ok
+
+
+@dataclass
+class SceneTruth:
+    """Ground-truth structures of one render entry and candidate pool, shared by all runs."""
+
+    surface: cKDTree
+    cams: list[Camera]
+    gts: list[GroundTruth]
+    points: list[np.ndarray]
+    """Per view: the 3D point under each candidate (NaN on occlusion edges)."""
+    pool_xy: list[np.ndarray]
+    reconstructable: int
+
+    @staticmethod
+    def build(cams: list[Camera], gts: list[GroundTruth], pools: list[Candidates]) -> SceneTruth:
+        samples = np.concatenate([g.position[g.single_surface] for g in gts]).astype(np.float64)
+        points = []
+        for cam, gt, cand in zip(cams, gts, pools):
+            col = np.clip(cand.xy[:, 0].astype(int), 0, cam.width - 1)
+            row = np.clip(cand.xy[:, 1].astype(int), 0, cam.height - 1)
+            P = gt.position[row, col].astype(np.float64)
+            P[~gt.single_surface[row, col]] = np.nan
+            points.append(P)
+        truth = SceneTruth(cKDTree(samples), cams, gts, points, [c.xy for c in pools], 0)
+        truth.reconstructable = truth._count_reconstructable()
+        return truth
+
+    def correspondences(self, i: int, j: int, ki: np.ndarray, kj: np.ndarray) -> np.ndarray:
+        """Whether candidate ki[m] of view i and kj[m] of view j correspond (ground truth)."""
+
+        def one_way(a, b, ka, kb):
+            uv, ok = _visible(self.points[a][ka], self.cams[b], self.gts[b])
+            return ok & (np.linalg.norm(uv - self.pool_xy[b][kb], axis=1) <= CORRESPONDENCE_PX)
+
+        return one_way(i, j, ki, kj) | one_way(j, i, kj, ki)
+
+    def _count_reconstructable(self) -> int:
+        offsets = np.cumsum([0] + [len(p) for p in self.points])
+        rows, cols = [], []
+        for i, j in (
+            (i, j) for i in range(len(self.cams)) for j in range(len(self.cams)) if i != j
+        ):
+            if not len(self.pool_xy[j]) or not len(self.points[i]):
+                continue
+            uv, ok = _visible(np.nan_to_num(self.points[i]), self.cams[j], self.gts[j])
+            ok &= np.isfinite(self.points[i]).all(1)
+            d, nn = cKDTree(self.pool_xy[j]).query(np.where(ok[:, None], uv, 0))
+            link = ok & (d <= CORRESPONDENCE_PX)
+            rows.append(offsets[i] + np.flatnonzero(link))
+            cols.append(offsets[j] + nn[link])
+        n = offsets[-1]
+        r, c = (np.concatenate(x) if x else np.zeros(0, int) for x in (rows, cols))
+        _, label = connected_components(
+            coo_matrix((np.ones(len(r)), (r, c)), shape=(n, n)), directed=False
+        )
+        view_of = np.repeat(np.arange(len(self.points)), np.diff(offsets))
+        views_per_component = np.zeros(label.max() + 1 if n else 0, int)
+        for v in range(len(self.points)):
+            views_per_component[np.unique(label[view_of == v])] += 1
+        return int(np.sum(views_per_component >= 2))
+
+
+def evaluate(
+    truth: SceneTruth,
+    pools: list[Candidates],
+    selections: list[np.ndarray],
+    rec: Reconstruction,
+    n_signals: int,
+) -> dict[str, float]:
+    """Every metric of one run (see the module docstring)."""
+    row: dict[str, float] = {"reconstructable": truth.reconstructable}
+    tentative = [len(p.tentative) for p in rec.pairs]
+    verified = [len(p.verified) for p in rec.pairs]
+    row["tentative_matches"], row["verified_matches"] = sum(tentative), sum(verified)
+    row["inlier_pct"] = 100.0 * sum(verified) / sum(tentative) if sum(tentative) else math.nan
+    correct = sum(
+        int(
+            truth.correspondences(
+                p.i, p.j, selections[p.i][p.verified[:, 0]], selections[p.j][p.verified[:, 1]]
+            ).sum()
+        )
+        for p in rec.pairs
+        if len(p.verified)
+    )
+    row["match_precision_pct"] = 100.0 * correct / sum(verified) if sum(verified) else math.nan
+    cam = truth.cams[0]
+    row["coverage_pct"] = coverage_pct(
+        [pools[v].xy[s] for v, s in enumerate(selections)], cam.width, cam.height
+    )
+    row |= runtime_proxy(
+        [len(p) for p in pools], n_signals, [len(s) for s in selections], tentative, verified
+    )
+    model = rec.model
+    pts = list(model.points3D.values()) if model is not None else []
+    X = np.array([p.xyz for p in pts]).reshape(-1, 3)
+    e = point_error(X, truth.surface)
+    row["points"] = len(pts)
+    row["rmse"] = rmse(e)
+    row["median_error"] = float(np.median(e)) if len(e) else math.nan
+    for tau in THRESHOLDS:
+        suffix = "" if tau == 0.10 else f"_{tau:.2f}"
+        row[f"acc_completeness_pct{suffix}"] = (
+            completeness_pct(e, truth.reconstructable, tau)
+            if len(pts)
+            else (0.0 if truth.reconstructable else math.nan)
+        )
+    if pts:
+        centres = {img_id: img.projection_center() for img_id, img in model.images.items()}
+        lengths, angles = [], []
+        for p in pts:
+            ids = [el.image_id for el in p.track.elements]
+            lengths.append(len(ids))
+            rays = np.array([centres[k] - p.xyz for k in ids])
+            rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+            angles.append(np.degrees(np.arccos(np.clip((rays @ rays.T).min(), -1, 1))))
+        row["mean_track_length"], row["mean_tri_angle_deg"] = (
+            float(np.mean(lengths)),
+            float(np.mean(angles)),
+        )
+    else:
+        row["mean_track_length"] = row["mean_tri_angle_deg"] = math.nan
+    return row
