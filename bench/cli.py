@@ -8,7 +8,8 @@ import sys
 from pathlib import Path
 
 from bench import ROOT, BenchError
-from bench.config import VARIANTS, RenderConfig, field_docs
+from bench.config import QUICK_RENDER, VARIANTS, RenderConfig, field_docs
+from bench.features import DETECTORS, DetectorConfig
 
 
 class _Parser(argparse.ArgumentParser):
@@ -68,16 +69,54 @@ def cmd_gallery(args: argparse.Namespace) -> None:
     print(write_gallery(entries, args.out))
 
 
-def cmd_run(args: argparse.Namespace) -> None:
-    from bench.render import render_scene
-    from bench.scene import load_spec
+def _budgets(text: str) -> tuple[int, ...]:
+    try:
+        budgets = tuple(int(b) for b in text.split(","))
+    except ValueError:
+        raise BenchError(
+            f"budget must be positive integers like 256 or 128,256,512, got {text!r}"
+        ) from None
+    if min(budgets) <= 0:
+        raise BenchError(f"budget must be positive, got {text!r}")
+    return budgets
 
-    cfg = config_from_args(RenderConfig, args).validate()
-    for name in args.scenes:
-        load_spec(name)  # unknown names fail before any work
-    for name in args.scenes:
-        for seed in range(args.seeds):
-            print(render_scene(name, seed, cfg, args.renders))
+
+def cmd_run(args: argparse.Namespace) -> None:
+    from bench.harness import BenchConfig, run_benchmark
+    from bench.pipeline import RunConfig
+    from bench.report import table1
+
+    render = QUICK_RENDER if args.quick else RenderConfig()
+    overrides = {
+        f.name: getattr(args, f.name)
+        for f in dataclasses.fields(RenderConfig)
+        if getattr(args, f.name) is not None
+    }
+    render = dataclasses.replace(render, **overrides)
+    run = RunConfig(render=render, detector=DetectorConfig(detector=args.detector))
+    seeds = args.seeds if args.seeds is not None else (1 if args.quick else 3)
+    cfg = BenchConfig(tuple(args.scenes), seeds, tuple(args.policies), _budgets(args.budget), run)
+    df = run_benchmark(cfg, args.results, args.renders, overwrite=args.overwrite)
+    t = table1(df)
+    cols = [
+        "strategy",
+        "budget",
+        "runs",
+        "rmse",
+        "acc_completeness_pct",
+        "inlier_pct",
+        "coverage_pct",
+        "runtime_proxy",
+        "wall_ms",
+    ]
+    print(t[cols].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
+
+
+def cmd_plot(args: argparse.Namespace) -> None:
+    from bench.report import load_runs, write_report
+
+    write_report(load_runs(args.results / "runs.csv"), args.results, args.renders)
+    print(f"tables and figures rewritten in {args.results}")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -110,25 +149,100 @@ def build_parser() -> argparse.ArgumentParser:
     )
     r.set_defaults(func=cmd_render)
 
+    from bench.harness import DEFAULT_POLICIES
     from bench.scene import scene_names
 
     u = sub.add_parser(
         "run",
-        help="run the benchmark (for now: render every scene and seed into the cache)",
-        description="Render every (scene, seed) of the benchmark grid into the render cache.",
+        help="run the full benchmark: every scene, seed, policy and budget; tables and figures",
+        description="Run every (scene, seed, policy, budget) of the grid: render (cached), "
+        "candidates and signals (cached), selection, COLMAP matching, verification and "
+        "triangulation with the known poses, evaluation against ground truth. Rows go to "
+        "RESULTS/runs.csv as they finish; an interrupted run resumes where it stopped. Then "
+        "table1.csv, table2.csv, figure2.png, figure3.png/.pdf and manifest.json.",
     )
-    u.add_argument("--scenes", nargs="+", default=scene_names(), help="scene types (default: all)")
     u.add_argument(
-        "--seeds", type=int, default=3, help="seeds 0..N-1 per scene (default: %(default)s)"
+        "--scenes",
+        nargs="+",
+        default=scene_names(),
+        metavar="SCENE",
+        help="scene types (default: all four)",
     )
-    add_config_args(u, RenderConfig)
+    u.add_argument(
+        "--policies",
+        nargs="+",
+        default=list(DEFAULT_POLICIES),
+        metavar="POLICY",
+        help="policies (default: %(default)s)",
+    )
+    u.add_argument(
+        "--budget",
+        default="256",
+        help="features per view, or a comma-separated list (default: %(default)s)",
+    )
+    u.add_argument(
+        "--seeds",
+        type=int,
+        default=None,
+        help="seeds 0..N-1 per scene (default: 3, or 1 with --quick)",
+    )
+    u.add_argument("--quick", action="store_true", help="smoke run: tiny renders, one seed")
+    u.add_argument(
+        "--detector",
+        default="sift",
+        choices=DETECTORS,
+        help="candidate detector (default: %(default)s)",
+    )
+    docs = field_docs(RenderConfig)
+    for f in dataclasses.fields(RenderConfig):
+        kind = {"choices": VARIANTS} if f.name == "variant" else {"type": type(f.default)}
+        quick = getattr(QUICK_RENDER, f.name)
+        u.add_argument(
+            "--" + f.name.replace("_", "-"),
+            dest=f.name,
+            default=None,
+            **kind,
+            help=f"{docs[f.name]} (default: {f.default}, or {quick} with --quick)",
+        )
+    u.add_argument(
+        "--results",
+        type=Path,
+        default=ROOT / "results",
+        help="results directory (default: results/)",
+    )
     u.add_argument(
         "--renders",
         type=Path,
         default=ROOT / "renders",
         help="render cache directory (default: renders/)",
     )
+    u.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace results of another configuration in RESULTS",
+    )
     u.set_defaults(func=cmd_run)
+
+    pl = sub.add_parser(
+        "plot",
+        help="rebuild the tables and figures from runs.csv (no rendering, no reconstruction)",
+        description="Rewrite table1.csv, table2.csv, figure3.png/.pdf (and the budget figure) "
+        "from RESULTS/runs.csv alone, and figure2.png from it plus the exported model and the "
+        "cached render.",
+    )
+    pl.add_argument(
+        "--results",
+        type=Path,
+        default=ROOT / "results",
+        help="results directory (default: results/)",
+    )
+    pl.add_argument(
+        "--renders",
+        type=Path,
+        default=ROOT / "renders",
+        help="render cache directory (default: renders/)",
+    )
+    pl.set_defaults(func=cmd_plot)
 
     g = sub.add_parser(
         "gallery",

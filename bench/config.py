@@ -39,7 +39,7 @@ class RenderConfig:
         return self
 
 
-QUICK_RENDER = RenderConfig(width=160, height=120, spp=16, max_depth=2)
+QUICK_RENDER = RenderConfig(width=320, height=240, spp=9, max_depth=2)
 """The tiny render of `--quick` runs and of the tests."""
 
 

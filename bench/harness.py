@@ -1,0 +1,230 @@
+"""`bench run`: every (scene, seed, policy, budget) of the grid, resumable and reproducible.
+
+Stages per (scene, seed): render (cached) -> front end (cached) -> for each policy and
+budget: one run (`bench.pipeline.run_one`), its row appended to `runs.csv` at once (the
+file is rewritten through a temporary name, so an interrupt keeps every finished row).
+The configuration is stored in `config.json` beside the results; a run into a directory
+holding another configuration is refused unless `overwrite`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from importlib.metadata import version
+from pathlib import Path
+
+import pandas as pd
+
+from bench import ROOT, BenchError
+from bench.evaluate import SceneTruth
+from bench.frontend import front_end
+from bench.groundtruth import load_ground_truth
+from bench.pipeline import RunConfig, run_one
+from bench.policies import POLICIES, check_policies
+from bench.progress import Progress
+from bench.render import render_scene
+from bench.report import KEY, write_report
+from bench.scene import load_spec, scene_names
+
+DEFAULT_POLICIES = ("random", "texture", "grid", "adaptive", "all")
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """The benchmark grid and the configuration of every run in it."""
+
+    scenes: tuple[str, ...] = field(default_factory=lambda: tuple(scene_names()))
+    seeds: int = 3
+    policies: tuple[str, ...] = DEFAULT_POLICIES
+    budgets: tuple[int, ...] = (256,)
+    run: RunConfig = field(default_factory=RunConfig)
+
+    def validate(self) -> BenchConfig:
+        for s in self.scenes:
+            load_spec(s)
+        check_policies(self.policies)
+        if self.seeds <= 0:
+            raise BenchError(f"seeds must be positive, got {self.seeds}")
+        if not self.budgets or min(self.budgets) <= 0:
+            raise BenchError(f"budgets must be positive integers, got {list(self.budgets)}")
+        self.run.render.validate()
+        self.run.detector.validate()
+        self.run.policy.validate()
+        return self
+
+    def as_dict(self) -> dict:
+        return json.loads(json.dumps(asdict(self)))  # tuples as lists, as stored
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+
+
+def _claim_results_dir(results: Path, cfg: BenchConfig, overwrite: bool) -> None:
+    try:
+        results.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise BenchError(f"cannot write to {results}: {e.strerror}") from e
+    stored_path = results / "config.json"
+    if stored_path.exists() and not overwrite:
+        try:
+            stored = json.loads(stored_path.read_text())
+        except ValueError as e:
+            raise BenchError(
+                f"{stored_path} is unreadable ({e}); use --overwrite to start again"
+            ) from e
+        if stored != cfg.as_dict():
+            differ = sorted(
+                k for k in set(stored) | set(cfg.as_dict()) if stored.get(k) != cfg.as_dict().get(k)
+            )
+            raise BenchError(
+                f"{results} holds results of another configuration (differs in: {', '.join(differ)}); "
+                "use --overwrite to replace them, or --results DIR"
+            )
+    if overwrite:
+        for name in ("runs.csv", "models"):
+            p = results / name
+            shutil.rmtree(p) if p.is_dir() else p.unlink(missing_ok=True)
+    _atomic_write(stored_path, json.dumps(cfg.as_dict(), indent=1))
+
+
+def read_finished(runs_csv: Path, config_hash: str) -> pd.DataFrame:
+    if not runs_csv.exists():
+        return pd.DataFrame()
+    try:
+        df = pd.read_csv(runs_csv)
+    except (ValueError, pd.errors.ParserError) as e:
+        raise BenchError(f"{runs_csv} is malformed ({e}); use --overwrite to start again") from e
+    return df[df["config_hash"] == config_hash] if "config_hash" in df else pd.DataFrame()
+
+
+def run_benchmark(
+    cfg: BenchConfig, results: Path, renders: Path, overwrite: bool = False
+) -> pd.DataFrame:
+    """Run whatever of the grid is missing from `results/runs.csv`, then write the report."""
+    cfg.validate()
+    results, renders = Path(results), Path(renders)
+    t_start = time.perf_counter()
+    _claim_results_dir(results, cfg, overwrite)
+    runs_csv = results / "runs.csv"
+    df = read_finished(runs_csv, cfg.run.hash)
+    done = set(map(tuple, df[list(KEY)].itertuples(index=False))) if len(df) else set()
+    rows = df.to_dict("records") if len(df) else []
+    grid = [(sc, sd) for sc in cfg.scenes for sd in range(cfg.seeds)]
+    todo = [
+        (sc, sd, p, b)
+        for sc, sd in grid
+        for p in cfg.policies
+        for b in cfg.budgets
+        if (sc, sd, p, b) not in done
+    ]
+    stage_s = dict.fromkeys(
+        ["render", "frontend", "truth", "select", "match", "verify", "triangulate", "evaluate"], 0.0
+    )
+    print(
+        f"bench: {len(done)} of {len(done) + len(todo)} runs already in {runs_csv}; {len(todo)} to do",
+        file=sys.stderr,
+    )
+
+    entries = {}
+    with Progress("render", len(grid)) as bar:
+        for sc, sd in grid:
+            t = time.perf_counter()
+            entries[sc, sd] = render_scene(sc, sd, cfg.run.render, renders)
+            stage_s["render"] += time.perf_counter() - t
+            bar.step(f"{sc} seed {sd}")
+    with Progress("runs", len(todo)) as bar:
+        for sc, sd in grid:
+            mine = [t for t in todo if t[:2] == (sc, sd)]
+            if not mine:
+                continue
+            t = time.perf_counter()
+            fe = front_end(entries[sc, sd], cfg.run.detector, cfg.run.signals, renders / "frontend")
+            stage_s["frontend"] += time.perf_counter() - t
+            t = time.perf_counter()
+            truth = SceneTruth.build(
+                [v.camera for v in fe.views], load_ground_truth(entries[sc, sd]), fe.pools
+            )
+            stage_s["truth"] += time.perf_counter() - t
+            for _, _, policy, budget in mine:
+                model_dir = results / "models" / f"{sc}-s{sd}" / f"{policy}-b{budget}"
+                row = run_one(
+                    entries[sc, sd], fe, truth, sc, sd, policy, budget, cfg.run, model_dir
+                )
+                for k in ("select", "match", "verify", "triangulate", "evaluate"):
+                    stage_s[k] += row[f"{k}_ms"] / 1000
+                rows.append(row)
+                pd.DataFrame(rows).to_csv(runs_csv.with_name(".runs.csv.tmp"), index=False)
+                runs_csv.with_name(".runs.csv.tmp").replace(runs_csv)
+                bar.step(
+                    f"{sc} s{sd} {policy} b{budget}: {row['points']} points, rmse {row['rmse']:.3f}"
+                )
+    t = time.perf_counter()
+    out = pd.read_csv(runs_csv)
+    write_report(out, results, renders)
+    stage_s["report"] = time.perf_counter() - t
+    total = time.perf_counter() - t_start
+    write_manifest(results, cfg, entries, stage_s, total, len(todo))
+    print(
+        f"bench: {len(todo)} runs done, {len(done)} reused, in {total:.0f} s; results in {results}",
+        file=sys.stderr,
+    )
+    return out
+
+
+def _git_commit() -> str:
+    try:
+        sha = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True, timeout=10
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=10,
+        ).stdout.strip()
+        return sha + ("-dirty" if dirty else "") if sha else "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def write_manifest(
+    results: Path, cfg: BenchConfig, entries: dict, stage_s: dict, total: float, n_runs: int
+) -> None:
+    variants = sorted(
+        {json.loads((e / "meta.json").read_text())["variant"] for e in entries.values()}
+    )
+    packages = [
+        "mitsuba",
+        "drjit",
+        "numpy",
+        "opencv-contrib-python-headless",
+        "pycolmap",
+        "pandas",
+        "matplotlib",
+        "scipy",
+    ]
+    manifest = {
+        "versions": {"python": platform.python_version(), **{p: version(p) for p in packages}},
+        "variant": variants,
+        "host": {"node": platform.node(), "platform": platform.platform(), "cpus": os.cpu_count()},
+        "config": cfg.as_dict(),
+        "config_hash": cfg.run.hash,
+        "seeds": list(range(cfg.seeds)),
+        "policies": list(cfg.policies) or list(POLICIES),
+        "git_commit": _git_commit(),
+        "runs_this_invocation": n_runs,
+        "seconds": {"total": total, **stage_s},
+        "render_entries": {f"{sc}-s{sd}": e.name for (sc, sd), e in entries.items()},
+    }
+    _atomic_write(results / "manifest.json", json.dumps(manifest, indent=1))
