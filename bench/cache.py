@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import fcntl
 import hashlib
+import inspect
 import json
 import os
 import shutil
@@ -27,11 +28,12 @@ def content_key(obj, n: int = 12) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:n]
 
 
-def source_hash(*modules) -> str:
-    """Hash of the source files of the given modules (code that changes an entry's content)."""
+def source_hash(*code) -> str:
+    """Hash of the source of the given modules and functions (the code that decides an
+    entry's content, so that changing it invalidates the entry)."""
     h = hashlib.sha256()
-    for m in modules:
-        h.update(Path(m.__file__).read_bytes())
+    for obj in code:
+        h.update(inspect.getsource(obj).encode())
     return h.hexdigest()[:12]
 
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from bench import cache, scene, scenes, shapes, textures
+from bench import cache, camera, scene, scenes, shapes, textures
 from bench.camera import Camera, write_colmap_rig
 from bench.config import RenderConfig
 from bench.scene import N_VIEWS, SceneDescription, SceneSpec, build_scene, load_spec
@@ -144,9 +144,7 @@ def render_view(desc: SceneDescription, view: int, cfg: RenderConfig, variant: s
 
 def render_key(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -> str:
     """Hash of everything that changes pixels: scene, seed, rig, settings, code, renderer."""
-    code = cache.source_hash(
-        scene, scenes, shapes, textures, sys.modules[__name__], sys.modules["bench.camera"]
-    )
+    code = cache.source_hash(scene, scenes, shapes, textures, camera, *PIXEL_CODE)
     return cache.content_key(
         {
             "scene": spec.name,
@@ -158,10 +156,18 @@ def render_key(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -> s
             "max_depth": cfg.max_depth,
             "variant": variant,
             "code": code,
+            "aovs": AOVS,
+            "mitsuba_from_opencv": MITSUBA_FROM_OPENCV.tolist(),
             "mitsuba": version("mitsuba"),
             "drjit": version("drjit"),
         }
     )
+
+
+PIXEL_CODE = (mitsuba_sensor, _mitsuba_mesh, mitsuba_scene_dict, split_layers, srgb8, render_view)
+"""The functions of this module that decide pixels (hashed into the render key; the cache
+plumbing below is not, so editing it re-renders nothing)."""
+_announced: set[str] = set()
 
 
 def log(msg: str) -> None:
@@ -176,7 +182,9 @@ def render_scene(
     spec = load_spec(name)
     renders_dir = Path(renders_dir)
     variant, why = resolve_variant(cfg.variant, renders_dir)
-    log(why)
+    if why not in _announced:  # once per process
+        log(why)
+        _announced.add(why)
     entry = renders_dir / f"{name}-s{seed}-{render_key(spec, seed, cfg, variant)}"
     with cache.locked(entry):
         problem = cache.entry_problem(entry) if entry.exists() else None
