@@ -84,7 +84,7 @@ def _budgets(text: str) -> tuple[int, ...]:
 def cmd_run(args: argparse.Namespace) -> None:
     from bench.harness import BenchConfig, run_benchmark
     from bench.pipeline import RunConfig
-    from bench.report import table1
+    from bench.report import HEADLINE, table1
 
     render = QUICK_RENDER if args.quick else RenderConfig()
     overrides = {
@@ -98,18 +98,11 @@ def cmd_run(args: argparse.Namespace) -> None:
     cfg = BenchConfig(tuple(args.scenes), seeds, tuple(args.policies), _budgets(args.budget), run)
     df = run_benchmark(cfg, args.results, args.renders, overwrite=args.overwrite)
     t = table1(df)
-    cols = [
-        "strategy",
-        "budget",
-        "runs",
-        "rmse",
-        "acc_completeness_pct",
-        "inlier_pct",
-        "coverage_pct",
-        "runtime_proxy",
-        "wall_ms",
-    ]
-    print(t[cols].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
+    print(
+        t[["strategy", "budget", "runs", *HEADLINE]].to_string(
+            index=False, float_format=lambda x: f"{x:.3f}"
+        )
+    )
 
 
 def cmd_plot(args: argparse.Namespace) -> None:
@@ -117,6 +110,12 @@ def cmd_plot(args: argparse.Namespace) -> None:
 
     write_report(load_runs(args.results / "runs.csv"), args.results, args.renders)
     print(f"tables and figures rewritten in {args.results}")
+
+
+def _dir_arg(parser: argparse.ArgumentParser, name: str, what: str) -> None:
+    parser.add_argument(
+        f"--{name}", type=Path, default=ROOT / name, help=f"{what} (default: {name}/)"
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -141,12 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument(
         "--force", action="store_true", help="render again even if a complete entry exists"
     )
-    r.add_argument(
-        "--renders",
-        type=Path,
-        default=ROOT / "renders",
-        help="render cache directory (default: renders/)",
-    )
+    _dir_arg(r, "renders", "render cache directory")
     r.set_defaults(func=cmd_render)
 
     from bench.harness import DEFAULT_POLICIES
@@ -204,18 +198,8 @@ def build_parser() -> argparse.ArgumentParser:
             **kind,
             help=f"{docs[f.name]} (default: {f.default}, or {quick} with --quick)",
         )
-    u.add_argument(
-        "--results",
-        type=Path,
-        default=ROOT / "results",
-        help="results directory (default: results/)",
-    )
-    u.add_argument(
-        "--renders",
-        type=Path,
-        default=ROOT / "renders",
-        help="render cache directory (default: renders/)",
-    )
+    _dir_arg(u, "results", "results directory")
+    _dir_arg(u, "renders", "render cache directory")
     u.add_argument(
         "--overwrite",
         action="store_true",
@@ -230,18 +214,8 @@ def build_parser() -> argparse.ArgumentParser:
         "from RESULTS/runs.csv alone, and figure2.png from it plus the exported model and the "
         "cached render.",
     )
-    pl.add_argument(
-        "--results",
-        type=Path,
-        default=ROOT / "results",
-        help="results directory (default: results/)",
-    )
-    pl.add_argument(
-        "--renders",
-        type=Path,
-        default=ROOT / "renders",
-        help="render cache directory (default: renders/)",
-    )
+    _dir_arg(pl, "results", "results directory")
+    _dir_arg(pl, "renders", "render cache directory")
     pl.set_defaults(func=cmd_plot)
 
     g = sub.add_parser(
@@ -252,12 +226,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     g.add_argument("--seed", type=int, default=0, help="scene seed (default: %(default)s)")
     add_config_args(g, RenderConfig)
-    g.add_argument(
-        "--renders",
-        type=Path,
-        default=ROOT / "renders",
-        help="render cache directory (default: renders/)",
-    )
+    _dir_arg(g, "renders", "render cache directory")
     g.add_argument(
         "--out",
         type=Path,

@@ -27,7 +27,7 @@ from bench.evaluate import SceneTruth
 from bench.frontend import front_end
 from bench.groundtruth import load_ground_truth
 from bench.pipeline import RunConfig, run_one
-from bench.policies import POLICIES, check_policies
+from bench.policies import check_policies
 from bench.progress import Progress
 from bench.render import render_scene
 from bench.report import KEY, write_report
@@ -135,18 +135,17 @@ def run_benchmark(
         file=sys.stderr,
     )
 
+    pending = [(sc, sd) for sc, sd in grid if any(t[:2] == (sc, sd) for t in todo)]
     entries = {}
-    with Progress("render", len(grid)) as bar:
-        for sc, sd in grid:
+    with Progress("render", len(pending)) as bar:
+        for sc, sd in pending:
             t = time.perf_counter()
             entries[sc, sd] = render_scene(sc, sd, cfg.run.render, renders)
             stage_s["render"] += time.perf_counter() - t
             bar.step(f"{sc} seed {sd}")
     with Progress("runs", len(todo)) as bar:
-        for sc, sd in grid:
+        for sc, sd in pending:
             mine = [t for t in todo if t[:2] == (sc, sd)]
-            if not mine:
-                continue
             t = time.perf_counter()
             fe = front_end(entries[sc, sd], cfg.run.detector, cfg.run.signals, renders / "frontend")
             stage_s["frontend"] += time.perf_counter() - t
@@ -173,7 +172,9 @@ def run_benchmark(
     write_report(out, results, renders)
     stage_s["report"] = time.perf_counter() - t
     total = time.perf_counter() - t_start
-    write_manifest(results, cfg, entries, stage_s, total, len(todo))
+    write_manifest(
+        results, cfg, [renders / k for k in out["render_key"].unique()], stage_s, total, len(todo)
+    )
     print(
         f"bench: {len(todo)} runs done, {len(done)} reused, in {total:.0f} s; results in {results}",
         file=sys.stderr,
@@ -199,11 +200,13 @@ def _git_commit() -> str:
 
 
 def write_manifest(
-    results: Path, cfg: BenchConfig, entries: dict, stage_s: dict, total: float, n_runs: int
+    results: Path, cfg: BenchConfig, entries: list[Path], stage_s: dict, total: float, n_runs: int
 ) -> None:
-    variants = sorted(
-        {json.loads((e / "meta.json").read_text())["variant"] for e in entries.values()}
-    )
+    """Versions, variant, host, configuration, seeds, commit and seconds of this invocation."""
+    metas = [
+        json.loads((e / "meta.json").read_text()) for e in entries if (e / "meta.json").is_file()
+    ]
+    variants = sorted({m["variant"] for m in metas})
     packages = [
         "mitsuba",
         "drjit",
@@ -221,10 +224,10 @@ def write_manifest(
         "config": cfg.as_dict(),
         "config_hash": cfg.run.hash,
         "seeds": list(range(cfg.seeds)),
-        "policies": list(cfg.policies) or list(POLICIES),
+        "policies": list(cfg.policies),
         "git_commit": _git_commit(),
         "runs_this_invocation": n_runs,
         "seconds": {"total": total, **stage_s},
-        "render_entries": {f"{sc}-s{sd}": e.name for (sc, sd), e in entries.items()},
+        "render_entries": sorted(e.name for e in entries),
     }
     _atomic_write(results / "manifest.json", json.dumps(manifest, indent=1))

@@ -125,6 +125,11 @@ def test_interrupted_run_resumes_without_redoing_rows(renders_dir, tmp_path, mon
     assert len(calls) == 7
     runs = pd.read_csv(tmp_path / "runs.csv")
     assert len(runs) == 10 and not runs.duplicated(["scene", "seed", "policy", "budget"]).any()
+    calls.clear()
+    rendered = []
+    monkeypatch.setattr(harness, "render_scene", lambda *a, **k: rendered.append(a))
+    run_benchmark(SMALL, tmp_path, renders_dir)  # all done: nothing rendered, nothing run
+    assert calls == [] and rendered == []
 
 
 def test_another_configuration_into_the_same_directory_is_refused(
