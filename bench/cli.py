@@ -10,6 +10,7 @@ from pathlib import Path
 from bench import ROOT, BenchError
 from bench.config import QUICK_RENDER, VARIANTS, RenderConfig, field_docs
 from bench.features import DETECTORS, DetectorConfig
+from bench.policies import PolicyConfig
 
 
 class _Parser(argparse.ArgumentParser):
@@ -19,12 +20,10 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"bench: error: {message} (see `{self.prog} --help`)\n")
 
 
-def add_config_args(parser: argparse.ArgumentParser, cls: type, skip=()) -> None:
+def add_config_args(parser: argparse.ArgumentParser, cls: type) -> None:
     """One `--option` per dataclass field, its docstring as help and its default shown."""
     docs = field_docs(cls)
     for f in dataclasses.fields(cls):
-        if f.name in skip:
-            continue
         kwargs = {
             "type": type(f.default),
             "default": f.default,
@@ -81,6 +80,16 @@ def _budgets(text: str) -> tuple[int, ...]:
     return budgets
 
 
+def _weights(text: str) -> tuple[float, ...]:
+    try:
+        weights = tuple(float(w) for w in text.split(","))
+    except ValueError:
+        raise BenchError(
+            f"weights must be five numbers w_t,w_r,w_q,w_p,w_a, got {text!r}"
+        ) from None
+    return PolicyConfig(weights=weights).validate().weights
+
+
 def cmd_run(args: argparse.Namespace) -> None:
     from bench.harness import BenchConfig, run_benchmark
     from bench.pipeline import RunConfig
@@ -93,7 +102,11 @@ def cmd_run(args: argparse.Namespace) -> None:
         if getattr(args, f.name) is not None
     }
     render = dataclasses.replace(render, **overrides)
-    run = RunConfig(render=render, detector=DetectorConfig(detector=args.detector))
+    run = RunConfig(
+        render=render,
+        detector=DetectorConfig(detector=args.detector),
+        policy=PolicyConfig(weights=_weights(args.weights)),
+    )
     seeds = args.seeds if args.seeds is not None else (1 if args.quick else 3)
     cfg = BenchConfig(tuple(args.scenes), seeds, tuple(args.policies), _budgets(args.budget), run)
     df = run_benchmark(cfg, args.results, args.renders, overwrite=args.overwrite)
@@ -179,6 +192,11 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=None,
         help="seeds 0..N-1 per scene (default: 3, or 1 with --quick)",
+    )
+    u.add_argument(
+        "--weights",
+        default=",".join(str(w) for w in PolicyConfig().weights),
+        help=f"{field_docs(PolicyConfig)['weights']} (default: %(default)s)",
     )
     u.add_argument("--quick", action="store_true", help="smoke run: tiny renders, one seed")
     u.add_argument(

@@ -68,11 +68,6 @@ class Candidates:
     def __len__(self) -> int:
         return len(self.xy)
 
-    def subset(self, idx: np.ndarray) -> Candidates:
-        return Candidates(
-            *(getattr(self, f)[idx] for f in ("xy", "size", "angle", "response", "descriptors"))
-        )
-
 
 def keypoint_arrays(kps) -> tuple[np.ndarray, ...]:
     xy = np.array([k.pt for k in kps], float).reshape(-1, 2) + 0.5

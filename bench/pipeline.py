@@ -26,8 +26,6 @@ from bench.frontend import FrontEnd
 from bench.policies import SIGNALS_USED, PolicyConfig, PolicyInput, select
 from bench.signals import SignalConfig
 
-STAGES = ("detect", "signals", "select", "match", "verify", "triangulate", "evaluate")
-
 
 @dataclass(frozen=True)
 class RunConfig:

@@ -173,6 +173,8 @@ def test_plot_rejects_bad_runs_csv_in_one_line(tmp_path, capsys, content, messag
         (["run", "--budget", "12x"], "budget must be positive integers"),
         (["run", "--scenes", "moon"], "unknown scene 'moon'"),
         (["run", "--detector", "surf"], "invalid choice: 'surf'"),
+        (["run", "--weights", "0.3,x,0,0,0"], "weights must be five numbers"),
+        (["run", "--weights", "0.3,0.2"], "weights must be five numbers"),
     ],
 )
 def test_run_bad_input_is_one_clear_line(argv, message, tmp_path, capsys):
