@@ -114,6 +114,7 @@ def run_benchmark(
     cfg.validate()
     results, renders = Path(results), Path(renders)
     t_start = time.perf_counter()
+    commit = _git_commit()  # before this run rewrites any tracked result file
     _claim_results_dir(results, cfg, overwrite)
     runs_csv = results / "runs.csv"
     df = read_finished(runs_csv, cfg.run.hash)
@@ -173,7 +174,13 @@ def run_benchmark(
     stage_s["report"] = time.perf_counter() - t
     total = time.perf_counter() - t_start
     write_manifest(
-        results, cfg, [renders / k for k in out["render_key"].unique()], stage_s, total, len(todo)
+        results,
+        cfg,
+        commit,
+        [renders / k for k in out["render_key"].unique()],
+        stage_s,
+        total,
+        len(todo),
     )
     print(
         f"bench: {len(todo)} runs done, {len(done)} reused, in {total:.0f} s; results in {results}",
@@ -200,7 +207,13 @@ def _git_commit() -> str:
 
 
 def write_manifest(
-    results: Path, cfg: BenchConfig, entries: list[Path], stage_s: dict, total: float, n_runs: int
+    results: Path,
+    cfg: BenchConfig,
+    commit: str,
+    entries: list[Path],
+    stage_s: dict,
+    total: float,
+    n_runs: int,
 ) -> None:
     """Versions, variant, host, configuration, seeds, commit and seconds of this invocation."""
     metas = [
@@ -225,7 +238,7 @@ def write_manifest(
         "config_hash": cfg.run.hash,
         "seeds": list(range(cfg.seeds)),
         "policies": list(cfg.policies),
-        "git_commit": _git_commit(),
+        "git_commit": commit,
         "runs_this_invocation": n_runs,
         "seconds": {"total": total, **stage_s},
         "render_entries": sorted(e.name for e in entries),
