@@ -98,6 +98,16 @@ def test_plot_rebuilds_the_tables_from_runs_csv_alone(quick_results, tmp_path, r
     assert "figure2.png not drawn" in capsys.readouterr().out  # no exported model was copied
 
 
+def test_several_budgets_give_a_budget_figure(quick_results, tmp_path, renders_dir):
+    from bench.report import write_report
+
+    runs = pd.read_csv(quick_results / "runs.csv")
+    write_report(pd.concat([runs, runs.assign(budget=32)]), tmp_path, renders_dir)
+    assert (tmp_path / "figure_budget.png").is_file()
+    t1 = pd.read_csv(tmp_path / "table1.csv")
+    assert sorted(set(t1["budget"])) == [32, 64] and len(t1) == 10
+
+
 def test_same_command_gives_identical_metrics(quick_results, renders_dir, tmp_path):
     run_benchmark(SMALL, tmp_path, renders_dir)
     a, b = (pd.read_csv(d / "runs.csv") for d in (quick_results, tmp_path))
