@@ -37,6 +37,14 @@ def source_hash(*code) -> str:
     return h.hexdigest()[:12]
 
 
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write through a temporary name beside `path`, then rename: readers see the old file
+    or the new one, never half of one."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+
+
 def entry_problem(entry: Path) -> str | None:
     """Why `entry` is not a complete cache entry, or None if it is."""
     try:

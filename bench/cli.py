@@ -68,26 +68,13 @@ def cmd_gallery(args: argparse.Namespace) -> None:
     print(write_gallery(entries, args.out))
 
 
-def _budgets(text: str) -> tuple[int, ...]:
+def _numbers(text: str, kind: type, what: str) -> tuple:
+    """A comma-separated list of numbers; one that does not parse is the one-line error `what`
+    (their values are checked with the rest of the configuration)."""
     try:
-        budgets = tuple(int(b) for b in text.split(","))
+        return tuple(kind(x) for x in text.split(","))
     except ValueError:
-        raise BenchError(
-            f"budget must be positive integers like 256 or 128,256,512, got {text!r}"
-        ) from None
-    if min(budgets) <= 0:
-        raise BenchError(f"budget must be positive, got {text!r}")
-    return budgets
-
-
-def _weights(text: str) -> tuple[float, ...]:
-    try:
-        weights = tuple(float(w) for w in text.split(","))
-    except ValueError:
-        raise BenchError(
-            f"weights must be five numbers w_t,w_r,w_q,w_p,w_a, got {text!r}"
-        ) from None
-    return PolicyConfig(weights=weights).validate().weights
+        raise BenchError(f"{what}, got {text!r}") from None
 
 
 def cmd_run(args: argparse.Namespace) -> None:
@@ -105,10 +92,20 @@ def cmd_run(args: argparse.Namespace) -> None:
     run = RunConfig(
         render=render,
         detector=DetectorConfig(detector=args.detector),
-        policy=PolicyConfig(weights=_weights(args.weights)),
+        policy=PolicyConfig(
+            weights=_numbers(
+                args.weights, float, "weights must be five numbers w_t,w_r,w_q,w_p,w_a"
+            )
+        ),
     )
     seeds = args.seeds if args.seeds is not None else (1 if args.quick else 3)
-    cfg = BenchConfig(tuple(args.scenes), seeds, tuple(args.policies), _budgets(args.budget), run)
+    cfg = BenchConfig(
+        tuple(args.scenes),
+        seeds,
+        tuple(args.policies),
+        _numbers(args.budget, int, "budget must be positive integers like 256 or 128,256,512"),
+        run,
+    )
     df = run_benchmark(cfg, args.results, args.renders, overwrite=args.overwrite)
     t = table1(df)
     print(

@@ -23,6 +23,7 @@ from pathlib import Path
 import pandas as pd
 
 from bench import ROOT, BenchError
+from bench.cache import write_text_atomic
 from bench.evaluate import SceneTruth
 from bench.frontend import front_end
 from bench.groundtruth import load_ground_truth
@@ -53,7 +54,7 @@ class BenchConfig:
         if self.seeds <= 0:
             raise BenchError(f"seeds must be positive, got {self.seeds}")
         if not self.budgets or min(self.budgets) <= 0:
-            raise BenchError(f"budgets must be positive integers, got {list(self.budgets)}")
+            raise BenchError(f"budget must be positive integers, got {list(self.budgets)}")
         self.run.render.validate()
         self.run.detector.validate()
         self.run.policy.validate()
@@ -61,12 +62,6 @@ class BenchConfig:
 
     def as_dict(self) -> dict:
         return json.loads(json.dumps(asdict(self)))  # tuples as lists, as stored
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
 
 
 def _claim_results_dir(results: Path, cfg: BenchConfig, overwrite: bool) -> None:
@@ -94,7 +89,7 @@ def _claim_results_dir(results: Path, cfg: BenchConfig, overwrite: bool) -> None
         for name in ("runs.csv", "models"):
             p = results / name
             shutil.rmtree(p) if p.is_dir() else p.unlink(missing_ok=True)
-    _atomic_write(stored_path, json.dumps(cfg.as_dict(), indent=1))
+    write_text_atomic(stored_path, json.dumps(cfg.as_dict(), indent=1))
 
 
 def read_finished(runs_csv: Path, config_hash: str) -> pd.DataFrame:
@@ -163,8 +158,7 @@ def run_benchmark(
                 for k in ("select", "match", "verify", "triangulate", "evaluate"):
                     stage_s[k] += row[f"{k}_ms"] / 1000
                 rows.append(row)
-                pd.DataFrame(rows).to_csv(runs_csv.with_name(".runs.csv.tmp"), index=False)
-                runs_csv.with_name(".runs.csv.tmp").replace(runs_csv)
+                write_text_atomic(runs_csv, pd.DataFrame(rows).to_csv(index=False))
                 bar.step(
                     f"{sc} s{sd} {policy} b{budget}: {row['points']} points, rmse {row['rmse']:.3f}"
                 )
@@ -243,4 +237,4 @@ def write_manifest(
         "seconds": {"total": total, **stage_s},
         "render_entries": sorted(e.name for e in entries),
     }
-    _atomic_write(results / "manifest.json", json.dumps(manifest, indent=1))
+    write_text_atomic(results / "manifest.json", json.dumps(manifest, indent=1))

@@ -20,6 +20,7 @@ import pandas as pd  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from bench import BenchError  # noqa: E402
+from bench.cache import write_text_atomic  # noqa: E402
 
 KEY = ("scene", "seed", "policy", "budget")
 DISPLAY = {
@@ -261,9 +262,7 @@ def write_report(df: pd.DataFrame, results: Path, renders: Path) -> None:
     results = Path(results)
     t1, t2 = table1(df), table2(df)
     for name, t in (("table1.csv", t1), ("table2.csv", t2)):
-        tmp = results / f".{name}.tmp"
-        t.to_csv(tmp, index=False, float_format="%.6g")
-        tmp.replace(results / name)
+        write_text_atomic(results / name, t.to_csv(index=False, float_format="%.6g"))
     figure3(t1, results / "figure3")
     if df["budget"].nunique() > 1:
         figure_budget(t1, results / "figure_budget")

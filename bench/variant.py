@@ -19,6 +19,7 @@ from importlib.metadata import version
 from pathlib import Path
 
 from bench import BenchError
+from bench.cache import write_text_atomic
 
 PROBE_CODE = """
 import sys, mitsuba as mi
@@ -99,9 +100,7 @@ def resolve_variant(requested: str, memo_dir: Path) -> tuple[str, str]:
             memo[key] = known
             try:
                 memo_path.parent.mkdir(parents=True, exist_ok=True)
-                tmp = memo_path.with_suffix(f".tmp{os.getpid()}")
-                tmp.write_text(json.dumps(memo, indent=1))
-                tmp.replace(memo_path)
+                write_text_atomic(memo_path, json.dumps(memo, indent=1))
             except OSError:
                 pass  # the memo is only a speed-up
         return tuple(known[variant])
