@@ -1,9 +1,29 @@
-"""Rendered-scene benchmark of keypoint selection policies for 3D reconstruction."""
+"""Rendered-scene benchmark of keypoint selection policies for 3D reconstruction.
 
+The subpackages are the stages of the data flow, in order; a stage imports only the
+stages before it and the shared modules of this package (`camera`, `files`):
+
+    scenes -> render -> frontend -> backend -> evaluation -> harness
+
+`scenes` describes scenes, `render` path-traces them into cached render entries,
+`frontend` detects candidates, computes their signals and selects features (policies),
+`backend` matches, verifies and reconstructs with COLMAP, `evaluation` scores against
+ground truth (the only stage that reads it), and `harness` runs the grid, writes the
+tables and figures and holds the command line.
+"""
+
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-"""Repository root: holds `scenes/`, and the default `renders/` and `results/`."""
+"""Repository root: holds `scenes/`, the default `renders/` and the published results."""
+
+DISTRIBUTION = "kpbudget-bench"
+"""The distribution's name on a package index (the import package is `bench`)."""
+try:
+    __version__ = version(DISTRIBUTION)
+except PackageNotFoundError:  # running from a source tree that was not installed
+    __version__ = "0+unknown"
 
 
 class BenchError(Exception):

@@ -1,7 +1,7 @@
 """Pinhole cameras in the OpenCV/COLMAP convention, and the rig's COLMAP text export.
 
 Pose is `cam_from_world` (R, t): x right, y down, z forward. Pixel (0, 0)'s centre is
-at (0.5, 0.5). Conversion to Mitsuba's camera frame happens only in `bench.render`.
+at (0.5, 0.5). Conversion to Mitsuba's camera frame happens only in `bench.render.entry`.
 """
 
 from __future__ import annotations

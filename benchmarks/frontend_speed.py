@@ -12,13 +12,13 @@ import time
 import numpy as np
 
 from bench import ROOT
-from bench.config import RenderConfig
-from bench.features import DetectorConfig, detect
-from bench.pipeline import policy_rng
-from bench.policies import POLICIES, SIGNALS_USED, PolicyInput, select
-from bench.render import render_scene
-from bench.signals import SIGNALS, SignalConfig, compute_signals
-from bench.views import load_views
+from bench.frontend.features import DetectorConfig, detect
+from bench.frontend.policies import POLICIES, SIGNALS_USED, PolicyInput, select
+from bench.frontend.signals import SIGNALS, SignalConfig, compute_signals
+from bench.frontend.views import load_views
+from bench.harness.pipeline import policy_rng
+from bench.render.config import RenderConfig
+from bench.render.entry import render_scene
 
 
 def main() -> None:

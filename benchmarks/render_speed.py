@@ -12,9 +12,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench import render
-from bench.config import RenderConfig
-from bench.variant import resolve_variant
+from bench.render import entry as render
+from bench.render.config import RenderConfig
+from bench.render.variant import resolve_variant
 
 
 def stage_timing(scene: str, cfg: RenderConfig, views: int, tmp: Path) -> tuple[float, float]:

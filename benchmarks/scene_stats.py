@@ -12,11 +12,11 @@ import json
 import numpy as np
 
 from bench import ROOT
-from bench.config import RenderConfig
-from bench.features import DetectorConfig, detect
-from bench.render import render_scene
-from bench.scene import scene_names
-from bench.views import load_views
+from bench.frontend.features import DetectorConfig, detect
+from bench.frontend.views import load_views
+from bench.render.config import RenderConfig
+from bench.render.entry import render_scene
+from bench.scenes.spec import scene_names
 
 
 def main() -> None:

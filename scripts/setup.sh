@@ -22,6 +22,8 @@ PY=${PYTHON:-python3}
 stamp=.venv/.bench-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     echo "setup: installing the package and its dependencies into .venv"
+    # the distribution was called `bench` before 0.2 (a name PyPI gives to another project)
+    .venv/bin/python -m pip uninstall -q -y bench >/dev/null 2>&1 || true
     .venv/bin/python -m pip install -q --disable-pip-version-check -e '.[test]'
     touch "$stamp"
 fi

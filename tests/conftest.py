@@ -4,9 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from bench.config import RenderConfig
+from bench.camera import look_at
+from bench.render.config import RenderConfig
 
 TINY = RenderConfig(width=96, height=72, spp=16, max_depth=2)
 
@@ -19,7 +21,7 @@ def renders_dir(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def tiny_entry(renders_dir):
     """Render (once per session) a tiny entry of a scene and seed; returns its directory."""
-    from bench.render import render_scene
+    from bench.render.entry import render_scene
 
     made: dict[tuple[str, int], Path] = {}
 
@@ -37,7 +39,7 @@ MEDIUM = RenderConfig(width=320, height=240, spp=16, max_depth=2)
 
 @pytest.fixture(scope="session")
 def medium_entry(renders_dir):
-    from bench.render import render_scene
+    from bench.render.entry import render_scene
 
     made: dict[str, Path] = {}
 
@@ -47,3 +49,14 @@ def medium_entry(renders_dir):
         return made[scene]
 
     return get
+
+
+def synthetic_rig():
+    """Four cameras in a row looking at 150 random points in front of them."""
+    cams = [
+        look_at((x, -8.0, 1.0), (0.0, 0.0, 1.0), width=640, height=480)
+        for x in (-1.5, -0.5, 0.5, 1.5)
+    ]
+    rng = np.random.default_rng(3)
+    X = np.c_[rng.uniform(-2.5, 2.5, 150), rng.uniform(-1.5, 1.5, 150), rng.uniform(0, 2, 150)]
+    return cams, X

@@ -1,4 +1,4 @@
-"""The COLMAP back end and the metrics, on hand-made cases with known answers."""
+"""The COLMAP back end (matching, verification, triangulation) on hand-made geometry."""
 
 from __future__ import annotations
 
@@ -6,92 +6,23 @@ import math
 
 import cv2
 import numpy as np
-import pycolmap
 import pytest
-from scipy.spatial import cKDTree
 
-from bench.backend import (
+from bench.backend.matching import (
     BackendConfig,
     PairMatches,
     expected_ransac_iterations,
     tentative_matches,
-    triangulate,
     verify,
 )
-from bench.camera import look_at
-from bench.evaluate import (
-    SceneTruth,
-    completeness_pct,
-    coverage_pct,
-    point_error,
-    rmse,
-    runtime_proxy,
-)
-from bench.features import Candidates
-from bench.groundtruth import GroundTruth
-
-# --- metrics on five hand-made points -------------------------------------------------
-
-TRUE = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [0.5, 0.5, 1.0]])
-
-
-def test_point_error_rmse_median_and_completeness_on_five_points():
-    surface = cKDTree(TRUE)
-    X = TRUE.copy()
-    X[4, 2] += 0.3  # one point 0.3 units off its surface
-    e = point_error(X, surface)
-    np.testing.assert_allclose(e, [0, 0, 0, 0, 0.3], atol=1e-12)
-    assert rmse(e) == pytest.approx(math.sqrt(0.09 / 5))
-    assert np.median(e) == 0
-    assert completeness_pct(e, 5, 0.10) == pytest.approx(80.0)
-    assert completeness_pct(e, 5, 0.20) == pytest.approx(80.0)
-    assert completeness_pct(e, 8, 0.50) == pytest.approx(62.5)  # 5 of 8 reconstructable
-    X[4, 2] = 1.15
-    assert completeness_pct(point_error(X, surface), 5, 0.20) == pytest.approx(100.0)
-    assert completeness_pct(point_error(X, surface), 5, 0.02) == pytest.approx(80.0)
-    assert math.isnan(rmse(np.zeros(0))) and math.isnan(completeness_pct(e, 0, 0.1))
-
-
-def test_coverage_of_a_known_layout():
-    three_cells = np.array(
-        [[1.0, 1.0], [2.0, 2.0], [100.0, 1.0], [630.0, 470.0]]
-    )  # 3 cells of 16x12
-    every_cell = np.array([[(c + 0.5) * 40, (r + 0.5) * 40] for r in range(12) for c in range(16)])
-    assert coverage_pct([three_cells, every_cell], 640, 480) == pytest.approx(
-        100 * (3 / 192 + 1) / 2
-    )
-
-
-def test_runtime_proxy_parts():
-    r = runtime_proxy([1000, 1000], 5, [10, 20, 30], tentative=[100, 0], verified=[50, 0])
-    assert r["runtime_scoring"] == pytest.approx(10.0)  # 2000 candidates x 5 signals / 1000
-    assert r["runtime_matching"] == pytest.approx((200 + 300 + 600) / 1000)
-    assert r["runtime_robust"] == pytest.approx(100 * expected_ransac_iterations(0.5) / 1000)
-    assert r["runtime_proxy"] == pytest.approx(
-        r["runtime_scoring"] + r["runtime_matching"] + r["runtime_robust"]
-    )
-
-
-def test_expected_ransac_iterations():
-    assert expected_ransac_iterations(0.5) == pytest.approx(math.log(0.001) / math.log(1 - 0.5**5))
-    assert expected_ransac_iterations(1.0) == 100.0 and expected_ransac_iterations(0.0) == 10000.0
-
+from bench.backend.reconstruction import triangulate
+from tests.conftest import synthetic_rig
 
 # --- synthetic two-view geometry ----------------------------------------------------------
 
 
-def _rig():
-    cams = [
-        look_at((x, -8.0, 1.0), (0.0, 0.0, 1.0), width=640, height=480)
-        for x in (-1.5, -0.5, 0.5, 1.5)
-    ]
-    rng = np.random.default_rng(3)
-    X = np.c_[rng.uniform(-2.5, 2.5, 150), rng.uniform(-1.5, 1.5, 150), rng.uniform(0, 2, 150)]
-    return cams, X
-
-
 def test_verification_removes_planted_outliers():
-    cams, X = _rig()
+    cams, X = synthetic_rig()
     xa, xb = cams[0].project(X)[0], cams[2].project(X)[0]
     rng = np.random.default_rng(0)
     planted = np.c_[rng.uniform(0, 640, (40, 1)), rng.uniform(0, 480, (40, 1))]
@@ -126,7 +57,7 @@ def _triangulate_exact(cams, X, noise_px, tmp_path):
 
 
 def test_triangulation_with_known_poses_recovers_exact_points(tmp_path):
-    cams, X = _rig()
+    cams, X = synthetic_rig()
     got = _triangulate_exact(cams, X, 0.0, tmp_path)
     assert len(got) == len(X)
     err = np.array([np.linalg.norm(got[k] - X[k]) for k in got])
@@ -136,7 +67,7 @@ def test_triangulation_with_known_poses_recovers_exact_points(tmp_path):
 
 
 def test_triangulation_error_under_half_pixel_noise_is_within_its_bound(tmp_path):
-    cams, X = _rig()
+    cams, X = synthetic_rig()
     got = _triangulate_exact(cams, X, 0.5, tmp_path)
     assert len(got) >= 0.95 * len(X)
     err = np.array([np.linalg.norm(got[k] - X[k]) for k in got])
@@ -159,54 +90,6 @@ def test_tentative_matches_are_mutual_and_pass_the_ratio_test():
     assert set(m2[:, 0].tolist()) == set(range(10, 50))
 
 
-# --- reconstructable points on a hand-made scene --------------------------------------------
-
-
-def _plane_truth(cam) -> GroundTruth:
-    """Exact layers of the plane y = 0 seen by `cam` (every pixel hits it)."""
-    v, u = np.mgrid[0 : cam.height, 0 : cam.width] + 0.5
-    d = cam.rays(np.c_[u.ravel(), v.ravel()])
-    C = cam.center
-    s = -C[1] / d[:, 1]
-    P = (C + s[:, None] * d).reshape(cam.height, cam.width, 3)
-    z = cam.to_camera(P.reshape(-1, 3))[:, 2].reshape(cam.height, cam.width)
-    n = np.broadcast_to([0, -1.0, 0], P.shape)
-    return GroundTruth(np.linalg.norm(P - C, axis=2), z, P, n, np.zeros(z.shape))
-
-
-def _cands(xy):
-    xy = np.asarray(xy, float)
-    return Candidates(
-        xy,
-        np.ones(len(xy)),
-        np.zeros(len(xy)),
-        np.ones(len(xy)),
-        np.zeros((len(xy), 128), np.float32),
-    )
-
-
-def test_reconstructable_points_and_gt_correspondences():
-    a = look_at((-0.5, -6, 0.2), (0, 0, 0.2), width=160, height=120)
-    b = look_at((0.5, -6, 0.2), (0, 0, 0.2), width=160, height=120)
-    gts = [_plane_truth(a), _plane_truth(b)]
-    P = np.array([[-1.0, 0, 0.5], [0.0, 0, 0.0], [1.0, 0, -0.5], [0.3, 0, 0.9]])
-    xa, xb = a.project(P)[0], b.project(P)[0]
-    # view a has all four points; view b has the first two exactly, the third 10 px off,
-    # and one unrelated candidate
-    pools = [_cands(xa), _cands([xb[0], xb[1] + [1.0, 0.5], xb[2] + [10.0, 0], [5.5, 5.5]])]
-    truth = SceneTruth.build([a, b], gts, pools)
-    assert truth.reconstructable == 2
-    ok = truth.correspondences(0, 1, np.array([0, 1, 2, 0]), np.array([0, 1, 2, 1]))
-    assert ok.tolist() == [True, True, False, False]
-
-
-def test_exported_model_reads_back_with_pycolmap(tmp_path):
-    from bench.backend import known_pose_model
-    from bench.pipeline import export_model
-
-    cams, X = _rig()
-    model = known_pose_model(cams, [f"v{k}.png" for k in range(4)], [c.project(X)[0] for c in cams])
-    export_model(model, tmp_path / "m")
-    back = pycolmap.Reconstruction(str(tmp_path / "m"))
-    assert back.num_images() == 4 and back.image(1).num_points2D() == len(X)
-    assert (tmp_path / "m" / "points.ply").is_file() and (tmp_path / "m" / "points3D.txt").is_file()
+def test_expected_ransac_iterations():
+    assert expected_ransac_iterations(0.5) == pytest.approx(math.log(0.001) / math.log(1 - 0.5**5))
+    assert expected_ransac_iterations(1.0) == 100.0 and expected_ransac_iterations(0.0) == 10000.0

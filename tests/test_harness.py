@@ -1,21 +1,107 @@
-"""`bench run` and `bench plot`: files, resumption, configuration guard, reproducibility."""
+"""The harness: one run end to end (a complete row, an export that matches it), then `bench
+run` and `bench plot`: files, resumption, configuration guard, reproducibility."""
 
 from __future__ import annotations
 
 import json
+import math
 import shutil
 
 import pandas as pd
+import pycolmap
 import pytest
 
-from bench import BenchError, harness
-from bench.cli import main
-from bench.harness import BenchConfig, run_benchmark
-from bench.pipeline import RunConfig
-from tests.conftest import MEDIUM
+from bench import BenchError
+from bench.backend.reconstruction import known_pose_model
+from bench.evaluation.groundtruth import load_ground_truth
+from bench.evaluation.metrics import SceneTruth
+from bench.frontend.stage import front_end
+from bench.harness import grid as harness
+from bench.harness.cli import main
+from bench.harness.grid import BenchConfig, run_benchmark
+from bench.harness.pipeline import RunConfig, export_model, run_one
+from tests.conftest import MEDIUM, synthetic_rig
+
+# --- one run ------------------------------------------------------------------------
+
+METRICS = [
+    "rmse",
+    "median_error",
+    "acc_completeness_pct",
+    "acc_completeness_pct_0.02",
+    "acc_completeness_pct_0.05",
+    "acc_completeness_pct_0.20",
+    "inlier_pct",
+    "match_precision_pct",
+    "coverage_pct",
+    "mean_track_length",
+    "mean_tri_angle_deg",
+    "runtime_proxy",
+    "runtime_scoring",
+    "runtime_matching",
+    "runtime_robust",
+    "wall_ms",
+    "detect_ms",
+    "signals_ms",
+    "select_ms",
+    "match_ms",
+    "verify_ms",
+    "triangulate_ms",
+    "evaluate_ms",
+    "render_s_per_view",
+]
+
+
+@pytest.fixture(scope="module")
+def table_run(medium_entry, tmp_path_factory):
+    entry = medium_entry("table")
+    cfg = RunConfig()
+    fe = front_end(entry, cfg.detector, cfg.signals, tmp_path_factory.mktemp("fe"))
+    truth = SceneTruth.build([v.camera for v in fe.views], load_ground_truth(entry), fe.pools)
+    out = tmp_path_factory.mktemp("models")
+
+    def run(policy: str, budget: int = 128):
+        return run_one(
+            entry, fe, truth, "table", 0, policy, budget, cfg, out / f"{policy}-b{budget}"
+        ), out / f"{policy}-b{budget}"
+
+    run.pool_size = sum(len(p) for p in fe.pools)
+    return run
+
+
+@pytest.mark.parametrize("policy", ["all", "adaptive"])
+def test_one_run_gives_a_complete_row(table_run, policy):
+    row, model_dir = table_run(policy)
+    assert row["status"] == "ok", row["failure"]
+    for k in METRICS:
+        assert isinstance(row[k], float | int) and math.isfinite(row[k]), k
+    assert row["points"] > 0 and row["reconstructable"] > 0
+    model = pycolmap.Reconstruction(str(model_dir))
+    assert model.num_points3D() == row["points"]
+    assert model.num_images() == 6
+    selected = sum(img.num_points2D() for img in model.images.values())
+    assert selected == (6 * 128 if policy == "adaptive" else table_run.pool_size)
+
+
+def test_budgeted_images_txt_lists_every_selected_keypoint(table_run):
+    _, model_dir = table_run("texture", 64)
+    model = pycolmap.Reconstruction(str(model_dir))
+    assert [img.num_points2D() for img in model.images.values()] == [64] * 6
+
+
+def test_exported_model_reads_back_with_pycolmap(tmp_path):
+    cams, X = synthetic_rig()
+    model = known_pose_model(cams, [f"v{k}.png" for k in range(4)], [c.project(X)[0] for c in cams])
+    export_model(model, tmp_path / "m")
+    back = pycolmap.Reconstruction(str(tmp_path / "m"))
+    assert back.num_images() == 4 and back.image(1).num_points2D() == len(X)
+    assert (tmp_path / "m" / "points.ply").is_file() and (tmp_path / "m" / "points3D.txt").is_file()
+
+
+# --- the grid -----------------------------------------------------------------------
 
 SMALL = BenchConfig(
-    scenes=("table", "facade"), seeds=1, budgets=(64,), run=RunConfig(render=MEDIUM)
+    scenes=("table", "facade"), seeds=(0,), budgets=(64,), run=RunConfig(render=MEDIUM)
 )
 TIMING = [
     "render_s_per_view",
@@ -95,11 +181,11 @@ def test_plot_rebuilds_the_tables_from_runs_csv_alone(quick_results, tmp_path, r
     for name in ("table1.csv", "table2.csv"):
         assert (tmp_path / name).read_bytes() == (quick_results / name).read_bytes()
     assert (tmp_path / "figure3.png").is_file()
-    assert "figure2.png not drawn" in capsys.readouterr().out  # no exported model was copied
+    assert "figure2.png not drawn" in capsys.readouterr().err  # no exported model was copied
 
 
 def test_several_budgets_give_a_budget_figure(quick_results, tmp_path, renders_dir):
-    from bench.report import write_report
+    from bench.harness.report import write_report
 
     runs = pd.read_csv(quick_results / "runs.csv")
     write_report(pd.concat([runs, runs.assign(budget=32)]), tmp_path, renders_dir)
@@ -146,7 +232,7 @@ def test_another_configuration_into_the_same_directory_is_refused(
     quick_results, renders_dir, tmp_path
 ):
     shutil.copytree(quick_results, tmp_path / "r")
-    other = BenchConfig(scenes=("table",), seeds=1, budgets=(32,), run=RunConfig(render=MEDIUM))
+    other = BenchConfig(scenes=("table",), seeds=(0,), budgets=(32,), run=RunConfig(render=MEDIUM))
     with pytest.raises(
         BenchError, match="holds results of another configuration .*budgets.*--overwrite"
     ):
@@ -180,10 +266,13 @@ def test_plot_rejects_bad_runs_csv_in_one_line(tmp_path, capsys, content, messag
             "unknown policy 'best'; valid: random, texture, grid, adaptive, all",
         ),
         (["run", "--budget", "0"], "budget must be positive"),
-        (["run", "--budget", "12x"], "budget must be positive integers"),
+        (["run", "--budget", "12x"], "--budget takes one comma-separated list"),
+        (["run", "--budget", "128,,256"], "e.g. --budget 128,256,512"),
+        (["run", "--scenes", "table", "facade"], "list options take one comma-separated list"),
+        (["run", "--seeds", "-1"], "seeds must be non-negative integers"),
         (["run", "--scenes", "moon"], "unknown scene 'moon'"),
         (["run", "--detector", "surf"], "invalid choice: 'surf'"),
-        (["run", "--weights", "0.3,x,0,0,0"], "weights must be five numbers"),
+        (["run", "--weights", "0.3,x,0,0,0"], "is not a list of float"),
         (["run", "--weights", "0.3,0.2"], "weights must be five numbers"),
     ],
 )
@@ -194,3 +283,9 @@ def test_run_bad_input_is_one_clear_line(argv, message, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
     assert not (tmp_path / "r").exists()
+
+
+def test_version_names_the_distribution(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0 and "kpbudget-bench" in capsys.readouterr().out

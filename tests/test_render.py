@@ -10,10 +10,12 @@ import cv2
 import numpy as np
 import pytest
 
-from bench import BenchError, render, variant
+from bench import BenchError
 from bench.camera import look_at, read_colmap_rig
-from bench.cli import main
-from bench.scene import build_scene, load_spec, scene_names
+from bench.harness.cli import main
+from bench.render import entry as render
+from bench.render import mitsuba, variant
+from bench.scenes.spec import build_scene, load_spec, scene_names
 from tests.conftest import TINY
 
 
@@ -44,7 +46,7 @@ def test_mitsuba_sensor_is_the_only_conversion():
     cam = look_at((1.0, -5.0, 2.0), (0.0, 0.0, 1.0), width=64, height=48, fov_x_deg=50)
     mi = pytest.importorskip("mitsuba")
     mi.set_variant("scalar_rgb")
-    sensor = mi.load_dict(render.mitsuba_sensor(cam, 1))
+    sensor = mi.load_dict(mitsuba.mitsuba_sensor(cam, 1))
     M = np.array(sensor.world_transform().matrix)
     np.testing.assert_allclose(M[:3, 3], cam.center, atol=1e-5)
     # Mitsuba looks down its +z, which must be the OpenCV camera's +z (forward)
@@ -134,7 +136,7 @@ def test_two_processes_rendering_one_entry(tmp_path):
     cmd = [
         sys.executable,
         "-m",
-        "bench.cli",
+        "bench",
         "render",
         "table",
         "--seed",
@@ -153,7 +155,7 @@ def test_two_processes_rendering_one_entry(tmp_path):
     assert sum(err.count("rendered table") for _, err in outs) == 6  # rendered once
     from pathlib import Path
 
-    from bench.cache import entry_problem
+    from bench.files import entry_problem
 
     assert entry_problem(Path(outs[0][0].strip())) is None
 

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from bench.camera import read_colmap_rig
-from bench.features import DetectorConfig, detect
-from bench.scene import build_scene, load_spec, scene_names
-from bench.signals import DUPLICATE_DISTANCE, _same_view_distances
-from bench.views import load_views
+from bench.frontend.features import DetectorConfig, detect
+from bench.frontend.signals import DUPLICATE_DISTANCE, _same_view_distances
+from bench.frontend.views import load_views
+from bench.scenes.spec import build_scene, load_spec, scene_names
 
 
 def test_all_four_scene_types_are_declared():

@@ -13,8 +13,8 @@ import cv2
 import numpy as np
 
 from bench import BenchError
-from bench.cache import entry_problem
 from bench.camera import Camera, read_colmap_rig
+from bench.files import entry_problem
 
 
 @dataclass(frozen=True)

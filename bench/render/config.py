@@ -1,12 +1,8 @@
-"""Typed configurations, and their field docstrings as `--help` text."""
+"""How a scene is rendered: a typed configuration whose field docstrings are `--help` text."""
 
 from __future__ import annotations
 
-import ast
-import dataclasses
-import inspect
 from dataclasses import dataclass
-from functools import cache
 
 VARIANTS = ("auto", "cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
 
@@ -41,22 +37,3 @@ class RenderConfig:
 
 QUICK_RENDER = RenderConfig(width=320, height=240, spp=9, max_depth=2)
 """The tiny render of `--quick` runs and of the tests."""
-
-
-@cache
-def field_docs(cls: type) -> dict[str, str]:
-    """The docstring written under each field of a dataclass, keyed by field name."""
-    docs: dict[str, str] = {}
-    for klass in reversed(cls.__mro__):
-        if not dataclasses.is_dataclass(klass):
-            continue
-        body = ast.parse(inspect.cleandoc("\n" + inspect.getsource(klass))).body[0].body
-        for node, nxt in zip(body, body[1:]):
-            if (
-                isinstance(node, ast.AnnAssign)
-                and isinstance(node.target, ast.Name)
-                and isinstance(nxt, ast.Expr)
-                and isinstance(nxt.value, ast.Constant)
-            ):
-                docs[node.target.id] = " ".join(str(nxt.value.value).split())
-    return docs

@@ -17,14 +17,15 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.backend import BackendConfig, known_pose_model, reconstruct
-from bench.cache import content_key
-from bench.config import RenderConfig
-from bench.evaluate import SceneTruth, evaluate
-from bench.features import DetectorConfig
-from bench.frontend import FrontEnd
-from bench.policies import SIGNALS_USED, PolicyConfig, PolicyInput, select
-from bench.signals import SignalConfig
+from bench.backend.matching import BackendConfig
+from bench.backend.reconstruction import known_pose_model, reconstruct
+from bench.evaluation.metrics import SceneTruth, evaluate
+from bench.files import content_key
+from bench.frontend.features import DetectorConfig
+from bench.frontend.policies import SIGNALS_USED, PolicyConfig, PolicyInput, select
+from bench.frontend.signals import SignalConfig
+from bench.frontend.stage import FrontEnd
+from bench.render.config import RenderConfig
 
 
 @dataclass(frozen=True)

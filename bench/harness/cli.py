@@ -1,22 +1,46 @@
-"""The `bench` command line: scenes, render, run, plot."""
+"""The `bench` command line: scenes, render, run, plot, gallery."""
 
 from __future__ import annotations
 
 import argparse
+import ast
 import dataclasses
+import inspect
 import sys
+from functools import cache
 from pathlib import Path
 
-from bench import ROOT, BenchError
-from bench.config import QUICK_RENDER, VARIANTS, RenderConfig, field_docs
-from bench.features import DETECTORS, DetectorConfig
-from bench.policies import PolicyConfig
+from bench import DISTRIBUTION, ROOT, BenchError, __version__
+from bench.frontend.features import DETECTORS, DetectorConfig
+from bench.frontend.policies import PolicyConfig
+from bench.render.config import QUICK_RENDER, VARIANTS, RenderConfig
+
+
+@cache
+def field_docs(cls: type) -> dict[str, str]:
+    """The docstring written under each field of a dataclass, keyed by field name."""
+    docs: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        if not dataclasses.is_dataclass(klass):
+            continue
+        body = ast.parse(inspect.cleandoc("\n" + inspect.getsource(klass))).body[0].body
+        for node, nxt in zip(body, body[1:]):
+            if (
+                isinstance(node, ast.AnnAssign)
+                and isinstance(node.target, ast.Name)
+                and isinstance(nxt, ast.Expr)
+                and isinstance(nxt.value, ast.Constant)
+            ):
+                docs[node.target.id] = " ".join(str(nxt.value.value).split())
+    return docs
 
 
 class _Parser(argparse.ArgumentParser):
     """Usage errors as one line, like every other error of the CLI."""
 
     def error(self, message: str):
+        if message.startswith("unrecognized arguments"):
+            message += f" (list options take {LIST_FORM}, e.g. --scenes table,facade)"
         self.exit(2, f"bench: error: {message} (see `{self.prog} --help`)\n")
 
 
@@ -41,7 +65,7 @@ def config_from_args(cls: type, args: argparse.Namespace):
 
 
 def cmd_scenes(args: argparse.Namespace) -> None:
-    from bench.scene import load_spec, scene_names
+    from bench.scenes.spec import load_spec, scene_names
 
     for name in scene_names():
         spec = load_spec(name)
@@ -51,7 +75,7 @@ def cmd_scenes(args: argparse.Namespace) -> None:
 
 
 def cmd_render(args: argparse.Namespace) -> None:
-    from bench.render import render_scene
+    from bench.render.entry import render_scene
 
     cfg = config_from_args(RenderConfig, args).validate()
     entry = render_scene(args.scene, args.seed, cfg, args.renders, force=args.force)
@@ -59,28 +83,40 @@ def cmd_render(args: argparse.Namespace) -> None:
 
 
 def cmd_gallery(args: argparse.Namespace) -> None:
-    from bench.gallery import write_gallery
-    from bench.render import render_scene
-    from bench.scene import scene_names
+    from bench.render.entry import render_scene
+    from bench.render.gallery import write_gallery
+    from bench.scenes.spec import scene_names
 
     cfg = config_from_args(RenderConfig, args).validate()
     entries = {name: render_scene(name, args.seed, cfg, args.renders) for name in scene_names()}
     print(write_gallery(entries, args.out))
 
 
-def _numbers(text: str, kind: type, what: str) -> tuple:
-    """A comma-separated list of numbers; one that does not parse is the one-line error `what`
-    (their values are checked with the rest of the configuration)."""
+LIST_FORM = "one comma-separated list without spaces"
+
+
+def parse_list(option: str, text: str, kind: type = str, example: str = "") -> tuple:
+    """The items of a list option, which has one syntax: `--option a,b,c`. Integer items of
+    `--seeds` may also be inclusive ranges such as 100-119."""
+    how = f"{option} takes {LIST_FORM}, e.g. {option} {example}"
+    if any(not x.strip() for x in text.split(",")):
+        raise BenchError(f"{how}; got {text!r}")
+    items = []
     try:
-        return tuple(kind(x) for x in text.split(","))
+        for x in text.split(","):
+            lo, dash, hi = (
+                x.partition("-") if option == "--seeds" and x[1:].count("-") else (x, "", "")
+            )
+            items += list(range(int(lo), int(hi) + 1)) if dash else [kind(x)]
     except ValueError:
-        raise BenchError(f"{what}, got {text!r}") from None
+        raise BenchError(f"{how}; {text!r} is not a list of {kind.__name__}") from None
+    return tuple(items)
 
 
 def cmd_run(args: argparse.Namespace) -> None:
-    from bench.harness import BenchConfig, run_benchmark
-    from bench.pipeline import RunConfig
-    from bench.report import HEADLINE, table1
+    from bench.harness.grid import BenchConfig, run_benchmark
+    from bench.harness.pipeline import RunConfig
+    from bench.harness.report import HEADLINE, table1
 
     render = QUICK_RENDER if args.quick else RenderConfig()
     overrides = {
@@ -93,17 +129,15 @@ def cmd_run(args: argparse.Namespace) -> None:
         render=render,
         detector=DetectorConfig(detector=args.detector),
         policy=PolicyConfig(
-            weights=_numbers(
-                args.weights, float, "weights must be five numbers w_t,w_r,w_q,w_p,w_a"
-            )
+            weights=parse_list("--weights", args.weights, float, "0.28,0.27,0.22,0.19,0.20")
         ),
     )
-    seeds = args.seeds if args.seeds is not None else (1 if args.quick else 3)
+    seeds = args.seeds if args.seeds is not None else ("0" if args.quick else "0,1,2")
     cfg = BenchConfig(
-        tuple(args.scenes),
-        seeds,
-        tuple(args.policies),
-        _numbers(args.budget, int, "budget must be positive integers like 256 or 128,256,512"),
+        parse_list("--scenes", args.scenes, str, "table,facade"),
+        parse_list("--seeds", seeds, int, "0,1,2 or 100-119"),
+        parse_list("--policies", args.policies, str, "texture,adaptive"),
+        parse_list("--budget", args.budget, int, "128,256,512"),
         run,
     )
     df = run_benchmark(cfg, args.results, args.renders, overwrite=args.overwrite)
@@ -116,7 +150,7 @@ def cmd_run(args: argparse.Namespace) -> None:
 
 
 def cmd_plot(args: argparse.Namespace) -> None:
-    from bench.report import load_runs, write_report
+    from bench.harness.report import load_runs, write_report
 
     write_report(load_runs(args.results / "runs.csv"), args.results, args.renders)
     print(f"tables and figures rewritten in {args.results}")
@@ -133,6 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="bench",
         description="Rendered-scene benchmark of keypoint selection policies for 3D reconstruction.",
     )
+    p.add_argument("--version", action="version", version=f"bench {__version__} ({DISTRIBUTION})")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     s = sub.add_parser("scenes", help="list the scene types and their parameters")
@@ -153,8 +188,8 @@ def build_parser() -> argparse.ArgumentParser:
     _dir_arg(r, "renders", "render cache directory")
     r.set_defaults(func=cmd_render)
 
-    from bench.harness import DEFAULT_POLICIES
-    from bench.scene import scene_names
+    from bench.harness.grid import DEFAULT_POLICIES
+    from bench.scenes.spec import scene_names
 
     u = sub.add_parser(
         "run",
@@ -165,35 +200,26 @@ def build_parser() -> argparse.ArgumentParser:
         "RESULTS/runs.csv as they finish; an interrupted run resumes where it stopped. Then "
         "table1.csv, table2.csv, figure2.png, figure3.png/.pdf and manifest.json.",
     )
-    u.add_argument(
-        "--scenes",
-        nargs="+",
-        default=scene_names(),
-        metavar="SCENE",
-        help="scene types (default: all four)",
+
+    def list_arg(name: str, default: str | None, metavar: str, what: str) -> None:
+        u.add_argument(
+            f"--{name}",
+            default=default,
+            metavar=metavar,
+            help=f"{what}; {LIST_FORM}" + (f" (default: {default})" if default is not None else ""),
+        )
+
+    list_arg("scenes", ",".join(scene_names()), "S1,S2", "scene types")
+    list_arg("policies", ",".join(DEFAULT_POLICIES), "P1,P2", "policies")
+    list_arg("budget", "256", "B1,B2", "features per view")
+    list_arg(
+        "seeds", None, "N1,N2", "scene seeds, e.g. 0,1,2 or 0-9 (default: 0,1,2, or 0 with --quick)"
     )
-    u.add_argument(
-        "--policies",
-        nargs="+",
-        default=list(DEFAULT_POLICIES),
-        metavar="POLICY",
-        help="policies (default: %(default)s)",
-    )
-    u.add_argument(
-        "--budget",
-        default="256",
-        help="features per view, or a comma-separated list (default: %(default)s)",
-    )
-    u.add_argument(
-        "--seeds",
-        type=int,
-        default=None,
-        help="seeds 0..N-1 per scene (default: 3, or 1 with --quick)",
-    )
-    u.add_argument(
-        "--weights",
-        default=",".join(str(w) for w in PolicyConfig().weights),
-        help=f"{field_docs(PolicyConfig)['weights']} (default: %(default)s)",
+    list_arg(
+        "weights",
+        ",".join(str(w) for w in PolicyConfig().weights),
+        "W1,...,W5",
+        field_docs(PolicyConfig)["weights"].rstrip("."),
     )
     u.add_argument("--quick", action="store_true", help="smoke run: tiny renders, one seed")
     u.add_argument(

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from bench import BenchError
-from bench.features import Candidates
-from bench.signals import Signals
-from bench.views import View
+from bench.frontend.features import Candidates
+from bench.frontend.signals import Signals
+from bench.frontend.views import View
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from bench.scene import N_VIEWS
+from bench.scenes.spec import N_VIEWS
 
 
 def write_gallery(entries: dict[str, Path], out: Path, thumb_width: int = 320) -> Path:

@@ -15,11 +15,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from bench import BenchError, features, signals
-from bench.cache import content_key, source_hash
-from bench.features import Candidates, DetectorConfig
-from bench.signals import SIGNALS, SignalConfig, Signals, compute_signals
-from bench.views import View, load_views
+from bench import BenchError
+from bench.console import log
+from bench.files import content_key, source_hash
+from bench.frontend import features, signals
+from bench.frontend.features import Candidates, DetectorConfig
+from bench.frontend.signals import SIGNALS, SignalConfig, Signals, compute_signals
+from bench.frontend.views import View, load_views
 
 _CAND = [f.name for f in fields(Candidates)]
 
@@ -58,7 +60,7 @@ def front_end(entry: Path, det: DetectorConfig, sig: SignalConfig, cache_dir: Pa
                 seconds = {k: float(z[f"seconds_{k}"]) for k in ("detect", *SIGNALS)}
             return FrontEnd(views, pools, sigs, seconds, cached=True)
         except (OSError, ValueError, KeyError):
-            print(f"bench: damaged front-end cache {path.name}; computing it again")
+            log(f"damaged front-end cache {path.name}; computing it again")
     t = time.perf_counter()
     pools = [features.detect(v, det) for v in views]
     seconds = {"detect": time.perf_counter() - t}

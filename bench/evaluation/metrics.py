@@ -40,10 +40,11 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from bench.backend import Reconstruction, expected_ransac_iterations
+from bench.backend.matching import expected_ransac_iterations
+from bench.backend.reconstruction import Reconstruction
 from bench.camera import Camera
-from bench.features import Candidates
-from bench.groundtruth import GroundTruth
+from bench.evaluation.groundtruth import GroundTruth
+from bench.frontend.features import Candidates
 
 THRESHOLDS = (0.02, 0.05, 0.10, 0.20)
 CORRESPONDENCE_PX = 3.0

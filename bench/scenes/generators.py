@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench import shapes, textures
 from bench.camera import Camera, look_at
-from bench.scene import N_VIEWS, Material, Mesh, generator
-from bench.shapes import Geom
+from bench.scenes import shapes, textures
+from bench.scenes.shapes import Geom
+from bench.scenes.spec import N_VIEWS, Material, Mesh, generator
 
 
 def _mesh(name: str, g: Geom, material: Material, motion=None) -> Mesh:

@@ -1,7 +1,7 @@
 """`bench run`: every (scene, seed, policy, budget) of the grid, resumable and reproducible.
 
 Stages per (scene, seed): render (cached) -> front end (cached) -> for each policy and
-budget: one run (`bench.pipeline.run_one`), its row appended to `runs.csv` at once (the
+budget: one run (`bench.harness.pipeline.run_one`), its row appended to `runs.csv` at once (the
 file is rewritten through a temporary name, so an interrupt keeps every finished row).
 The configuration is stored in `config.json` beside the results; a run into a directory
 holding another configuration is refused unless `overwrite`.
@@ -14,7 +14,6 @@ import os
 import platform
 import shutil
 import subprocess
-import sys
 import time
 from dataclasses import asdict, dataclass, field
 from importlib.metadata import version
@@ -23,16 +22,16 @@ from pathlib import Path
 import pandas as pd
 
 from bench import ROOT, BenchError
-from bench.cache import write_text_atomic
-from bench.evaluate import SceneTruth
-from bench.frontend import front_end
-from bench.groundtruth import load_ground_truth
-from bench.pipeline import RunConfig, run_one
-from bench.policies import check_policies
-from bench.progress import Progress
-from bench.render import render_scene
-from bench.report import KEY, write_report
-from bench.scene import load_spec, scene_names
+from bench.console import log, progress
+from bench.evaluation.groundtruth import load_ground_truth
+from bench.evaluation.metrics import SceneTruth
+from bench.files import write_text_atomic
+from bench.frontend.policies import check_policies
+from bench.frontend.stage import front_end
+from bench.harness.pipeline import RunConfig, run_one
+from bench.harness.report import KEY, write_report
+from bench.render.entry import render_scene
+from bench.scenes.spec import load_spec, scene_names
 
 DEFAULT_POLICIES = ("random", "texture", "grid", "adaptive", "all")
 
@@ -42,7 +41,7 @@ class BenchConfig:
     """The benchmark grid and the configuration of every run in it."""
 
     scenes: tuple[str, ...] = field(default_factory=lambda: tuple(scene_names()))
-    seeds: int = 3
+    seeds: tuple[int, ...] = (0, 1, 2)
     policies: tuple[str, ...] = DEFAULT_POLICIES
     budgets: tuple[int, ...] = (256,)
     run: RunConfig = field(default_factory=RunConfig)
@@ -51,8 +50,8 @@ class BenchConfig:
         for s in self.scenes:
             load_spec(s)
         check_policies(self.policies)
-        if self.seeds <= 0:
-            raise BenchError(f"seeds must be positive, got {self.seeds}")
+        if not self.seeds or min(self.seeds) < 0:
+            raise BenchError(f"seeds must be non-negative integers, got {list(self.seeds)}")
         if not self.budgets or min(self.budgets) <= 0:
             raise BenchError(f"budget must be positive integers, got {list(self.budgets)}")
         self.run.render.validate()
@@ -115,7 +114,7 @@ def run_benchmark(
     df = read_finished(runs_csv, cfg.run.hash)
     done = set(map(tuple, df[list(KEY)].itertuples(index=False))) if len(df) else set()
     rows = df.to_dict("records") if len(df) else []
-    grid = [(sc, sd) for sc in cfg.scenes for sd in range(cfg.seeds)]
+    grid = [(sc, sd) for sc in cfg.scenes for sd in cfg.seeds]
     todo = [
         (sc, sd, p, b)
         for sc, sd in grid
@@ -126,20 +125,18 @@ def run_benchmark(
     stage_s = dict.fromkeys(
         ["render", "frontend", "truth", "select", "match", "verify", "triangulate", "evaluate"], 0.0
     )
-    print(
-        f"bench: {len(done)} of {len(done) + len(todo)} runs already in {runs_csv}; {len(todo)} to do",
-        file=sys.stderr,
-    )
+    log(f"{len(done)} of {len(done) + len(todo)} runs already in {runs_csv}; {len(todo)} to do")
 
     pending = [(sc, sd) for sc, sd in grid if any(t[:2] == (sc, sd) for t in todo)]
     entries = {}
-    with Progress("render", len(pending)) as bar:
+    with progress("render", len(pending)) as bar:
         for sc, sd in pending:
             t = time.perf_counter()
             entries[sc, sd] = render_scene(sc, sd, cfg.run.render, renders)
             stage_s["render"] += time.perf_counter() - t
-            bar.step(f"{sc} seed {sd}")
-    with Progress("runs", len(todo)) as bar:
+            bar.set_postfix_str(f"{sc} seed {sd}")
+            bar.update()
+    with progress("runs", len(todo)) as bar:
         for sc, sd in pending:
             mine = [t for t in todo if t[:2] == (sc, sd)]
             t = time.perf_counter()
@@ -159,9 +156,8 @@ def run_benchmark(
                     stage_s[k] += row[f"{k}_ms"] / 1000
                 rows.append(row)
                 write_text_atomic(runs_csv, pd.DataFrame(rows).to_csv(index=False))
-                bar.step(
-                    f"{sc} s{sd} {policy} b{budget}: {row['points']} points, rmse {row['rmse']:.3f}"
-                )
+                bar.set_postfix_str(f"{sc} s{sd} {policy} b{budget}: {row['points']} points")
+                bar.update()
     t = time.perf_counter()
     out = pd.read_csv(runs_csv)
     write_report(out, results, renders)
@@ -176,10 +172,7 @@ def run_benchmark(
         total,
         len(todo),
     )
-    print(
-        f"bench: {len(todo)} runs done, {len(done)} reused, in {total:.0f} s; results in {results}",
-        file=sys.stderr,
-    )
+    log(f"{len(todo)} runs done, {len(done)} reused, in {total:.0f} s; results in {results}")
     return out
 
 
@@ -230,7 +223,7 @@ def write_manifest(
         "host": {"node": platform.node(), "platform": platform.platform(), "cpus": os.cpu_count()},
         "config": cfg.as_dict(),
         "config_hash": cfg.run.hash,
-        "seeds": list(range(cfg.seeds)),
+        "seeds": list(cfg.seeds),
         "policies": list(cfg.policies),
         "git_commit": commit,
         "runs_this_invocation": n_runs,

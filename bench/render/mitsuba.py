@@ -1,4 +1,5 @@
-"""The render stage: a scene description to a cached `renders/` entry, through Mitsuba.
+"""The Mitsuba boundary: a scene description and an OpenCV camera to a path-traced image
+with its ground-truth layers.
 
 This is the only module that talks to Mitsuba, and `mitsuba_sensor` is the only place
 where the OpenCV camera convention is converted to Mitsuba's (x left, y up, z forward).
@@ -9,19 +10,12 @@ integrator around `path`, box filter).
 from __future__ import annotations
 
 import math
-import sys
-import time
-from importlib.metadata import version
-from pathlib import Path
 
-import cv2
 import numpy as np
 
-from bench import cache, camera, scene, scenes, shapes, textures
-from bench.camera import Camera, write_colmap_rig
-from bench.config import RenderConfig
-from bench.scene import N_VIEWS, SceneDescription, SceneSpec, build_scene, load_spec
-from bench.variant import resolve_variant
+from bench.camera import Camera
+from bench.render.config import RenderConfig
+from bench.scenes.spec import Mesh, SceneDescription
 
 MITSUBA_FROM_OPENCV = np.diag([-1.0, -1.0, 1.0])
 AOVS = "dd:depth,pp:position,nn:sh_normal,si:shape_index"
@@ -59,7 +53,7 @@ def mitsuba_sensor(cam: Camera, spp: int) -> dict:
     }
 
 
-def _mitsuba_mesh(m: scene.Mesh, view: int):
+def _mitsuba_mesh(m: Mesh, view: int):
     mi = _mi()
     if m.material.texture is not None:
         albedo = {"type": "bitmap", "data": mi.TensorXf(m.material.texture), "raw": True}
@@ -140,93 +134,3 @@ def render_view(desc: SceneDescription, view: int, cfg: RenderConfig, variant: s
     img = np.array(mi.render(sc, seed=desc.seed * 1000 + view))
     rgb, gt = split_layers(img, desc.cameras[view])
     return rgb, gt, [s.id() for s in sc.shapes()]
-
-
-def render_key(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -> str:
-    """Hash of everything that changes pixels: scene, seed, rig, settings, code, renderer."""
-    code = cache.source_hash(scene, scenes, shapes, textures, camera, *PIXEL_CODE)
-    return cache.content_key(
-        {
-            "scene": spec.name,
-            "params": spec.params,
-            "seed": seed,
-            "width": cfg.width,
-            "height": cfg.height,
-            "spp": cfg.spp,
-            "max_depth": cfg.max_depth,
-            "variant": variant,
-            "code": code,
-            "aovs": AOVS,
-            "mitsuba_from_opencv": MITSUBA_FROM_OPENCV.tolist(),
-            "mitsuba": version("mitsuba"),
-            "drjit": version("drjit"),
-        }
-    )
-
-
-PIXEL_CODE = (mitsuba_sensor, _mitsuba_mesh, mitsuba_scene_dict, split_layers, srgb8, render_view)
-"""The functions of this module that decide pixels (hashed into the render key; the cache
-plumbing below is not, so editing it re-renders nothing)."""
-_announced: set[str] = set()
-
-
-def log(msg: str) -> None:
-    print(f"bench: {msg}", file=sys.stderr, flush=True)
-
-
-def render_scene(
-    name: str, seed: int, cfg: RenderConfig, renders_dir: Path, force: bool = False
-) -> Path:
-    """The cache entry of (scene, seed, settings), rendered only if missing or damaged."""
-    cfg.validate()
-    spec = load_spec(name)
-    renders_dir = Path(renders_dir)
-    variant, why = resolve_variant(cfg.variant, renders_dir)
-    if why not in _announced:  # once per process
-        log(why)
-        _announced.add(why)
-    entry = renders_dir / f"{name}-s{seed}-{render_key(spec, seed, cfg, variant)}"
-    with cache.locked(entry):
-        problem = cache.entry_problem(entry) if entry.exists() else None
-        if entry.exists() and problem is None and not force:
-            return entry
-        if problem:
-            log(f"damaged cache entry {entry.name} ({problem}); rendering it again")
-        desc = build_scene(spec, seed, cfg.width, cfg.height)
-        with cache.atomic_dir(entry) as tmp:
-            seconds, names = [], None
-            for v in range(N_VIEWS):
-                t0 = time.perf_counter()
-                rgb, gt, names = render_view(desc, v, cfg, variant)
-                cv2.imwrite(str(tmp / f"view_{v:02d}.png"), srgb8(rgb)[..., ::-1])
-                np.savez(tmp / f"gt_{v:02d}.npz", **gt)
-                seconds.append(time.perf_counter() - t0)
-                log(
-                    f"rendered {name} seed {seed} view {v + 1}/{N_VIEWS} in {seconds[-1]:.1f} s ({variant})"
-                )
-            write_colmap_rig(desc.cameras, tmp, [f"view_{v:02d}.png" for v in range(N_VIEWS)])
-            cache.write_meta(
-                tmp,
-                {
-                    "scene": name,
-                    "seed": seed,
-                    "params": spec.params,
-                    "width": cfg.width,
-                    "height": cfg.height,
-                    "spp": cfg.spp,
-                    "max_depth": cfg.max_depth,
-                    "variant": variant,
-                    "versions": {"mitsuba": version("mitsuba"), "drjit": version("drjit")},
-                    "seconds_per_view": seconds,
-                    "shape_names": names,
-                    "gt_layers": {
-                        k: "float32; NaN (shape_index -1) where the pixel saw nothing"
-                        for k in GT_LAYERS
-                    },
-                    "cameras": [
-                        {"K": c.K.tolist(), "R_cam_from_world": c.R.tolist(), "t": c.t.tolist()}
-                        for c in desc.cameras
-                    ],
-                },
-            )
-    return entry

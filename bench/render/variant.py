@@ -19,7 +19,7 @@ from importlib.metadata import version
 from pathlib import Path
 
 from bench import BenchError
-from bench.cache import write_text_atomic
+from bench.files import write_text_atomic
 
 PROBE_CODE = """
 import sys, mitsuba as mi

@@ -20,7 +20,8 @@ import pandas as pd  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from bench import BenchError  # noqa: E402
-from bench.cache import write_text_atomic  # noqa: E402
+from bench.console import log  # noqa: E402
+from bench.files import write_text_atomic  # noqa: E402
 
 KEY = ("scene", "seed", "policy", "budget")
 DISPLAY = {
@@ -200,7 +201,7 @@ def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | 
     import pycolmap
     from scipy.spatial import cKDTree
 
-    from bench.groundtruth import load_ground_truth
+    from bench.evaluation.groundtruth import load_ground_truth
 
     rows = df[(df["scene"] == "table") & (df["policy"] == "adaptive")].sort_values(
         ["seed", "budget"]
@@ -268,4 +269,4 @@ def write_report(df: pd.DataFrame, results: Path, renders: Path) -> None:
         figure_budget(t1, results / "figure_budget")
     why = figure2(df, results, Path(renders), results / "figure2")
     if why:
-        print(f"bench: figure2.png not drawn: {why}")
+        log(f"figure2.png not drawn: {why}")

@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 
 from bench import BenchError
-from bench.views import View
+from bench.frontend.views import View
 
 DETECTORS = ("sift", "orb", "akaze")
 
@@ -95,3 +95,12 @@ def detect(view: View, cfg: DetectorConfig) -> Candidates:
 def detect_points(gray: np.ndarray, cfg: DetectorConfig) -> np.ndarray:
     """Keypoint locations only (COLMAP convention), for re-detection under perturbations."""
     return keypoint_arrays(cfg.create().detect(gray, None))[0]
+
+
+def descriptor_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Pairwise descriptor distances: L2 for float descriptors, Hamming fraction for binary."""
+    if a.dtype == np.uint8:
+        A, B = (np.unpackbits(x, axis=1).astype(np.float32) for x in (a, b))
+        return (A @ (1 - B).T + (1 - A) @ B.T) / A.shape[1]
+    d2 = (a * a).sum(1)[:, None] + (b * b).sum(1)[None] - 2 * a @ b.T
+    return np.sqrt(np.maximum(d2, 0))

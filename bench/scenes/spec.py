@@ -112,8 +112,6 @@ def load_spec(name: str) -> SceneSpec:
 
 def build_scene(spec: SceneSpec, seed: int, width: int, height: int) -> SceneDescription:
     """Generate the scene deterministically from its parameters and seed."""
-    import bench.scenes  # noqa: F401  (registers the generators)
-
     rng = np.random.default_rng([seed, int.from_bytes(spec.name.encode()[:8], "little")])
     meshes, cameras, sun = _GENERATORS[spec.name](spec.params, rng, width, height)
     return SceneDescription(spec.name, seed, dict(spec.params), meshes, cameras, sun)

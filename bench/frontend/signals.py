@@ -32,8 +32,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from bench.camera import Camera
-from bench.features import Candidates, DetectorConfig, detect_points
-from bench.views import View
+from bench.frontend.features import Candidates, DetectorConfig, descriptor_distances, detect_points
+from bench.frontend.views import View
 
 SIGNALS = ("texture", "repeatability", "distinctiveness", "ambiguity", "parallax")
 DUPLICATE_DISTANCE = {"sift": 0.3, "orb": 0.2, "akaze": 0.2}
@@ -125,15 +125,6 @@ def repeatability(gray: np.ndarray, cand: Candidates, det: DetectorConfig) -> np
             d, _ = cKDTree(pts).query(mapped)
             hits += inside & (d <= tol)
     return np.divide(hits, seen, out=np.zeros_like(hits), where=seen > 0)
-
-
-def descriptor_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Pairwise descriptor distances: L2 for float descriptors, Hamming fraction for binary."""
-    if a.dtype == np.uint8:
-        A, B = (np.unpackbits(x, axis=1).astype(np.float32) for x in (a, b))
-        return (A @ (1 - B).T + (1 - A) @ B.T) / A.shape[1]
-    d2 = (a * a).sum(1)[:, None] + (b * b).sum(1)[None] - 2 * a @ b.T
-    return np.sqrt(np.maximum(d2, 0))
 
 
 def _same_view_distances(cand: Candidates) -> np.ndarray:

@@ -1,0 +1,126 @@
+"""Matching and geometric verification of the selected features of every pair of views.
+
+1. Tentative matches: mutual nearest neighbours in descriptor space that also pass Lowe's
+   ratio test (d1 < ratio * d2).
+2. Verification per pair with COLMAP's calibrated two-view geometry (RANSAC on the
+   essential matrix, homography checks) using the known intrinsics; inliers are kept.
+RANSAC is seeded, so a run is reproducible.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from itertools import combinations
+
+import numpy as np
+import pycolmap
+
+from bench.camera import Camera
+from bench.frontend.features import descriptor_distances
+
+
+@dataclass(frozen=True)
+class BackendConfig:
+    """Matching, verification and triangulation settings."""
+
+    ratio: float = 0.8
+    """Lowe ratio test threshold for tentative matches (with mutual nearest neighbours)."""
+    ransac_max_error: float = 4.0
+    """RANSAC inlier threshold of the two-view verification, in pixels (COLMAP's default)."""
+    min_tri_angle: float = 1.5
+    """Minimum triangulation angle in degrees for a track to become a point (COLMAP's default)."""
+    keep_two_view_tracks: bool = True
+    """Triangulate tracks seen in only two views (COLMAP's point triangulator drops them by default)."""
+    seed: int = 0
+    """Seed of COLMAP's RANSAC and triangulator."""
+
+
+@dataclass
+class PairMatches:
+    """Matches between the selected features of views i < j (indices into the selections)."""
+
+    i: int
+    j: int
+    tentative: np.ndarray
+    verified: np.ndarray
+    config: str
+    """COLMAP's two-view configuration (e.g. CALIBRATED, PLANAR, DEGENERATE)."""
+
+
+def tentative_matches(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float) -> np.ndarray:
+    """(M, 2) index pairs: mutual nearest neighbours that pass the ratio test."""
+    if len(desc_a) < 2 or len(desc_b) < 2:
+        return np.zeros((0, 2), np.int64)
+    D = descriptor_distances(desc_a, desc_b)
+    two = np.partition(D, 1, axis=1)[:, :2]
+    nn_ab, nn_ba = D.argmin(1), D.argmin(0)
+    a = np.arange(len(desc_a))
+    keep = (nn_ba[nn_ab] == a) & (two[:, 0] < ratio * two[:, 1])
+    return np.stack([a[keep], nn_ab[keep]], 1)
+
+
+def colmap_camera(cam: Camera) -> pycolmap.Camera:
+    c = pycolmap.Camera(
+        model="PINHOLE",
+        width=cam.width,
+        height=cam.height,
+        params=[cam.fx, cam.fy, cam.cx, cam.cy],
+        camera_id=1,
+    )
+    c.has_prior_focal_length = True  # otherwise COLMAP does not estimate a calibrated geometry
+    return c
+
+
+def verify(
+    cam_a: Camera,
+    xy_a: np.ndarray,
+    cam_b: Camera,
+    xy_b: np.ndarray,
+    matches: np.ndarray,
+    cfg: BackendConfig,
+) -> tuple[np.ndarray, str]:
+    """COLMAP's calibrated two-view geometry on the tentative matches: (inliers, configuration)."""
+    if len(matches) < 5:
+        return np.zeros((0, 2), np.int64), "TOO_FEW_MATCHES"
+    opts = pycolmap.TwoViewGeometryOptions()
+    opts.ransac.max_error = cfg.ransac_max_error
+    opts.ransac.random_seed = cfg.seed
+    tvg = pycolmap.estimate_calibrated_two_view_geometry(
+        colmap_camera(cam_a),
+        xy_a.astype(np.float64),
+        colmap_camera(cam_b),
+        xy_b.astype(np.float64),
+        matches.astype(np.uint32),
+        opts,
+    )
+    config = pycolmap.TwoViewGeometryConfiguration(int(tvg.config)).name
+    return np.asarray(tvg.inlier_matches, np.int64).reshape(-1, 2), config
+
+
+def match_and_verify(
+    cams: list[Camera], xy: list[np.ndarray], desc: list[np.ndarray], cfg: BackendConfig
+) -> tuple[list[PairMatches], dict[str, float]]:
+    pairs, seconds = [], {"match": 0.0, "verify": 0.0}
+    for i, j in combinations(range(len(cams)), 2):
+        t = time.perf_counter()
+        m = tentative_matches(desc[i], desc[j], cfg.ratio)
+        seconds["match"] += time.perf_counter() - t
+        t = time.perf_counter()
+        inliers, config = verify(cams[i], xy[i], cams[j], xy[j], m, cfg)
+        seconds["verify"] += time.perf_counter() - t
+        pairs.append(PairMatches(i, j, m, inliers, config))
+    return pairs, seconds
+
+
+def expected_ransac_iterations(
+    inlier_ratio: float, sample_size: int = 5, confidence: float = 0.999
+) -> float:
+    """RANSAC trials needed to draw one all-inlier minimal sample with the given confidence,
+    within COLMAP's trial bounds (100 to 10000)."""
+    w = min(max(inlier_ratio, 0.0), 1.0) ** sample_size
+    trials = (
+        math.log(1 - confidence) / math.log1p(-w) if 0 < w < 1 else (1.0 if w >= 1 else math.inf)
+    )
+    return float(min(max(trials, 100.0), 10000.0))

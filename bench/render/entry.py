@@ -1,0 +1,109 @@
+"""Render entries: a scene and seed to a cached `renders/` entry (six views, their
+ground truth, the rig), rendered through `bench.render.mitsuba` only when missing or damaged.
+"""
+
+from __future__ import annotations
+
+import time
+from importlib.metadata import version
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from bench import camera, files
+from bench.camera import write_colmap_rig
+from bench.console import log
+from bench.render import mitsuba
+from bench.render.config import RenderConfig
+from bench.render.mitsuba import AOVS, GT_LAYERS, MITSUBA_FROM_OPENCV, render_view, srgb8
+from bench.render.variant import resolve_variant
+from bench.scenes import generators, shapes, textures
+from bench.scenes import spec as scene_spec
+from bench.scenes.spec import N_VIEWS, SceneSpec, build_scene, load_spec
+
+
+def render_key(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -> str:
+    """Hash of everything that changes pixels: scene, seed, rig, settings, code, renderer.
+
+    The code is that of the scene description and of `bench.render.mitsuba`; this module's
+    cache plumbing is not hashed, so editing it re-renders nothing."""
+    code = files.source_hash(scene_spec, generators, shapes, textures, camera, mitsuba)
+    return files.content_key(
+        {
+            "scene": spec.name,
+            "params": spec.params,
+            "seed": seed,
+            "width": cfg.width,
+            "height": cfg.height,
+            "spp": cfg.spp,
+            "max_depth": cfg.max_depth,
+            "variant": variant,
+            "code": code,
+            "aovs": AOVS,
+            "mitsuba_from_opencv": MITSUBA_FROM_OPENCV.tolist(),
+            "mitsuba": version("mitsuba"),
+            "drjit": version("drjit"),
+        }
+    )
+
+
+_announced: set[str] = set()
+
+
+def render_scene(
+    name: str, seed: int, cfg: RenderConfig, renders_dir: Path, force: bool = False
+) -> Path:
+    """The cache entry of (scene, seed, settings), rendered only if missing or damaged."""
+    cfg.validate()
+    spec = load_spec(name)
+    renders_dir = Path(renders_dir)
+    variant, why = resolve_variant(cfg.variant, renders_dir)
+    if why not in _announced:  # once per process
+        log(why)
+        _announced.add(why)
+    entry = renders_dir / f"{name}-s{seed}-{render_key(spec, seed, cfg, variant)}"
+    with files.locked(entry):
+        problem = files.entry_problem(entry) if entry.exists() else None
+        if entry.exists() and problem is None and not force:
+            return entry
+        if problem:
+            log(f"damaged cache entry {entry.name} ({problem}); rendering it again")
+        desc = build_scene(spec, seed, cfg.width, cfg.height)
+        with files.atomic_dir(entry) as tmp:
+            seconds, names = [], None
+            for v in range(N_VIEWS):
+                t0 = time.perf_counter()
+                rgb, gt, names = render_view(desc, v, cfg, variant)
+                cv2.imwrite(str(tmp / f"view_{v:02d}.png"), srgb8(rgb)[..., ::-1])
+                np.savez(tmp / f"gt_{v:02d}.npz", **gt)
+                seconds.append(time.perf_counter() - t0)
+                log(
+                    f"rendered {name} seed {seed} view {v + 1}/{N_VIEWS} in {seconds[-1]:.1f} s ({variant})"
+                )
+            write_colmap_rig(desc.cameras, tmp, [f"view_{v:02d}.png" for v in range(N_VIEWS)])
+            files.write_meta(
+                tmp,
+                {
+                    "scene": name,
+                    "seed": seed,
+                    "params": spec.params,
+                    "width": cfg.width,
+                    "height": cfg.height,
+                    "spp": cfg.spp,
+                    "max_depth": cfg.max_depth,
+                    "variant": variant,
+                    "versions": {"mitsuba": version("mitsuba"), "drjit": version("drjit")},
+                    "seconds_per_view": seconds,
+                    "shape_names": names,
+                    "gt_layers": {
+                        k: "float32; NaN (shape_index -1) where the pixel saw nothing"
+                        for k in GT_LAYERS
+                    },
+                    "cameras": [
+                        {"K": c.K.tolist(), "R_cam_from_world": c.R.tolist(), "t": c.t.tolist()}
+                        for c in desc.cameras
+                    ],
+                },
+            )
+    return entry

@@ -1,0 +1,104 @@
+"""The metrics and the ground-truth structures, on hand-made cases with known answers."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from bench.backend.matching import expected_ransac_iterations
+from bench.camera import look_at
+from bench.evaluation.groundtruth import GroundTruth
+from bench.evaluation.metrics import (
+    SceneTruth,
+    completeness_pct,
+    coverage_pct,
+    point_error,
+    rmse,
+    runtime_proxy,
+)
+from bench.frontend.features import Candidates
+
+# --- metrics on five hand-made points -------------------------------------------------
+
+TRUE = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [0.5, 0.5, 1.0]])
+
+
+def test_point_error_rmse_median_and_completeness_on_five_points():
+    surface = cKDTree(TRUE)
+    X = TRUE.copy()
+    X[4, 2] += 0.3  # one point 0.3 units off its surface
+    e = point_error(X, surface)
+    np.testing.assert_allclose(e, [0, 0, 0, 0, 0.3], atol=1e-12)
+    assert rmse(e) == pytest.approx(math.sqrt(0.09 / 5))
+    assert np.median(e) == 0
+    assert completeness_pct(e, 5, 0.10) == pytest.approx(80.0)
+    assert completeness_pct(e, 5, 0.20) == pytest.approx(80.0)
+    assert completeness_pct(e, 8, 0.50) == pytest.approx(62.5)  # 5 of 8 reconstructable
+    X[4, 2] = 1.15
+    assert completeness_pct(point_error(X, surface), 5, 0.20) == pytest.approx(100.0)
+    assert completeness_pct(point_error(X, surface), 5, 0.02) == pytest.approx(80.0)
+    assert math.isnan(rmse(np.zeros(0))) and math.isnan(completeness_pct(e, 0, 0.1))
+
+
+def test_coverage_of_a_known_layout():
+    three_cells = np.array(
+        [[1.0, 1.0], [2.0, 2.0], [100.0, 1.0], [630.0, 470.0]]
+    )  # 3 cells of 16x12
+    every_cell = np.array([[(c + 0.5) * 40, (r + 0.5) * 40] for r in range(12) for c in range(16)])
+    assert coverage_pct([three_cells, every_cell], 640, 480) == pytest.approx(
+        100 * (3 / 192 + 1) / 2
+    )
+
+
+def test_runtime_proxy_parts():
+    r = runtime_proxy([1000, 1000], 5, [10, 20, 30], tentative=[100, 0], verified=[50, 0])
+    assert r["runtime_scoring"] == pytest.approx(10.0)  # 2000 candidates x 5 signals / 1000
+    assert r["runtime_matching"] == pytest.approx((200 + 300 + 600) / 1000)
+    assert r["runtime_robust"] == pytest.approx(100 * expected_ransac_iterations(0.5) / 1000)
+    assert r["runtime_proxy"] == pytest.approx(
+        r["runtime_scoring"] + r["runtime_matching"] + r["runtime_robust"]
+    )
+
+
+# --- reconstructable points on a hand-made scene --------------------------------------------
+
+
+def _plane_truth(cam) -> GroundTruth:
+    """Exact layers of the plane y = 0 seen by `cam` (every pixel hits it)."""
+    v, u = np.mgrid[0 : cam.height, 0 : cam.width] + 0.5
+    d = cam.rays(np.c_[u.ravel(), v.ravel()])
+    C = cam.center
+    s = -C[1] / d[:, 1]
+    P = (C + s[:, None] * d).reshape(cam.height, cam.width, 3)
+    z = cam.to_camera(P.reshape(-1, 3))[:, 2].reshape(cam.height, cam.width)
+    n = np.broadcast_to([0, -1.0, 0], P.shape)
+    return GroundTruth(np.linalg.norm(P - C, axis=2), z, P, n, np.zeros(z.shape))
+
+
+def _cands(xy):
+    xy = np.asarray(xy, float)
+    return Candidates(
+        xy,
+        np.ones(len(xy)),
+        np.zeros(len(xy)),
+        np.ones(len(xy)),
+        np.zeros((len(xy), 128), np.float32),
+    )
+
+
+def test_reconstructable_points_and_gt_correspondences():
+    a = look_at((-0.5, -6, 0.2), (0, 0, 0.2), width=160, height=120)
+    b = look_at((0.5, -6, 0.2), (0, 0, 0.2), width=160, height=120)
+    gts = [_plane_truth(a), _plane_truth(b)]
+    P = np.array([[-1.0, 0, 0.5], [0.0, 0, 0.0], [1.0, 0, -0.5], [0.3, 0, 0.9]])
+    xa, xb = a.project(P)[0], b.project(P)[0]
+    # view a has all four points; view b has the first two exactly, the third 10 px off,
+    # and one unrelated candidate
+    pools = [_cands(xa), _cands([xb[0], xb[1] + [1.0, 0.5], xb[2] + [10.0, 0], [5.5, 5.5]])]
+    truth = SceneTruth.build([a, b], gts, pools)
+    assert truth.reconstructable == 2
+    ok = truth.correspondences(0, 1, np.array([0, 1, 2, 0]), np.array([0, 1, 2, 1]))
+    assert ok.tolist() == [True, True, False, False]

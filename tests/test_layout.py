@@ -1,0 +1,110 @@
+"""The package layout: stages in data-flow order, no import cycles, and the ground-truth
+firewall (front end and back end never reach ground truth)."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+import bench
+
+PACKAGE = Path(bench.__file__).parent
+STAGES = ("scenes", "render", "frontend", "backend", "evaluation", "harness")
+"""The subpackages in data-flow order; the modules directly in `bench/` are shared."""
+FIREWALLED = ("frontend", "backend")
+GROUND_TRUTH = ("bench.scenes", "bench.render", "bench.evaluation")
+"""What holds or produces ground truth: scene geometry, the renderer, the evaluation."""
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+MODULES = {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def imports_of(source: str) -> set[str]:
+    """The bench modules a module's source imports (at any depth, functions included)."""
+    found = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            assert not node.level, "relative imports hide the data flow"
+            full = {f"{node.module}.{a.name}" for a in node.names}
+            found |= {m if m in MODULES else node.module for m in full}
+    return {m for m in found if m == "bench" or m.startswith("bench.")}
+
+
+def stage_of(name: str) -> int:
+    """Position in the data flow; -1 for the shared modules directly in `bench/`, and the
+    top for `python -m bench`."""
+    parts = name.split(".")
+    if name == "bench.__main__":
+        return len(STAGES)
+    return STAGES.index(parts[1]) if len(parts) > 1 and parts[1] in STAGES else -1
+
+
+GRAPH = {name: imports_of(path.read_text()) for name, path in MODULES.items()}
+
+
+def test_every_stage_is_a_subpackage_with_a_docstring_saying_what_enters_and_leaves():
+    for stage in STAGES:
+        doc = ast.get_docstring(ast.parse((PACKAGE / stage / "__init__.py").read_text()))
+        assert doc and "In:" in doc and "Out:" in doc, stage
+
+
+def test_no_import_cycles():
+    state: dict[str, int] = {}
+
+    def visit(node: str, path: list[str]) -> None:
+        state[node] = 1
+        for nxt in sorted(GRAPH.get(node, ())):
+            if nxt == node or nxt not in GRAPH or (node.startswith(nxt + ".") and nxt != "bench"):
+                continue  # a module's own package is imported before it, not by it
+            assert state.get(nxt) != 1, "import cycle: " + " -> ".join([*path, node, nxt])
+            if nxt not in state:
+                visit(nxt, [*path, node])
+        state[node] = 2
+
+    for name in GRAPH:
+        if name not in state:
+            visit(name, [])
+
+
+def test_lower_stages_never_import_higher_ones():
+    for name, deps in GRAPH.items():
+        for dep in deps:
+            assert stage_of(dep) <= stage_of(name), (
+                f"{name} (stage {stage_of(name)}) imports {dep} (stage {stage_of(dep)})"
+            )
+
+
+def firewall_breaches(source: str, name: str) -> set[str]:
+    """Ground-truth modules a front- or back-end module imports, and `gt_` file names."""
+    bad = {d for d in imports_of(source) if d.startswith(GROUND_TRUTH)}
+    return bad | ({"gt_ files"} if "gt_" in source else set())
+
+
+@pytest.mark.parametrize(
+    "name", [m for m in MODULES if m.split(".")[1:2] in ([f] for f in FIREWALLED)]
+)
+def test_front_and_back_end_cannot_reach_ground_truth(name):
+    assert not firewall_breaches(MODULES[name].read_text(), name)
+
+
+@pytest.mark.parametrize(
+    "planted",
+    [
+        "from bench.evaluation.groundtruth import load_ground_truth",
+        "import bench.render.entry",
+        "from bench.scenes import spec",
+        "np.load(entry / 'gt_00.npz')",
+    ],
+)
+def test_the_firewall_check_catches_a_planted_breach(planted):
+    source = MODULES["bench.frontend.policies"].read_text() + "\n" + planted + "\n"
+    assert firewall_breaches(source, "bench.frontend.policies")
