@@ -93,3 +93,33 @@ def test_tentative_matches_are_mutual_and_pass_the_ratio_test():
 def test_expected_ransac_iterations():
     assert expected_ransac_iterations(0.5) == pytest.approx(math.log(0.001) / math.log(1 - 0.5**5))
     assert expected_ransac_iterations(1.0) == 100.0 and expected_ransac_iterations(0.0) == 10000.0
+
+
+def test_a_two_view_outlier_is_dropped_by_multiview_and_kept_by_twoview(tmp_path):
+    """150 points seen by all four cameras, plus one wrong match seen by two: its second
+    observation lies on the epipolar line of the first, at the image of a point 3 units
+    deeper, so it triangulates cleanly (no reprojection error) far from any true point."""
+    cams, X = synthetic_rig()
+    xy = [c.project(X)[0] for c in cams]
+    ray = cams[0].rays(xy[0][:1])[0]
+    wrong = cams[0].center + (np.linalg.norm(X[0] - cams[0].center) + 3.0) * ray
+    xy[0] = np.vstack([xy[0], xy[0][:1]])
+    xy[1] = np.vstack([xy[1], cams[1].project(wrong[None])[0]])
+    ids = np.arange(len(X))
+    pairs = []
+    for i in range(4):
+        for j in range(i + 1, 4):
+            m = np.c_[ids, ids]
+            if (i, j) == (0, 1):
+                m = np.vstack([m, [len(X), len(X)]])
+            pairs.append(PairMatches(i, j, m, m, "CALIBRATED"))
+    names = [f"view_{k:02d}.png" for k in range(4)]
+    for n in names:
+        cv2.imwrite(str(tmp_path / n), np.zeros((480, 640, 3), np.uint8))
+    found = {}
+    for protocol in ("multiview", "twoview"):
+        model = triangulate(tmp_path, cams, names, xy, pairs, BackendConfig(), protocol)
+        P = np.array([p.xyz for p in model.points3D.values()])
+        found[protocol] = (len(P), np.linalg.norm(P - wrong, axis=1).min())
+    assert found["multiview"][0] == len(X) and found["multiview"][1] > 1.0
+    assert found["twoview"][0] == len(X) + 1 and found["twoview"][1] < 1e-3

@@ -16,8 +16,15 @@ from bench.evaluation.metrics import (
     completeness_pct,
     coverage_pct,
     point_error,
+    point_metrics,
     rmse,
     runtime_proxy,
+)
+from bench.evaluation.oracle import (
+    exact_track_count,
+    matchable_tracks,
+    oracle_select,
+    tracks_in_three_views,
 )
 from bench.frontend.features import Candidates
 
@@ -99,6 +106,73 @@ def test_reconstructable_points_and_gt_correspondences():
     # and one unrelated candidate
     pools = [_cands(xa), _cands([xb[0], xb[1] + [1.0, 0.5], xb[2] + [10.0, 0], [5.5, 5.5]])]
     truth = SceneTruth.build([a, b], gts, pools)
-    assert truth.reconstructable == 2
+    assert truth.reconstructable(2) == 2
     ok = truth.correspondences(0, 1, np.array([0, 1, 2, 0]), np.array([0, 1, 2, 1]))
     assert ok.tolist() == [True, True, False, False]
+
+
+def test_reconstructable_points_per_track_protocol():
+    a, b, c = (look_at((x, -6, 0.2), (0, 0, 0.2), width=160, height=120) for x in (-0.5, 0.0, 0.5))
+    P = np.array([[-1.0, 0, 0.5], [0.0, 0, 0.0], [1.0, 0, -0.5]])
+    # all three points in views a and b; only the first two in view c
+    pools = [_cands(a.project(P)[0]), _cands(b.project(P)[0]), _cands(c.project(P[:2])[0])]
+    truth = SceneTruth.build([a, b, c], [_plane_truth(v) for v in (a, b, c)], pools)
+    assert truth.reconstructable(2) == 3 and truth.reconstructable(3) == 2
+
+
+def test_accuracy_is_the_share_of_points_within_tau():
+    surface = cKDTree(TRUE)
+    X = TRUE.copy()
+    X[4, 2] += 0.3
+    row = point_metrics(X, surface, reconstructable=10)
+    assert row["accuracy_pct"] == pytest.approx(80.0) and row["accuracy_pct_0.20"] == 80.0
+    assert row["acc_completeness_pct"] == pytest.approx(40.0)  # 4 accurate of 10
+    assert math.isnan(point_metrics(np.zeros((0, 3)), surface, 10)["accuracy_pct"])
+
+
+# --- the oracle -------------------------------------------------------------------------
+
+
+def test_oracle_picks_the_candidates_of_the_three_view_tracks():
+    """Four views of five candidates: tracks 0 and 1 span three views, track 2 two views,
+    the rest are singletons. With a budget of two per view (one per view where only one
+    three-view track is present), exactly the three-view tracks' candidates are chosen."""
+    track = [
+        np.array([0, 1, 2, 10, 11]),
+        np.array([0, 1, 2, 12, 13]),
+        np.array([0, 14, 15, 16, 17]),
+        np.array([1, 18, 19, 20, 21]),
+    ]
+    response = [np.arange(5, 0, -1.0)[::-1] for _ in track]  # singletons are the strongest
+    sel = oracle_select(track, response, 2)
+    assert [sorted(t[s].tolist()) for t, s in zip(track, sel)][:2] == [[0, 1], [0, 1]]
+    assert tracks_in_three_views(track, sel) == 2 == exact_track_count(track, 2)
+    assert all(len(s) == 2 and len(set(s.tolist())) == 2 for s in sel)
+
+
+def test_oracle_greedy_is_close_to_the_exact_optimum():
+    rng = np.random.default_rng(0)
+    got = best = 0
+    for _ in range(25):
+        n, n_tracks, budget = rng.integers(10, 40), rng.integers(5, 30), int(rng.integers(2, 8))
+        track = [rng.integers(0, n_tracks, n) for _ in range(6)]
+        sel = oracle_select(track, [rng.random(n) for _ in range(6)], budget)
+        assert all(len(s) == min(budget, n) for s in sel)
+        got += tracks_in_three_views(track, sel)
+        best += exact_track_count(track, budget)
+    assert got <= best and got >= 0.95 * best, (got, best)
+
+
+def test_matchable_tracks_need_ground_truth_and_matching_descriptors():
+    a = look_at((-0.5, -6, 0.2), (0, 0, 0.2), width=160, height=120)
+    b = look_at((0.5, -6, 0.2), (0, 0, 0.2), width=160, height=120)
+    P = np.array([[-1.0, 0, 0.5], [0.0, 0, 0.0], [1.0, 0, -0.5]])
+    rng = np.random.default_rng(0)
+    desc = rng.normal(size=(4, 128)).astype(np.float32)
+    desc /= np.linalg.norm(desc, axis=1, keepdims=True)
+    pa, pb = _cands(a.project(P)[0]), _cands(b.project(P)[0])
+    pa.descriptors[:] = desc[:3]
+    pb.descriptors[:] = desc[[0, 1, 3]]  # the third point looks different in view b
+    truth = SceneTruth.build([a, b], [_plane_truth(a), _plane_truth(b)], [pa, pb])
+    ta, tb = matchable_tracks(truth, [pa, pb], 0.8)
+    assert ta[0] == tb[0] and ta[1] == tb[1] and ta[2] != tb[2]

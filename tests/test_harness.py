@@ -19,7 +19,9 @@ from bench.frontend.stage import front_end
 from bench.harness import grid as harness
 from bench.harness.cli import main
 from bench.harness.grid import BenchConfig, run_benchmark
-from bench.harness.pipeline import RunConfig, export_model, run_one
+from bench.harness.pipeline import RunConfig, export_model, run_unit
+from bench.harness.stats import bootstrap_mean, paired_difference
+from bench.harness.tables import KEY
 from tests.conftest import MEDIUM, synthetic_rig
 
 # --- one run ------------------------------------------------------------------------
@@ -46,9 +48,10 @@ METRICS = [
     "select_ms",
     "match_ms",
     "verify_ms",
-    "triangulate_ms",
+    "task_ms",
     "evaluate_ms",
     "render_s_per_view",
+    "accuracy_pct",
 ]
 
 
@@ -61,9 +64,10 @@ def table_run(medium_entry, tmp_path_factory):
     out = tmp_path_factory.mktemp("models")
 
     def run(policy: str, budget: int = 128):
-        return run_one(
-            entry, fe, truth, "table", 0, policy, budget, cfg, out / f"{policy}-b{budget}"
-        ), out / f"{policy}-b{budget}"
+        (row,) = run_unit(
+            entry, fe, truth, "table", 0, policy, budget, [("tri", "multiview")], cfg, out
+        )
+        return row, out / "models" / "table-s0" / f"{policy}-b{budget}"
 
     run.pool_size = sum(len(p) for p in fe.pools)
     return run
@@ -110,10 +114,12 @@ TIMING = [
     "select_ms",
     "match_ms",
     "verify_ms",
-    "triangulate_ms",
+    "task_ms",
     "evaluate_ms",
     "wall_ms",
 ]
+POLICIES = ["random", "texture", "grid", "adaptive", "oracle", "all"]
+ROWS = 2 * len(POLICIES) * 2  # scenes x units x track protocols
 
 
 @pytest.fixture(scope="module")
@@ -127,7 +133,9 @@ def test_quick_run_writes_every_file_with_documented_columns(quick_results):
     for name in (
         "runs.csv",
         "table1.csv",
+        "table1_twoview.csv",
         "table2.csv",
+        "paired.csv",
         "figure2.png",
         "figure3.png",
         "figure3.pdf",
@@ -136,13 +144,9 @@ def test_quick_run_writes_every_file_with_documented_columns(quick_results):
     ):
         assert (quick_results / name).is_file(), name
     runs = pd.read_csv(quick_results / "runs.csv")
-    assert len(runs) == 2 * 5 and set(runs["policy"]) == {
-        "random",
-        "texture",
-        "grid",
-        "adaptive",
-        "all",
-    }
+    assert len(runs) == ROWS and set(runs["policy"]) == set(POLICIES)
+    assert set(runs.loc[runs["policy"] == "all", "budget"]) == {0}  # one run, the whole pool
+    assert set(zip(runs["task"], runs["protocol"])) == {("tri", "multiview"), ("tri", "twoview")}
     assert {"render_key", "config_hash", "status", "failure", *TIMING} <= set(runs.columns)
     t1 = pd.read_csv(quick_results / "table1.csv")
     assert {
@@ -153,11 +157,15 @@ def test_quick_run_writes_every_file_with_documented_columns(quick_results):
         "coverage_pct",
         "runtime_proxy",
         "wall_ms",
-        "rmse_ci95",
+        "rmse_lo",
+        "rmse_hi",
+        "accuracy_pct",
+        "completeness_vs_oracle_pct",
     } <= set(t1.columns)
-    assert list(t1["policy"]) == ["random", "texture", "grid", "adaptive", "all"]
+    assert list(t1["policy"]) == POLICIES
     t2 = pd.read_csv(quick_results / "table2.csv")
-    assert list(t2.columns[:2]) == ["scene", "budget"] and set(t2["scene"]) == {"table", "facade"}
+    assert list(t2.columns[:2]) == ["scene", "budget"]
+    assert set(t2["scene"]) == {"table", "facade", "all scenes"}
     assert {
         "adaptive_rmse",
         "best_baseline_rmse",
@@ -171,8 +179,8 @@ def test_quick_run_writes_every_file_with_documented_columns(quick_results):
         manifest
     )
     assert manifest["seconds"]["total"] > 0 and "render" in manifest["seconds"]
-    for policy in ("adaptive", "all"):
-        assert (quick_results / "models" / "table-s0" / f"{policy}-b64" / "points3D.txt").is_file()
+    for run in ("adaptive-b64", "all-b0", "oracle-b64/twoview"):
+        assert (quick_results / "models" / "table-s0" / run / "points3D.txt").is_file()
 
 
 def test_plot_rebuilds_the_tables_from_runs_csv_alone(quick_results, tmp_path, renders_dir, capsys):
@@ -188,10 +196,11 @@ def test_several_budgets_give_a_budget_figure(quick_results, tmp_path, renders_d
     from bench.harness.report import write_report
 
     runs = pd.read_csv(quick_results / "runs.csv")
-    write_report(pd.concat([runs, runs.assign(budget=32)]), tmp_path, renders_dir)
+    budgeted = runs[runs["policy"] != "all"]
+    write_report(pd.concat([runs, budgeted.assign(budget=32)]), tmp_path, renders_dir)
     assert (tmp_path / "figure_budget.png").is_file()
     t1 = pd.read_csv(tmp_path / "table1.csv")
-    assert sorted(set(t1["budget"])) == [32, 64] and len(t1) == 10
+    assert sorted(set(t1["budget"])) == [0, 32, 64] and len(t1) == 11
 
 
 def test_same_command_gives_identical_metrics(quick_results, renders_dir, tmp_path):
@@ -203,7 +212,7 @@ def test_same_command_gives_identical_metrics(quick_results, renders_dir, tmp_pa
 
 def test_interrupted_run_resumes_without_redoing_rows(renders_dir, tmp_path, monkeypatch):
     calls = []
-    real = harness.run_one
+    real = harness.run_unit
 
     def interrupt_after_three(*args, **kwargs):
         if len(calls) == 3:
@@ -211,16 +220,16 @@ def test_interrupted_run_resumes_without_redoing_rows(renders_dir, tmp_path, mon
         calls.append(args[4:7])
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(harness, "run_one", interrupt_after_three)
+    monkeypatch.setattr(harness, "run_unit", interrupt_after_three)
     with pytest.raises(KeyboardInterrupt):
         run_benchmark(SMALL, tmp_path, renders_dir)
-    assert len(pd.read_csv(tmp_path / "runs.csv")) == 3
+    assert len(pd.read_csv(tmp_path / "runs.csv")) == 3 * 2
     calls.clear()
-    monkeypatch.setattr(harness, "run_one", lambda *a, **k: calls.append(a[4:7]) or real(*a, **k))
+    monkeypatch.setattr(harness, "run_unit", lambda *a, **k: calls.append(a[4:7]) or real(*a, **k))
     run_benchmark(SMALL, tmp_path, renders_dir)
-    assert len(calls) == 7
+    assert len(calls) == 2 * len(POLICIES) - 3
     runs = pd.read_csv(tmp_path / "runs.csv")
-    assert len(runs) == 10 and not runs.duplicated(["scene", "seed", "policy", "budget"]).any()
+    assert len(runs) == ROWS and not runs.duplicated(list(KEY)).any()
     calls.clear()
     rendered = []
     monkeypatch.setattr(harness, "render_scene", lambda *a, **k: rendered.append(a))
@@ -237,9 +246,9 @@ def test_another_configuration_into_the_same_directory_is_refused(
         BenchError, match="holds results of another configuration .*budgets.*--overwrite"
     ):
         run_benchmark(other, tmp_path / "r", renders_dir)
-    assert len(pd.read_csv(tmp_path / "r" / "runs.csv")) == 10  # nothing lost
+    assert len(pd.read_csv(tmp_path / "r" / "runs.csv")) == ROWS  # nothing lost
     run_benchmark(other, tmp_path / "r", renders_dir, overwrite=True)
-    assert len(pd.read_csv(tmp_path / "r" / "runs.csv")) == 5
+    assert len(pd.read_csv(tmp_path / "r" / "runs.csv")) == len(POLICIES) * 2
 
 
 @pytest.mark.parametrize(
@@ -265,6 +274,10 @@ def test_plot_rejects_bad_runs_csv_in_one_line(tmp_path, capsys, content, messag
             ["run", "--policies", "best"],
             "unknown policy 'best'; valid: random, texture, grid, adaptive, all",
         ),
+        (
+            ["run", "--protocols", "threeview"],
+            "unknown protocol 'threeview'; valid: multiview, twoview",
+        ),
         (["run", "--budget", "0"], "budget must be positive"),
         (["run", "--budget", "12x"], "--budget takes one comma-separated list"),
         (["run", "--budget", "128,,256"], "e.g. --budget 128,256,512"),
@@ -289,3 +302,40 @@ def test_version_names_the_distribution(capsys):
     with pytest.raises(SystemExit) as e:
         main(["--version"])
     assert e.value.code == 0 and "kpbudget-bench" in capsys.readouterr().out
+
+
+# --- statistics -----------------------------------------------------------------------
+
+
+def test_paired_bootstrap_on_known_differences():
+    units = pd.MultiIndex.from_tuples([(s, k) for s in ("a", "b") for k in range(3)])
+    strata = pd.Series(units.get_level_values(0), index=units)
+    base = pd.Series(10.0, index=units)
+    # a constant difference per scene (+1 in a, +5 in b): resampling seeds within each
+    # scene keeps the pooled mean at exactly 3, so the interval is [3, 3]
+    better = base + pd.Series([1, 1, 1, 5, 5, 5], index=units, dtype=float)
+    r = paired_difference(better, base, strata, "acc_completeness_pct")
+    assert (r["n"], r["mean_diff"], r["lo"], r["hi"]) == (6, 3.0, 3.0, 3.0)
+    assert (r["wins"], r["ties"], r["losses"]) == (6, 0, 0)
+    # for rmse lower is better: the same differences are six losses
+    assert paired_difference(better, base, strata, "rmse")["losses"] == 6
+    # differences -1, 0, +1 in one scene: mean 0, interval inside [-1, 1], one of each
+    mixed = paired_difference(
+        base.iloc[:3] + [-1.0, 0.0, 1.0], base.iloc[:3], strata.iloc[:3], "accuracy_pct"
+    )
+    assert mixed["mean_diff"] == 0 and -1 <= mixed["lo"] < 0 < mixed["hi"] <= 1
+    assert (mixed["wins"], mixed["ties"], mixed["losses"]) == (1, 1, 1)
+
+
+def test_bootstrap_interval_stays_within_the_metric_range():
+    mean, lo, hi = bootstrap_mean([0.0, 0.0, 0.0, 0.0, 100.0])
+    assert mean == 20.0 and 0.0 <= lo <= mean <= hi <= 100.0
+    assert math.isnan(bootstrap_mean([5.0])[1])  # one run: no interval, not a zero-width one
+
+
+def test_a_budget_above_every_pool_is_refused_in_one_line(tmp_path, capsys):
+    tiny = ["--width", "64", "--height", "48", "--spp", "2", "--max-depth", "2"]
+    argv = ["run", "--scenes", "table", "--seeds", "0", "--budget", "100000", *tiny]
+    assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "budget 100000 exceeds every candidate pool of table seed 0" in err[-1]

@@ -23,7 +23,7 @@ from bench.frontend.features import descriptor_distances
 
 @dataclass(frozen=True)
 class BackendConfig:
-    """Matching, verification and triangulation settings."""
+    """Matching, verification and reconstruction settings."""
 
     ratio: float = 0.8
     """Lowe ratio test threshold for tentative matches (with mutual nearest neighbours)."""
@@ -31,10 +31,8 @@ class BackendConfig:
     """RANSAC inlier threshold of the two-view verification, in pixels (COLMAP's default)."""
     min_tri_angle: float = 1.5
     """Minimum triangulation angle in degrees for a track to become a point (COLMAP's default)."""
-    keep_two_view_tracks: bool = True
-    """Triangulate tracks seen in only two views (COLMAP's point triangulator drops them by default)."""
     seed: int = 0
-    """Seed of COLMAP's RANSAC and triangulator."""
+    """Seed of COLMAP's RANSAC, triangulator and mapper."""
 
 
 @dataclass

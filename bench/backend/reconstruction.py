@@ -1,15 +1,21 @@
 """Reconstruction on COLMAP (pycolmap) from the selected keypoints and verified matches.
 
-Tracks and triangulation with the known poses: a COLMAP database holding exactly the
-selected keypoints and the verified matches, and `pycolmap.triangulate_points` on a
-reconstruction whose poses are the rig's (poses and intrinsics are held fixed; points
-are refined by COLMAP's bundle adjustment).
+Known-pose triangulation (task `tri`): a COLMAP database holding exactly the selected
+keypoints and the verified matches (each pair with the configuration its verification
+found), and `pycolmap.triangulate_points` on a reconstruction whose poses are the rig's
+(poses and intrinsics held fixed; points refined by COLMAP's bundle adjustment).
 
-Triangulation options (the same for every policy): two-view tracks are kept (COLMAP drops
-them by default; with six views and a few hundred features per view most tracks are
-short); COLMAP's minimum triangulation angle of 1.5 degrees and its 4 px reprojection
-limits are kept, so near-degenerate ray intersections are not created. The triangulator
-is seeded and single-threaded, so a run is reproducible.
+Track protocols (the same for every policy):
+
+* `multiview` (the headline): COLMAP's default point triangulation, which ignores
+  two-view tracks, keeps its 1.5 degree minimum triangulation angle and 4 px reprojection
+  filters; then every point whose final track has fewer than three views is removed, so
+  each point is checked by at least a third view.
+* `twoview`: the same with two-view tracks kept (COLMAP drops them by default); reported
+  in its own table only, because a two-view track cannot be checked by a third view and
+  nearly all gross outliers come from such tracks.
+
+The triangulator is seeded and single-threaded, so a run is reproducible.
 """
 
 from __future__ import annotations
@@ -17,26 +23,42 @@ from __future__ import annotations
 import shutil
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pycolmap
 
-from bench.backend.matching import BackendConfig, PairMatches, colmap_camera, match_and_verify
+from bench import BenchError
+from bench.backend.matching import BackendConfig, PairMatches, colmap_camera
 from bench.camera import Camera
 
 pycolmap.logging.minloglevel = 2  # errors only: COLMAP's per-image progress would drown ours
 
 
+PROTOCOLS = {"multiview": 3, "twoview": 2}
+"""Track protocols of the known-pose task: the fewest views a point's track may have."""
+
+
+def check_protocols(names) -> list[str]:
+    unknown = [n for n in names if n not in PROTOCOLS]
+    if unknown:
+        raise BenchError(f"unknown protocol {unknown[0]!r}; valid: {', '.join(PROTOCOLS)}")
+    return list(names)
+
+
+def image_names(n: int) -> list[str]:
+    """The image names of a render entry's views, as the back end's models record them."""
+    return [f"view_{k:02d}.png" for k in range(n)]
+
+
 @dataclass
 class Reconstruction:
-    """The back end's result: a COLMAP model with the rig's poses, or the reason there is none."""
+    """A reconstruction task's result: a COLMAP model, or the reason there is none."""
 
-    pairs: list[PairMatches]
     model: pycolmap.Reconstruction | None
     failure: str | None
-    seconds: dict[str, float] = field(default_factory=dict)
+    seconds: float
 
 
 def _write_database(
@@ -52,10 +74,11 @@ def _write_database(
             db.write_keypoints(k + 1, xy[k].astype(np.float32).reshape(-1, 2))
         for p in pairs:
             db.write_matches(p.i + 1, p.j + 1, p.tentative.astype(np.uint32))
-            tvg = pycolmap.TwoViewGeometry()
-            tvg.inlier_matches = p.verified.astype(np.uint32)
-            tvg.config = pycolmap.TwoViewGeometryConfiguration.CALIBRATED
-            db.write_two_view_geometry(p.i + 1, p.j + 1, tvg)
+            if len(p.verified):
+                tvg = pycolmap.TwoViewGeometry()
+                tvg.inlier_matches = p.verified.astype(np.uint32)
+                tvg.config = pycolmap.TwoViewGeometryConfiguration.__members__[p.config]
+                db.write_two_view_geometry(p.i + 1, p.j + 1, tvg)
     finally:
         db.close()
 
@@ -78,6 +101,13 @@ def known_pose_model(
     return rec
 
 
+def drop_short_tracks(model: pycolmap.Reconstruction, min_views: int) -> None:
+    """Remove every point whose track has fewer than `min_views` distinct views."""
+    for pid, point in list(model.points3D.items()):
+        if len({el.image_id for el in point.track.elements}) < min_views:
+            model.delete_point3D(pid)
+
+
 def triangulate(
     image_dir: Path,
     cams: list[Camera],
@@ -85,49 +115,48 @@ def triangulate(
     xy: list[np.ndarray],
     pairs: list[PairMatches],
     cfg: BackendConfig,
+    protocol: str = "multiview",
 ) -> pycolmap.Reconstruction:
-    """Triangulate the verified tracks with the rig's known poses through COLMAP."""
+    """Triangulate the verified tracks with the rig's known poses through COLMAP, under a
+    track protocol (see the module docstring)."""
     work = Path(tempfile.mkdtemp(prefix="bench-colmap-"))
     try:
         _write_database(work / "database.db", cams, names, xy, pairs)
         rec = known_pose_model(cams, names, xy)
         opts = pycolmap.IncrementalPipelineOptions()
-        opts.triangulation.ignore_two_view_tracks = not cfg.keep_two_view_tracks
+        opts.triangulation.ignore_two_view_tracks = PROTOCOLS[protocol] > 2
         opts.triangulation.min_angle = cfg.min_tri_angle
         opts.mapper.filter_min_tri_angle = cfg.min_tri_angle
         opts.triangulation.random_seed = cfg.seed
         opts.random_seed = cfg.seed
         opts.num_threads = 1
         (work / "out").mkdir()
-        return pycolmap.triangulate_points(
+        model = pycolmap.triangulate_points(
             rec, work / "database.db", image_dir, work / "out", options=opts
         )
+        drop_short_tracks(model, PROTOCOLS[protocol])
+        return model
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
 
-def reconstruct(
+def known_pose_task(
     image_dir: Path,
     cams: list[Camera],
     xy: list[np.ndarray],
-    desc: list[np.ndarray],
+    pairs: list[PairMatches],
     cfg: BackendConfig,
+    protocol: str,
 ) -> Reconstruction:
-    """Match, verify and triangulate; failures are recorded as a reason, never raised."""
-    names = [f"view_{k:02d}.png" for k in range(len(cams))]
-    pairs, seconds = match_and_verify(cams, xy, desc, cfg)
-    if sum(len(p.verified) for p in pairs) == 0:
-        return Reconstruction(pairs, None, "no pair of views has verified matches", seconds)
+    """Task `tri`: triangulate with the known poses; failures are recorded, never raised."""
     t = time.perf_counter()
+    if sum(len(p.verified) for p in pairs) == 0:
+        return Reconstruction(None, "no pair of views has verified matches", 0.0)
     try:
-        model = triangulate(image_dir, cams, names, xy, pairs, cfg)
+        model = triangulate(image_dir, cams, image_names(len(cams)), xy, pairs, cfg, protocol)
     except Exception as e:  # COLMAP failures become a recorded reason
         return Reconstruction(
-            pairs,
-            None,
-            f"triangulation failed: {type(e).__name__}: {e}",
-            seconds | {"triangulate": time.perf_counter() - t},
+            None, f"triangulation failed: {type(e).__name__}: {e}", time.perf_counter() - t
         )
-    seconds["triangulate"] = time.perf_counter() - t
     failure = None if model.num_points3D() > 0 else "no track could be triangulated"
-    return Reconstruction(pairs, model, failure, seconds)
+    return Reconstruction(model, failure, time.perf_counter() - t)

@@ -80,9 +80,10 @@ def select(
     rng: np.random.Generator,
     cfg: PolicyConfig = PolicyConfig(),
 ) -> np.ndarray:
-    """Run a policy and check its contract: min(B, N) distinct valid indices."""
+    """Run a policy and check its contract: min(B, N) distinct valid indices (`all`, the
+    whole pool, takes no budget)."""
     check_policies([name])
-    if budget <= 0:
+    if budget <= 0 and name != "all":
         raise BenchError(f"budget must be positive, got {budget}")
     idx = np.asarray(POLICIES[name](inp, budget, rng, cfg), dtype=np.int64)
     n = len(inp.candidates)

@@ -116,7 +116,7 @@ def parse_list(option: str, text: str, kind: type = str, example: str = "") -> t
 def cmd_run(args: argparse.Namespace) -> None:
     from bench.harness.grid import BenchConfig, run_benchmark
     from bench.harness.pipeline import RunConfig
-    from bench.harness.report import HEADLINE, table1
+    from bench.harness.tables import table1, with_oracle_share
 
     render = QUICK_RENDER if args.quick else RenderConfig()
     overrides = {
@@ -133,20 +133,21 @@ def cmd_run(args: argparse.Namespace) -> None:
         ),
     )
     seeds = args.seeds if args.seeds is not None else ("0" if args.quick else "0,1,2")
+    budget = args.budget if args.budget is not None else ("256" if args.quick else "128,256,512")
     cfg = BenchConfig(
         parse_list("--scenes", args.scenes, str, "table,facade"),
         parse_list("--seeds", seeds, int, "0,1,2 or 100-119"),
         parse_list("--policies", args.policies, str, "texture,adaptive"),
-        parse_list("--budget", args.budget, int, "128,256,512"),
+        parse_list("--budget", budget, int, "128,256,512"),
+        parse_list("--tasks", args.tasks, str, "tri"),
+        parse_list("--protocols", args.protocols, str, "multiview,twoview"),
         run,
     )
     df = run_benchmark(cfg, args.results, args.renders, overwrite=args.overwrite)
-    t = table1(df)
-    print(
-        t[["strategy", "budget", "runs", *HEADLINE]].to_string(
-            index=False, float_format=lambda x: f"{x:.3f}"
-        )
-    )
+    t = table1(with_oracle_share(df))
+    cols = ["strategy", "budget", "runs", "acc_completeness_pct", "completeness_vs_oracle_pct"]
+    cols += ["accuracy_pct", "rmse", "median_error", "inlier_pct", "coverage_pct"]
+    print(t[cols].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
 
 
 def cmd_plot(args: argparse.Namespace) -> None:
@@ -188,7 +189,9 @@ def build_parser() -> argparse.ArgumentParser:
     _dir_arg(r, "renders", "render cache directory")
     r.set_defaults(func=cmd_render)
 
+    from bench.backend.reconstruction import PROTOCOLS
     from bench.harness.grid import DEFAULT_POLICIES
+    from bench.harness.pipeline import TASKS
     from bench.scenes.spec import scene_names
 
     u = sub.add_parser(
@@ -211,7 +214,21 @@ def build_parser() -> argparse.ArgumentParser:
 
     list_arg("scenes", ",".join(scene_names()), "S1,S2", "scene types")
     list_arg("policies", ",".join(DEFAULT_POLICIES), "P1,P2", "policies")
-    list_arg("budget", "256", "B1,B2", "features per view")
+    list_arg(
+        "budget",
+        None,
+        "B1,B2",
+        "features per view (default: 128,256,512, or 256 with --quick; 256 is the headline; "
+        "`all` runs once per scene and seed, as budget 0)",
+    )
+    list_arg("tasks", ",".join(TASKS), "T1,T2", "reconstruction tasks: tri (known poses)")
+    list_arg(
+        "protocols",
+        ",".join(PROTOCOLS),
+        "P1,P2",
+        "track protocols of the tri task: multiview (tracks of 3+ views, the headline) and "
+        "twoview (two-view tracks kept; its own table)",
+    )
     list_arg(
         "seeds", None, "N1,N2", "scene seeds, e.g. 0,1,2 or 0-9 (default: 0,1,2, or 0 with --quick)"
     )
@@ -221,7 +238,9 @@ def build_parser() -> argparse.ArgumentParser:
         "W1,...,W5",
         field_docs(PolicyConfig)["weights"].rstrip("."),
     )
-    u.add_argument("--quick", action="store_true", help="smoke run: tiny renders, one seed")
+    u.add_argument(
+        "--quick", action="store_true", help="smoke run: tiny renders, one seed, budget 256"
+    )
     u.add_argument(
         "--detector",
         default="sift",

@@ -22,18 +22,19 @@ from pathlib import Path
 import pandas as pd
 
 from bench import ROOT, BenchError
+from bench.backend.reconstruction import PROTOCOLS, check_protocols
 from bench.console import log, progress
 from bench.evaluation.groundtruth import load_ground_truth
 from bench.evaluation.metrics import SceneTruth
 from bench.files import write_text_atomic
 from bench.frontend.policies import check_policies
 from bench.frontend.stage import front_end
-from bench.harness.pipeline import RunConfig, run_one
+from bench.harness.pipeline import ORACLE, TASKS, RunConfig, run_unit
 from bench.harness.report import KEY, write_report
 from bench.render.entry import render_scene
 from bench.scenes.spec import load_spec, scene_names
 
-DEFAULT_POLICIES = ("random", "texture", "grid", "adaptive", "all")
+DEFAULT_POLICIES = ("random", "texture", "grid", "adaptive", "all", ORACLE)
 
 
 @dataclass(frozen=True)
@@ -43,13 +44,21 @@ class BenchConfig:
     scenes: tuple[str, ...] = field(default_factory=lambda: tuple(scene_names()))
     seeds: tuple[int, ...] = (0, 1, 2)
     policies: tuple[str, ...] = DEFAULT_POLICIES
-    budgets: tuple[int, ...] = (256,)
+    budgets: tuple[int, ...] = (128, 256, 512)
+    tasks: tuple[str, ...] = TASKS
+    protocols: tuple[str, ...] = tuple(PROTOCOLS)
     run: RunConfig = field(default_factory=RunConfig)
 
     def validate(self) -> BenchConfig:
         for s in self.scenes:
             load_spec(s)
-        check_policies(self.policies)
+        check_policies([p for p in self.policies if p != ORACLE])
+        check_protocols(self.protocols)
+        unknown = [t for t in self.tasks if t not in TASKS]
+        if unknown or not self.tasks:
+            raise BenchError(
+                f"unknown task {unknown[0] if unknown else ''!r}; valid: {', '.join(TASKS)}"
+            )
         if not self.seeds or min(self.seeds) < 0:
             raise BenchError(f"seeds must be non-negative integers, got {list(self.seeds)}")
         if not self.budgets or min(self.budgets) <= 0:
@@ -61,6 +70,23 @@ class BenchConfig:
 
     def as_dict(self) -> dict:
         return json.loads(json.dumps(asdict(self)))  # tuples as lists, as stored
+
+    def units(self) -> list[tuple[str, int, str, int]]:
+        """Every (scene, seed, policy, budget) of the grid; `all` is one unit per scene and
+        seed, with budget 0 (the whole pool)."""
+        return [
+            (sc, sd, p, b)
+            for sc in self.scenes
+            for sd in self.seeds
+            for p in self.policies
+            for b in ((0,) if p == "all" else self.budgets)
+        ]
+
+    def jobs(self) -> list[tuple[str, str]]:
+        """Every (task, protocol) of a unit."""
+        return [
+            (t, pr) for t in self.tasks for pr in (self.protocols if t == "tri" else ("multiview",))
+        ]
 
 
 def _claim_results_dir(results: Path, cfg: BenchConfig, overwrite: bool) -> None:
@@ -101,6 +127,20 @@ def read_finished(runs_csv: Path, config_hash: str) -> pd.DataFrame:
     return df[df["config_hash"] == config_hash] if "config_hash" in df else pd.DataFrame()
 
 
+def check_budgets(budgets, fe, scene: str, seed: int) -> None:
+    """A budget above every view's pool would make every policy select the whole pool, so
+    the run would compare nothing: refuse it. A budget above some pools only takes those
+    pools whole (every policy selects min(B, N) per view)."""
+    largest = max(len(p) for p in fe.pools)
+    too_big = [b for b in budgets if b > largest]
+    if too_big:
+        raise BenchError(
+            f"budget {too_big[0]} exceeds every candidate pool of {scene} seed {seed} "
+            f"(the largest has {largest}); every policy would select the whole pool. "
+            f"Use budgets up to {largest}"
+        )
+
+
 def run_benchmark(
     cfg: BenchConfig, results: Path, renders: Path, overwrite: bool = False
 ) -> pd.DataFrame:
@@ -114,21 +154,19 @@ def run_benchmark(
     df = read_finished(runs_csv, cfg.run.hash)
     done = set(map(tuple, df[list(KEY)].itertuples(index=False))) if len(df) else set()
     rows = df.to_dict("records") if len(df) else []
-    grid = [(sc, sd) for sc in cfg.scenes for sd in cfg.seeds]
-    todo = [
-        (sc, sd, p, b)
-        for sc, sd in grid
-        for p in cfg.policies
-        for b in cfg.budgets
-        if (sc, sd, p, b) not in done
-    ]
+    todo = {}
+    for unit in cfg.units():
+        missing = [j for j in cfg.jobs() if (*unit, *j) not in done]
+        if missing:
+            todo[unit] = missing
+    n_rows = sum(len(j) for j in todo.values())
     stage_s = dict.fromkeys(
-        ["render", "frontend", "truth", "select", "match", "verify", "triangulate", "evaluate"], 0.0
+        ["render", "frontend", "truth", "select", "match", "verify", "task", "evaluate"], 0.0
     )
-    log(f"{len(done)} of {len(done) + len(todo)} runs already in {runs_csv}; {len(todo)} to do")
+    log(f"{len(done)} of {len(done) + n_rows} rows already in {runs_csv}; {n_rows} to do")
 
-    pending = [(sc, sd) for sc, sd in grid if any(t[:2] == (sc, sd) for t in todo)]
-    entries = {}
+    pending = sorted({u[:2] for u in todo}, key=lambda g: (cfg.scenes.index(g[0]), g[1]))
+    entries, fronts = {}, {}
     with progress("render", len(pending)) as bar:
         for sc, sd in pending:
             t = time.perf_counter()
@@ -136,28 +174,40 @@ def run_benchmark(
             stage_s["render"] += time.perf_counter() - t
             bar.set_postfix_str(f"{sc} seed {sd}")
             bar.update()
+    with progress("frontend", len(pending)) as bar:
+        for sc, sd in pending:
+            t = time.perf_counter()
+            fronts[sc, sd] = front_end(
+                entries[sc, sd], cfg.run.detector, cfg.run.signals, renders / "frontend"
+            )
+            stage_s["frontend"] += time.perf_counter() - t
+            check_budgets(cfg.budgets, fronts[sc, sd], sc, sd)
+            bar.set_postfix_str(f"{sc} seed {sd}")
+            bar.update()
     with progress("runs", len(todo)) as bar:
         for sc, sd in pending:
-            mine = [t for t in todo if t[:2] == (sc, sd)]
-            t = time.perf_counter()
-            fe = front_end(entries[sc, sd], cfg.run.detector, cfg.run.signals, renders / "frontend")
-            stage_s["frontend"] += time.perf_counter() - t
+            fe = fronts.pop((sc, sd))
             t = time.perf_counter()
             truth = SceneTruth.build(
                 [v.camera for v in fe.views], load_ground_truth(entries[sc, sd]), fe.pools
             )
             stage_s["truth"] += time.perf_counter() - t
-            for _, _, policy, budget in mine:
-                model_dir = results / "models" / f"{sc}-s{sd}" / f"{policy}-b{budget}"
-                row = run_one(
-                    entries[sc, sd], fe, truth, sc, sd, policy, budget, cfg.run, model_dir
+            for (_, _, policy, budget), jobs in (
+                (u, j) for u, j in todo.items() if u[:2] == (sc, sd)
+            ):
+                new = run_unit(
+                    entries[sc, sd], fe, truth, sc, sd, policy, budget, jobs, cfg.run, results
                 )
-                for k in ("select", "match", "verify", "triangulate", "evaluate"):
-                    stage_s[k] += row[f"{k}_ms"] / 1000
-                rows.append(row)
+                for k in ("select", "match", "verify"):
+                    stage_s[k] += new[0][f"{k}_ms"] / 1000
+                for r in new:
+                    stage_s["task"] += r["task_ms"] / 1000
+                    stage_s["evaluate"] += r["evaluate_ms"] / 1000
+                rows += new
                 write_text_atomic(runs_csv, pd.DataFrame(rows).to_csv(index=False))
-                bar.set_postfix_str(f"{sc} s{sd} {policy} b{budget}: {row['points']} points")
+                bar.set_postfix_str(f"{sc} s{sd} {policy} b{budget}: {new[0]['points']} points")
                 bar.update()
+            del truth
     t = time.perf_counter()
     out = pd.read_csv(runs_csv)
     write_report(out, results, renders)
@@ -170,9 +220,9 @@ def run_benchmark(
         [renders / k for k in out["render_key"].unique()],
         stage_s,
         total,
-        len(todo),
+        n_rows,
     )
-    log(f"{len(todo)} runs done, {len(done)} reused, in {total:.0f} s; results in {results}")
+    log(f"{n_rows} rows done, {len(done)} reused, in {total:.0f} s; results in {results}")
     return out
 
 

@@ -1,7 +1,10 @@
-"""One benchmark run, end to end: (render entry, policy, budget) -> one row of metrics.
+"""One unit of work, end to end: (render entry, policy, budget) -> one row per task and
+track protocol.
 
-render entry -> front end (cached) -> policy selects B per view -> match -> verify ->
-triangulate (COLMAP, known poses) -> export the model -> evaluate against ground truth.
+render entry -> front end (cached) -> selection of B per view (a policy, or the oracle on
+the evaluation side) -> match -> verify -> for each task: reconstruct (COLMAP) -> export
+the model -> evaluate against ground truth. Matching and verification are shared by the
+tasks and protocols of a unit, so they see exactly the same matches.
 """
 
 from __future__ import annotations
@@ -17,15 +20,23 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.backend.matching import BackendConfig
-from bench.backend.reconstruction import known_pose_model, reconstruct
-from bench.evaluation.metrics import SceneTruth, evaluate
+from bench.backend.matching import BackendConfig, match_and_verify
+from bench.backend.reconstruction import PROTOCOLS, image_names, known_pose_model, known_pose_task
+from bench.evaluation.metrics import SceneTruth, evaluate_known_pose, match_metrics
+from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.files import content_key
 from bench.frontend.features import DetectorConfig
 from bench.frontend.policies import SIGNALS_USED, PolicyConfig, PolicyInput, select
 from bench.frontend.signals import SignalConfig
 from bench.frontend.stage import FrontEnd
 from bench.render.config import RenderConfig
+
+TASKS = ("tri",)
+"""Reconstruction tasks: `tri` triangulates with the known poses."""
+ORACLE = "oracle"
+"""The ground-truth selection of `bench.evaluation.oracle`: a reference, never a policy."""
+REFERENCES = ("all", ORACLE)
+"""Rows that are references, not contenders (never a "best baseline")."""
 
 
 @dataclass(frozen=True)
@@ -52,13 +63,24 @@ def policy_rng(seed: int, policy: str, budget: int, view: int) -> np.random.Gene
 
 
 def select_features(
-    fe: FrontEnd, policy: str, budget: int, seed: int, cfg: PolicyConfig
+    fe: FrontEnd, truth: SceneTruth, policy: str, budget: int, seed: int, cfg: RunConfig
 ) -> tuple[list[np.ndarray], float]:
+    """Every view's selection, and the seconds it took."""
     t = time.perf_counter()
-    sel = [
-        select(policy, PolicyInput(v, c, s), budget, policy_rng(seed, policy, budget, v.index), cfg)
-        for v, c, s in zip(fe.views, fe.pools, fe.signals)
-    ]
+    if policy == ORACLE:
+        tracks = matchable_tracks(truth, fe.pools, cfg.backend.ratio)
+        sel = oracle_select(tracks, [c.response for c in fe.pools], budget)
+    else:
+        sel = [
+            select(
+                policy,
+                PolicyInput(v, c, s),
+                budget,
+                policy_rng(seed, policy, budget, v.index),
+                cfg.policy,
+            )
+            for v, c, s in zip(fe.views, fe.pools, fe.signals)
+        ]
     return sel, time.perf_counter() - t
 
 
@@ -76,7 +98,20 @@ def export_model(model, out: Path) -> None:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def run_one(
+def model_dir(
+    results: Path, scene: str, seed: int, policy: str, budget: int, task: str, protocol: str
+) -> Path:
+    """Where a run's model is exported: the headline (`tri`, `multiview`) at the top of the
+    run's folder, every other task or protocol in a subfolder named after it."""
+    run = Path(results) / "models" / f"{scene}-s{seed}" / f"{policy}-b{budget}"
+    return (
+        run
+        if (task, protocol) == ("tri", "multiview")
+        else run / (protocol if task == "tri" else task)
+    )
+
+
+def run_unit(
     entry: Path,
     fe: FrontEnd,
     truth: SceneTruth,
@@ -84,47 +119,63 @@ def run_one(
     seed: int,
     policy: str,
     budget: int,
+    jobs: list[tuple[str, str]],
     cfg: RunConfig,
-    model_dir: Path,
-) -> dict:
-    """One row: identification, every metric, stage timings (ms), and a failure reason if any."""
-    row: dict = {
-        "scene": scene,
-        "seed": seed,
-        "policy": policy,
-        "budget": budget,
-        "render_key": Path(entry).name,
-        "config_hash": cfg.hash,
-    }
-    selections, select_s = select_features(fe, policy, budget, seed, cfg.policy)
+    results: Path,
+) -> list[dict]:
+    """One row per (task, protocol) in `jobs`: identification, every metric, stage timings
+    (ms) and a failure reason if any."""
+    selections, select_s = select_features(fe, truth, policy, budget, seed, cfg)
     cams = [v.camera for v in fe.views]
     xy = [c.xy[s] for c, s in zip(fe.pools, selections)]
     desc = [c.descriptors[s] for c, s in zip(fe.pools, selections)]
-    rec = reconstruct(entry, cams, xy, desc, cfg.backend)
-    export_model(
-        rec.model
-        if rec.model is not None
-        else known_pose_model(cams, [f"view_{k:02d}.png" for k in range(len(cams))], xy),
-        model_dir,
-    )
+    pairs, match_s = match_and_verify(cams, xy, desc, cfg.backend)
+    n_signals = len(SIGNALS_USED.get(policy, ()))
     t = time.perf_counter()
-    row |= evaluate(truth, fe.pools, selections, rec, len(SIGNALS_USED[policy]))
+    shared = match_metrics(truth, fe.pools, selections, pairs, n_signals)
+    shared_eval_s = time.perf_counter() - t
     seconds = {
         "detect": fe.seconds["detect"],
-        "signals": sum(fe.seconds[s] for s in SIGNALS_USED[policy]),
+        "signals": sum(fe.seconds[s] for s in SIGNALS_USED.get(policy, ())),
         "select": select_s,
-        "match": rec.seconds.get("match", 0.0),
-        "verify": rec.seconds.get("verify", 0.0),
-        "triangulate": rec.seconds.get("triangulate", 0.0),
-        "evaluate": time.perf_counter() - t,
+        "match": match_s["match"],
+        "verify": match_s["verify"],
     }
     meta = json.loads((Path(entry) / "meta.json").read_text())
-    row["render_s_per_view"] = float(np.mean(meta["seconds_per_view"]))
-    row |= {f"{k}_ms": 1000 * v for k, v in seconds.items()}
-    row["wall_ms"] = 1000 * sum(v for k, v in seconds.items() if k != "evaluate")
-    row["status"] = "ok" if rec.failure is None else "failed"
-    row["failure"] = rec.failure or ""
-    if rec.failure:
-        for k in ("rmse", "median_error"):
-            row[k] = math.nan
-    return row
+    rows = []
+    for task, protocol in jobs:
+        rec = known_pose_task(entry, cams, xy, pairs, cfg.backend, protocol)
+        out = model_dir(results, scene, seed, policy, budget, task, protocol)
+        export_model(
+            rec.model
+            if rec.model is not None
+            else known_pose_model(cams, image_names(len(cams)), xy),
+            out,
+        )
+        t = time.perf_counter()
+        metrics = evaluate_known_pose(truth, rec.model, PROTOCOLS[protocol])
+        timing = seconds | {
+            "task": rec.seconds,
+            "evaluate": shared_eval_s + time.perf_counter() - t,
+        }
+        row = {
+            "scene": scene,
+            "seed": seed,
+            "policy": policy,
+            "budget": budget,
+            "task": task,
+            "protocol": protocol,
+            "render_key": Path(entry).name,
+            "config_hash": cfg.hash,
+            **shared,
+            **metrics,
+            "render_s_per_view": float(np.mean(meta["seconds_per_view"])),
+            **{f"{k}_ms": 1000 * v for k, v in timing.items()},
+            "wall_ms": 1000 * sum(v for k, v in timing.items() if k != "evaluate"),
+            "status": "ok" if rec.failure is None else "failed",
+            "failure": rec.failure or "",
+        }
+        if rec.failure:
+            row["rmse"] = row["median_error"] = math.nan
+        rows.append(row)
+    return rows

@@ -1,0 +1,187 @@
+"""Figures from the tables (Figure 2 also reads the exported model and the cached render).
+
+Intervals are the tables' bootstrap percentile intervals, so they stay within each
+metric's range; a value that is missing (no run, or n = 1 for an interval) is drawn as
+missing ("n/a", no error bar), never as a zero-height bar.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+from matplotlib.ticker import FixedLocator, NullLocator  # noqa: E402
+
+from bench.harness.pipeline import ORACLE  # noqa: E402
+from bench.harness.tables import DISPLAY, HEADLINE_BUDGET  # noqa: E402
+
+PANELS = (
+    ("acc_completeness_pct", "Acc. completeness % (e < 0.10)"),
+    ("completeness_vs_oracle_pct", "Completeness, % of the oracle's"),
+    ("accuracy_pct", "Accuracy % (points with e < 0.10)"),
+    ("rmse", "RMSE (scene units)"),
+    ("median_error", "Median error (scene units)"),
+    ("inlier_pct", "Inlier %"),
+    ("coverage_pct", "Coverage %"),
+    ("runtime_proxy", "Runtime proxy (k ops)"),
+)
+LOG_SCALE = {"runtime_proxy", "rmse"}
+
+
+def headline_budget(t1: pd.DataFrame) -> int:
+    """256 when the table has it, else its middle budget."""
+    budgets = sorted(b for b in t1["budget"].unique() if b > 0)
+    return HEADLINE_BUDGET if HEADLINE_BUDGET in budgets else budgets[len(budgets) // 2]
+
+
+def _errors(t: pd.DataFrame, m: str) -> np.ndarray:
+    """Asymmetric error bars; zero length where there is no interval (drawn without one)."""
+    lo, hi = (t[m] - t[f"{m}_lo"]).to_numpy(float), (t[f"{m}_hi"] - t[m]).to_numpy(float)
+    return np.nan_to_num(np.vstack([lo, hi]))
+
+
+def figure3(t1: pd.DataFrame, out: Path, title: str = "") -> None:
+    """Aggregate metrics per strategy at the headline budget (references included), with
+    95% bootstrap intervals."""
+    b = headline_budget(t1)
+    t = t1[(t1["budget"] == b) | (t1["budget"] == 0)].reset_index(drop=True)
+    fig, axes = plt.subplots(2, 4, figsize=(17, 7.5))
+    colors = plt.cm.tab10(np.arange(len(t)))
+    for ax, (m, label) in zip(axes.ravel(), PANELS):
+        values = t[m].to_numpy(float)
+        ok = np.isfinite(values)
+        ax.bar(
+            np.flatnonzero(ok), values[ok], yerr=_errors(t, m)[:, ok], color=colors[ok], capsize=4
+        )
+        for k in np.flatnonzero(~ok):
+            ax.text(k, 0, "n/a", ha="center", va="bottom", fontsize=8, color="gray")
+        ax.set_xticks(
+            range(len(t)),
+            [s.replace(" (", "\n(") for s in t["strategy"]],
+            rotation=30,
+            ha="right",
+            fontsize=7,
+        )
+        ax.set_title(label, fontsize=10)
+        if m in LOG_SCALE:
+            ax.set_yscale("log")
+    fig.suptitle(
+        title
+        or f"Aggregate metrics per strategy (budget {b}; mean and 95% bootstrap interval over runs)"
+    )
+    fig.tight_layout()
+    save(fig, out, ("png", "pdf"))
+
+
+def figure_budget(t1: pd.DataFrame, out: Path) -> None:
+    """Each headline metric against the budget per policy (oracle included), with 95%
+    bootstrap bands; the `all` reference as a dashed line."""
+    fig, axes = plt.subplots(2, 4, figsize=(17, 7.5))
+    budgets = sorted(b for b in t1["budget"].unique() if b > 0)
+    for ax, (m, label) in zip(axes.ravel(), PANELS):
+        for policy, g in t1[t1["budget"] > 0].groupby("policy", sort=False):
+            g = g.sort_values("budget")
+            style = {"linestyle": ":", "color": "black"} if policy == ORACLE else {}
+            line = ax.plot(
+                g["budget"], g[m], marker="o", label=DISPLAY.get(policy, policy), **style
+            )
+            ax.fill_between(
+                g["budget"], g[f"{m}_lo"], g[f"{m}_hi"], color=line[0].get_color(), alpha=0.15
+            )
+        ref = t1[t1["budget"] == 0]
+        if len(ref) and np.isfinite(ref[m].iloc[0]):
+            ax.axhline(ref[m].iloc[0], color="gray", linestyle="--", label=DISPLAY["all"])
+        ax.set_xscale("log")
+        ax.xaxis.set_major_locator(FixedLocator(budgets))
+        ax.xaxis.set_minor_locator(NullLocator())
+        ax.set_xticklabels([str(b) for b in budgets])
+        ax.set_xlabel("budget per view")
+        ax.set_title(label, fontsize=10)
+        if m in LOG_SCALE:
+            ax.set_yscale("log")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle("Headline metrics against the budget (mean and 95% bootstrap band over runs)")
+    fig.tight_layout()
+    save(fig, out, ("png",))
+
+
+def save(fig, out: Path, formats) -> None:
+    for fmt in formats:
+        path = out.with_suffix(f".{fmt}")
+        tmp = path.with_name(f".{path.stem}.tmp.{fmt}")
+        fig.savefig(tmp, dpi=120)
+        tmp.replace(path)
+    plt.close(fig)
+
+
+def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | None:
+    """Two views of `table` with the adaptive selection, and its sparse points coloured by
+    error. Returns why it could not be drawn, or None."""
+    import cv2
+    import pycolmap
+    from scipy.spatial import cKDTree
+
+    from bench.evaluation.groundtruth import load_ground_truth
+
+    rows = df[
+        (df["scene"] == "table")
+        & (df["policy"] == "adaptive")
+        & (df["task"] == "tri")
+        & (df["protocol"] == "multiview")
+    ]
+    if rows.empty:
+        return "no adaptive run of the table scene in runs.csv"
+    rows = rows.assign(off=(rows["budget"] - HEADLINE_BUDGET).abs()).sort_values(["off", "seed"])
+    r = rows.iloc[0]
+    model_dir = results / "models" / f"table-s{r['seed']}" / f"adaptive-b{r['budget']}"
+    entry = renders / r["render_key"]
+    if not model_dir.is_dir() or not entry.is_dir():
+        return f"missing {model_dir if not model_dir.is_dir() else entry}"
+    model = pycolmap.Reconstruction(str(model_dir))
+    gts = load_ground_truth(entry)
+    surface = cKDTree(np.concatenate([g.position[g.single_surface] for g in gts]))
+    X = np.array([p.xyz for p in model.points3D.values()]).reshape(-1, 3)
+    err = surface.query(X)[0] if len(X) else np.zeros(0)
+    fig = plt.figure(figsize=(15, 4.8))
+    for k, image_id in enumerate(sorted(model.images)[:: max(1, len(model.images) - 1)][:2]):
+        img = model.images[image_id]
+        ax = fig.add_subplot(1, 3, k + 1)
+        ax.imshow(cv2.imread(str(entry / img.name))[..., ::-1])
+        xy = (
+            np.array([p.xy for p in img.points2D]).reshape(-1, 2) - 0.5
+        )  # COLMAP -> matplotlib pixel centres
+        tri = np.array([p.has_point3D() for p in img.points2D], bool)
+        ax.scatter(
+            *xy[~tri].T,
+            s=6,
+            facecolors="none",
+            edgecolors="yellow",
+            linewidths=0.6,
+            label="selected",
+        )
+        ax.scatter(*xy[tri].T, s=8, c="red", label="selected and triangulated")
+        ax.set_title(f"{img.name}: {len(xy)} adaptive features", fontsize=10)
+        ax.axis("off")
+        if k == 0:
+            ax.legend(loc="lower left", fontsize=8)
+    ax = fig.add_subplot(1, 3, 3, projection="3d")
+    if len(X):
+        keep = np.linalg.norm(X - np.median(X, 0), axis=1) < 4 * np.percentile(
+            np.linalg.norm(X - np.median(X, 0), axis=1), 75
+        )
+        sc = ax.scatter(
+            *X[keep].T, c=np.minimum(err[keep], 0.2), cmap="viridis", s=4, vmin=0, vmax=0.2
+        )
+        fig.colorbar(sc, ax=ax, shrink=0.6, label="point error (scene units, clipped at 0.2)")
+        ax.view_init(elev=25, azim=-100)
+    ax.set_title(
+        f"{len(X)} sparse points (table, seed {r['seed']}, budget {r['budget']})", fontsize=10
+    )
+    fig.tight_layout()
+    save(fig, out, ("png",))
+    return None

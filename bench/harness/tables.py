@@ -1,0 +1,189 @@
+"""Table 1, Table 2 and the paired comparisons, from the rows of `runs.csv` alone.
+
+* `table1.csv`: per strategy and budget, the headline task and protocol (`tri`,
+  `multiview`): the mean of every metric over runs with a 95% bootstrap interval
+  (`<metric>_lo`, `<metric>_hi`; `bench.harness.stats`). `table1_twoview.csv`: the same
+  under the `twoview` track protocol, never mixed into the headline.
+* `completeness_vs_oracle_pct`: a run's completeness as a percentage of the oracle's in the
+  same scene, seed and budget (the oracle is the ground-truth selection under the same
+  budget, `bench.evaluation.oracle`).
+* `table2.csv`: per scene (and all scenes pooled) and budget, adaptive against the best
+  baseline (random, texture, grid; never a reference) for each headline metric, with the
+  paired difference to that baseline. `paired.csv`: adaptive against every baseline, per
+  scene and pooled, for every headline metric.
+
+A run that reconstructed nothing has no rmse (left out of that mean; `failed_runs` counts
+such runs) and zero completeness (kept in the completeness mean).
+"""
+
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+
+from bench.harness.pipeline import ORACLE, REFERENCES
+from bench.harness.stats import LOWER_IS_BETTER, bootstrap_mean, paired_difference
+
+KEY = ("scene", "seed", "policy", "budget", "task", "protocol")
+DISPLAY = {
+    "random": "Random budget",
+    "texture": "Texture-only",
+    "grid": "Uniform grid",
+    "adaptive": "Adaptive optimized",
+    "all": "All candidates (reference)",
+    ORACLE: "Oracle (ground truth, reference)",
+}
+BASELINES = ("random", "texture", "grid")
+CONTENDER = "adaptive"
+HEADLINE = ("tri", "multiview")
+"""The headline task and track protocol."""
+HEADLINE_BUDGET = 256
+TABLE1_METRICS = (
+    "rmse",
+    "acc_completeness_pct",
+    "completeness_vs_oracle_pct",
+    "accuracy_pct",
+    "inlier_pct",
+    "coverage_pct",
+    "runtime_proxy",
+    "wall_ms",
+    "median_error",
+    "match_precision_pct",
+    "acc_completeness_pct_0.02",
+    "acc_completeness_pct_0.05",
+    "acc_completeness_pct_0.20",
+    "accuracy_pct_0.02",
+    "accuracy_pct_0.05",
+    "accuracy_pct_0.20",
+    "points",
+    "reconstructable",
+    "mean_track_length",
+    "mean_tri_angle_deg",
+    "runtime_scoring",
+    "runtime_matching",
+    "runtime_robust",
+    "task_ms",
+)
+PAIRED_METRICS = ("acc_completeness_pct", "accuracy_pct", "rmse", "median_error")
+"""The headline metrics that paired statistics compare."""
+
+
+def with_oracle_share(df: pd.DataFrame) -> pd.DataFrame:
+    """Add `completeness_vs_oracle_pct` (NaN where there is no oracle run or it is 0)."""
+    keys = ["scene", "seed", "budget", "task", "protocol"]
+    oracle = df[df["policy"] == ORACLE].set_index(keys)["acc_completeness_pct"]
+    ref = df.set_index(keys).index.map(lambda k: oracle.get(k, math.nan))
+    out = df.copy()
+    share = 100.0 * df["acc_completeness_pct"].to_numpy() / ref.to_numpy(dtype=float)
+    out["completeness_vs_oracle_pct"] = pd.Series(share, index=df.index).where(
+        ref.to_numpy(dtype=float) > 0
+    )
+    return out
+
+
+def _policy_order(policy: str) -> int:
+    return list(DISPLAY).index(policy) if policy in DISPLAY else len(DISPLAY)
+
+
+def table1(df: pd.DataFrame, task: str = "tri", protocol: str = "multiview") -> pd.DataFrame:
+    """Per strategy and budget: every metric's mean and 95% bootstrap interval over runs."""
+    rows = df[(df["task"] == task) & (df["protocol"] == protocol)]
+    out = []
+    for (policy, budget), g in rows.groupby(["policy", "budget"], sort=False):
+        row = {"strategy": DISPLAY.get(policy, policy), "policy": policy, "budget": budget}
+        row["runs"] = len(g)
+        row["failed_runs"] = int((g["status"] != "ok").sum())
+        for m in TABLE1_METRICS:
+            if m in g:
+                row[m], row[f"{m}_lo"], row[f"{m}_hi"] = bootstrap_mean(g[m].astype(float))
+        out.append(row)
+    t = pd.DataFrame(out)
+    if t.empty:
+        return t
+    order = t.apply(
+        lambda r: (r["budget"] if r["budget"] > 0 else math.inf, _policy_order(r["policy"])), axis=1
+    )
+    return t.loc[order.sort_values().index].reset_index(drop=True)
+
+
+def _units(df: pd.DataFrame, policy: str, budget: int, metric: str) -> pd.Series:
+    g = df[(df["policy"] == policy) & (df["budget"] == budget)]
+    return g.set_index(["scene", "seed"])[metric].astype(float)
+
+
+def paired(df: pd.DataFrame) -> pd.DataFrame:
+    """Adaptive minus each baseline, per scene and pooled, per budget and headline metric
+    (headline task and protocol)."""
+    rows = df[(df["task"] == HEADLINE[0]) & (df["protocol"] == HEADLINE[1])]
+    baselines = [p for p in pd.unique(rows["policy"]) if p not in (CONTENDER, *REFERENCES)]
+    out = []
+    for budget in sorted(b for b in pd.unique(rows["budget"]) if b > 0):
+        for scope in [*pd.unique(rows["scene"]), "all scenes"]:
+            part = rows if scope == "all scenes" else rows[rows["scene"] == scope]
+            for base in baselines:
+                for m in PAIRED_METRICS:
+                    a, b = _units(part, CONTENDER, budget, m), _units(part, base, budget, m)
+                    strata = pd.Series(a.index.get_level_values("scene"), index=a.index)
+                    res = (
+                        paired_difference(a, b, strata, m)
+                        if len(a) and len(b)
+                        else paired_difference(
+                            pd.Series(dtype=float),
+                            pd.Series(dtype=float),
+                            pd.Series(dtype=object),
+                            m,
+                        )
+                    )
+                    out.append(
+                        {
+                            "scene": scope,
+                            "budget": budget,
+                            "policy": CONTENDER,
+                            "baseline": base,
+                            "metric": m,
+                            **res,
+                        }
+                    )
+    return pd.DataFrame(out)
+
+
+def table2(df: pd.DataFrame, pairs: pd.DataFrame) -> pd.DataFrame:
+    """Per scene (and pooled) and budget: adaptive, the best baseline of each headline metric
+    and the paired difference to it, plus the oracle's completeness."""
+    rows = df[(df["task"] == HEADLINE[0]) & (df["protocol"] == HEADLINE[1])]
+    out = []
+    for budget in sorted(b for b in pd.unique(rows["budget"]) if b > 0):
+        for scope in [*pd.unique(rows["scene"]), "all scenes"]:
+            part = rows[rows["budget"] == budget]
+            part = part if scope == "all scenes" else part[part["scene"] == scope]
+            means = part.groupby("policy")[list(PAIRED_METRICS)].mean()
+            row = {"scene": scope, "budget": budget}
+            for m in PAIRED_METRICS:
+                row[f"adaptive_{m}"] = means[m].get(CONTENDER, math.nan)
+                base = means.loc[[p for p in BASELINES if p in means.index], m].dropna()
+                best = (
+                    (base.idxmin() if m in LOWER_IS_BETTER else base.idxmax()) if len(base) else ""
+                )
+                row[f"best_baseline_{m}"] = base.get(best, math.nan) if best else math.nan
+                row[f"best_baseline_{m}_policy"] = best
+                p = pairs[
+                    (pairs["scene"] == scope)
+                    & (pairs["budget"] == budget)
+                    & (pairs["baseline"] == best)
+                    & (pairs["metric"] == m)
+                ]
+                r = p.iloc[0] if len(p) else {}
+                row[f"diff_{m}"] = r.get("mean_diff", math.nan)
+                row[f"diff_{m}_lo"] = r.get("lo", math.nan)
+                row[f"diff_{m}_hi"] = r.get("hi", math.nan)
+                row[f"diff_{m}_wtl"] = f"{r['wins']}/{r['ties']}/{r['losses']}" if len(p) else ""
+            row["oracle_acc_completeness_pct"] = means["acc_completeness_pct"].get(ORACLE, math.nan)
+            out.append(row)
+    t = pd.DataFrame(out)
+    # the DESIGN.md column names of the first table 2
+    return t.rename(
+        columns={
+            "best_baseline_acc_completeness_pct_policy": "best_baseline_acc_completeness_policy",
+        }
+    )
