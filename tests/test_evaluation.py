@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 
 from bench.backend.matching import expected_ransac_iterations
 from bench.camera import look_at
@@ -25,6 +26,12 @@ from bench.evaluation.oracle import (
     matchable_tracks,
     oracle_select,
     tracks_in_three_views,
+)
+from bench.evaluation.poses import (
+    mean_average_accuracy,
+    pose_metrics,
+    relative_pose_errors,
+    similarity,
 )
 from bench.frontend.features import Candidates
 
@@ -176,3 +183,41 @@ def test_matchable_tracks_need_ground_truth_and_matching_descriptors():
     truth = SceneTruth.build([a, b], [_plane_truth(a), _plane_truth(b)], [pa, pb])
     ta, tb = matchable_tracks(truth, [pa, pb], 0.8)
     assert ta[0] == tb[0] and ta[1] == tb[1] and ta[2] != tb[2]
+
+
+# --- pose accuracy of the sfm task -------------------------------------------------------
+
+
+def _arc_rig():
+    return [
+        look_at((8 * np.cos(a), 8 * np.sin(a), 2.0), (0, 0, 1.0)) for a in np.linspace(-0.6, 0.6, 6)
+    ]
+
+
+def test_maa_of_the_rig_against_itself_and_with_one_camera_turned_by_5_degrees():
+    rig = _arc_rig()
+    est = {k: (c.R, c.t) for k, c in enumerate(rig)}
+    assert mean_average_accuracy(relative_pose_errors(est, rig)) == 1.0
+    turn = Rotation.from_euler("z", 5, degrees=True).as_matrix()  # about camera 2's own axis
+    est[2] = (turn @ rig[2].R, turn @ rig[2].t)
+    # By hand: the 5 pairs with camera 2 have a rotation error of exactly 5 degrees (and a
+    # translation-direction error of at most 5), so they pass the thresholds 6..10 (5 of
+    # 10); the other 10 pairs pass all 10. mAA = (10 * 10 + 5 * 5) / (15 * 10).
+    assert mean_average_accuracy(relative_pose_errors(est, rig)) == pytest.approx(125 / 150)
+
+
+def test_unregistered_views_count_as_failed_pairs_never_nan():
+    rig = _arc_rig()
+    row, sim = pose_metrics({}, rig)
+    assert row["maa"] == 0.0 and row["registered_views"] == 0 and sim is None
+    half = {k: (rig[k].R, rig[k].t) for k in range(3)}  # 3 of 15 pairs registered, exact
+    row, sim = pose_metrics(half, rig)
+    assert row["maa"] == pytest.approx(3 / 15) and row["cam_center_err"] < 1e-9
+
+
+def test_similarity_alignment_recovers_a_known_transform():
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(10, 3))
+    R = Rotation.from_euler("xyz", [10, -20, 30], degrees=True).as_matrix()
+    s, R_est, t_est = similarity(X, 2.5 * X @ R.T + [1.0, 2.0, 3.0])
+    assert s == pytest.approx(2.5) and np.allclose(R_est, R) and np.allclose(t_est, [1, 2, 3])

@@ -118,8 +118,8 @@ TIMING = [
     "evaluate_ms",
     "wall_ms",
 ]
-POLICIES = ["random", "texture", "grid", "adaptive", "oracle", "all"]
-ROWS = 2 * len(POLICIES) * 2  # scenes x units x track protocols
+POLICIES = ["random", "texture", "grid", "adaptive", "oracle", "colmap-b", "all", "colmap"]
+ROWS = 2 * (6 * 2 * 2 + 2 * 2)  # scenes x (selections x tasks x protocols + peers x protocols)
 
 
 @pytest.fixture(scope="module")
@@ -146,7 +146,11 @@ def test_quick_run_writes_every_file_with_documented_columns(quick_results):
     runs = pd.read_csv(quick_results / "runs.csv")
     assert len(runs) == ROWS and set(runs["policy"]) == set(POLICIES)
     assert set(runs.loc[runs["policy"] == "all", "budget"]) == {0}  # one run, the whole pool
-    assert set(zip(runs["task"], runs["protocol"])) == {("tri", "multiview"), ("tri", "twoview")}
+    assert set(zip(runs["task"], runs["protocol"])) == {
+        (t, p) for t in ("tri", "sfm") for p in ("multiview", "twoview")
+    }
+    assert set(runs.loc[runs["policy"].str.startswith("colmap"), "task"]) == {"sfm"}
+    assert runs["maa"].notna().sum() == runs["task"].eq("sfm").sum()  # never NaN, failed or not
     assert {"render_key", "config_hash", "status", "failure", *TIMING} <= set(runs.columns)
     t1 = pd.read_csv(quick_results / "table1.csv")
     assert {
@@ -196,11 +200,11 @@ def test_several_budgets_give_a_budget_figure(quick_results, tmp_path, renders_d
     from bench.harness.report import write_report
 
     runs = pd.read_csv(quick_results / "runs.csv")
-    budgeted = runs[runs["policy"] != "all"]
+    budgeted = runs[runs["budget"] > 0]
     write_report(pd.concat([runs, budgeted.assign(budget=32)]), tmp_path, renders_dir)
     assert (tmp_path / "figure_budget.png").is_file()
     t1 = pd.read_csv(tmp_path / "table1.csv")
-    assert sorted(set(t1["budget"])) == [0, 32, 64] and len(t1) == 11
+    assert sorted(set(t1["budget"])) == [0, 32, 64] and len(t1) == 2 * 6 + 2
 
 
 def test_same_command_gives_identical_metrics(quick_results, renders_dir, tmp_path):
@@ -223,11 +227,11 @@ def test_interrupted_run_resumes_without_redoing_rows(renders_dir, tmp_path, mon
     monkeypatch.setattr(harness, "run_unit", interrupt_after_three)
     with pytest.raises(KeyboardInterrupt):
         run_benchmark(SMALL, tmp_path, renders_dir)
-    assert len(pd.read_csv(tmp_path / "runs.csv")) == 3 * 2
+    assert len(pd.read_csv(tmp_path / "runs.csv")) == 3 * 4  # tasks x protocols
     calls.clear()
     monkeypatch.setattr(harness, "run_unit", lambda *a, **k: calls.append(a[4:7]) or real(*a, **k))
     run_benchmark(SMALL, tmp_path, renders_dir)
-    assert len(calls) == 2 * len(POLICIES) - 3
+    assert len(calls) == 2 * 6 - 3  # the peers do not go through run_unit
     runs = pd.read_csv(tmp_path / "runs.csv")
     assert len(runs) == ROWS and not runs.duplicated(list(KEY)).any()
     calls.clear()
@@ -248,7 +252,7 @@ def test_another_configuration_into_the_same_directory_is_refused(
         run_benchmark(other, tmp_path / "r", renders_dir)
     assert len(pd.read_csv(tmp_path / "r" / "runs.csv")) == ROWS  # nothing lost
     run_benchmark(other, tmp_path / "r", renders_dir, overwrite=True)
-    assert len(pd.read_csv(tmp_path / "r" / "runs.csv")) == len(POLICIES) * 2
+    assert len(pd.read_csv(tmp_path / "r" / "runs.csv")) == ROWS // 2
 
 
 @pytest.mark.parametrize(

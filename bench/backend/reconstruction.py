@@ -1,5 +1,7 @@
 """Reconstruction on COLMAP (pycolmap) from the selected keypoints and verified matches.
 
+Two tasks share the database and the matches:
+
 Known-pose triangulation (task `tri`): a COLMAP database holding exactly the selected
 keypoints and the verified matches (each pair with the configuration its verification
 found), and `pycolmap.triangulate_points` on a reconstruction whose poses are the rig's
@@ -15,7 +17,14 @@ Track protocols (the same for every policy):
   in its own table only, because a two-view track cannot be checked by a third view and
   nearly all gross outliers come from such tracks.
 
-The triangulator is seeded and single-threaded, so a run is reproducible.
+Structure from motion (task `sfm`): COLMAP's incremental mapper on the same database,
+with the intrinsics known and fixed (no focal length, principal point or distortion
+refinement) and the poses unknown; the model with the most registered views is kept.
+The rig's poses are never read for it. The track protocol applies to its triangulation
+too: `multiview` is COLMAP's default mapper (two-view tracks ignored; so a scene seen by
+two views alone cannot be mapped), `twoview` keeps them.
+
+The triangulator and the mapper are seeded and single-threaded, so a run is reproducible.
 """
 
 from __future__ import annotations
@@ -23,6 +32,7 @@ from __future__ import annotations
 import shutil
 import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,7 +43,17 @@ from bench import BenchError
 from bench.backend.matching import BackendConfig, PairMatches, colmap_camera
 from bench.camera import Camera
 
-pycolmap.logging.minloglevel = 2  # errors only: COLMAP's per-image progress would drown ours
+
+@contextmanager
+def quiet_colmap():
+    """COLMAP's log silenced while the back end calls it (its failures become recorded
+    reasons), and the caller's level restored afterwards."""
+    level = pycolmap.logging.minloglevel
+    pycolmap.logging.minloglevel = 3
+    try:
+        yield
+    finally:
+        pycolmap.logging.minloglevel = level
 
 
 PROTOCOLS = {"multiview": 3, "twoview": 2}
@@ -131,9 +151,10 @@ def triangulate(
         opts.random_seed = cfg.seed
         opts.num_threads = 1
         (work / "out").mkdir()
-        model = pycolmap.triangulate_points(
-            rec, work / "database.db", image_dir, work / "out", options=opts
-        )
+        with quiet_colmap():
+            model = pycolmap.triangulate_points(
+                rec, work / "database.db", image_dir, work / "out", options=opts
+            )
         drop_short_tracks(model, PROTOCOLS[protocol])
         return model
     finally:
@@ -160,3 +181,64 @@ def known_pose_task(
         )
     failure = None if model.num_points3D() > 0 else "no track could be triangulated"
     return Reconstruction(model, failure, time.perf_counter() - t)
+
+
+def fixed_intrinsics_options(
+    cfg: BackendConfig, protocol: str
+) -> pycolmap.IncrementalPipelineOptions:
+    """COLMAP's incremental mapper with known, fixed intrinsics under a track protocol;
+    seeded, one thread."""
+    opts = pycolmap.IncrementalPipelineOptions()
+    opts.triangulation.ignore_two_view_tracks = PROTOCOLS[protocol] > 2
+    opts.ba_refine_focal_length = False
+    opts.ba_refine_principal_point = False
+    opts.ba_refine_extra_params = False
+    opts.random_seed = cfg.seed
+    opts.num_threads = 1
+    return opts
+
+
+def map_database(
+    database: Path, image_dir: Path, cfg: BackendConfig, protocol: str
+) -> Reconstruction:
+    """Incremental mapping of a COLMAP database under a track protocol; the largest model
+    (points of shorter tracks than the protocol allows removed), or why there is none."""
+    t = time.perf_counter()
+    out = Path(tempfile.mkdtemp(prefix="bench-map-"))
+    try:
+        with quiet_colmap():
+            models = pycolmap.incremental_mapping(
+                database, image_dir, out, options=fixed_intrinsics_options(cfg, protocol)
+            )
+    except Exception as e:  # COLMAP failures become a recorded reason
+        return Reconstruction(
+            None, f"mapping failed: {type(e).__name__}: {e}", time.perf_counter() - t
+        )
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+    best = max(models.values(), key=lambda m: m.num_reg_images(), default=None)
+    if best is None or best.num_reg_images() < 2:
+        n = 0 if best is None else best.num_reg_images()
+        return Reconstruction(None, f"the mapper registered {n} view(s)", time.perf_counter() - t)
+    drop_short_tracks(best, PROTOCOLS[protocol])
+    return Reconstruction(best, None, time.perf_counter() - t)
+
+
+def mapping_task(
+    image_dir: Path,
+    cams: list[Camera],
+    xy: list[np.ndarray],
+    pairs: list[PairMatches],
+    cfg: BackendConfig,
+    protocol: str = "multiview",
+) -> Reconstruction:
+    """Task `sfm`: incremental mapping from the selected keypoints and verified matches,
+    intrinsics known and fixed, poses unknown; failures are recorded, never raised."""
+    if sum(len(p.verified) for p in pairs) == 0:
+        return Reconstruction(None, "no pair of views has verified matches", 0.0)
+    work = Path(tempfile.mkdtemp(prefix="bench-sfm-"))
+    try:
+        _write_database(work / "database.db", cams, image_names(len(cams)), xy, pairs)
+        return map_database(work / "database.db", image_dir, cfg, protocol)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)

@@ -244,7 +244,7 @@ def track_metrics(model) -> dict[str, float]:
     pts = list(model.points3D.values()) if model is not None else []
     if not pts:
         return {"mean_track_length": math.nan, "mean_tri_angle_deg": math.nan}
-    centres = {img_id: img.projection_center() for img_id, img in model.images.items()}
+    centres = {k: model.images[k].projection_center() for k in model.reg_image_ids()}
     lengths, angles = [], []
     for p in pts:
         ids = [el.image_id for el in p.track.elements]

@@ -29,6 +29,7 @@ PANELS = (
     ("inlier_pct", "Inlier %"),
     ("coverage_pct", "Coverage %"),
     ("runtime_proxy", "Runtime proxy (k ops)"),
+    ("sfm_maa", "SfM pose mAA (1-10 deg), unknown poses"),
 )
 LOG_SCALE = {"runtime_proxy", "rmse"}
 
@@ -50,16 +51,27 @@ def figure3(t1: pd.DataFrame, out: Path, title: str = "") -> None:
     95% bootstrap intervals."""
     b = headline_budget(t1)
     t = t1[(t1["budget"] == b) | (t1["budget"] == 0)].reset_index(drop=True)
-    fig, axes = plt.subplots(2, 4, figsize=(17, 7.5))
+    fig, axes = plt.subplots(3, 3, figsize=(15, 11))
     colors = plt.cm.tab10(np.arange(len(t)))
     for ax, (m, label) in zip(axes.ravel(), PANELS):
+        if m not in t:
+            ax.set_visible(False)
+            continue
         values = t[m].to_numpy(float)
         ok = np.isfinite(values)
         ax.bar(
             np.flatnonzero(ok), values[ok], yerr=_errors(t, m)[:, ok], color=colors[ok], capsize=4
         )
         for k in np.flatnonzero(~ok):
-            ax.text(k, 0, "n/a", ha="center", va="bottom", fontsize=8, color="gray")
+            ax.text(
+                k,
+                0.02,
+                "n/a",
+                transform=ax.get_xaxis_transform(),
+                ha="center",
+                fontsize=8,
+                color="gray",
+            )
         ax.set_xticks(
             range(len(t)),
             [s.replace(" (", "\n(") for s in t["strategy"]],
@@ -81,9 +93,12 @@ def figure3(t1: pd.DataFrame, out: Path, title: str = "") -> None:
 def figure_budget(t1: pd.DataFrame, out: Path) -> None:
     """Each headline metric against the budget per policy (oracle included), with 95%
     bootstrap bands; the `all` reference as a dashed line."""
-    fig, axes = plt.subplots(2, 4, figsize=(17, 7.5))
+    fig, axes = plt.subplots(3, 3, figsize=(15, 11))
     budgets = sorted(b for b in t1["budget"].unique() if b > 0)
     for ax, (m, label) in zip(axes.ravel(), PANELS):
+        if m not in t1:
+            ax.set_visible(False)
+            continue
         for policy, g in t1[t1["budget"] > 0].groupby("policy", sort=False):
             g = g.sort_values("budget")
             style = {"linestyle": ":", "color": "black"} if policy == ORACLE else {}
@@ -93,9 +108,12 @@ def figure_budget(t1: pd.DataFrame, out: Path) -> None:
             ax.fill_between(
                 g["budget"], g[f"{m}_lo"], g[f"{m}_hi"], color=line[0].get_color(), alpha=0.15
             )
-        ref = t1[t1["budget"] == 0]
-        if len(ref) and np.isfinite(ref[m].iloc[0]):
-            ax.axhline(ref[m].iloc[0], color="gray", linestyle="--", label=DISPLAY["all"])
+        for policy, ref in t1[t1["budget"] == 0].groupby("policy", sort=False):
+            if np.isfinite(ref[m].iloc[0]):
+                style = "--" if policy == "all" else "-."
+                ax.axhline(
+                    ref[m].iloc[0], color="gray", linestyle=style, label=DISPLAY.get(policy, policy)
+                )
         ax.set_xscale("log")
         ax.xaxis.set_major_locator(FixedLocator(budgets))
         ax.xaxis.set_minor_locator(NullLocator())

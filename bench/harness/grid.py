@@ -22,6 +22,7 @@ from pathlib import Path
 import pandas as pd
 
 from bench import ROOT, BenchError
+from bench.backend.peers import PEERS
 from bench.backend.reconstruction import PROTOCOLS, check_protocols
 from bench.console import log, progress
 from bench.evaluation.groundtruth import load_ground_truth
@@ -29,12 +30,12 @@ from bench.evaluation.metrics import SceneTruth
 from bench.files import write_text_atomic
 from bench.frontend.policies import check_policies
 from bench.frontend.stage import front_end
-from bench.harness.pipeline import ORACLE, TASKS, RunConfig, run_unit
+from bench.harness.pipeline import ORACLE, TASKS, RunConfig, run_peer_unit, run_unit
 from bench.harness.report import KEY, write_report
 from bench.render.entry import render_scene
 from bench.scenes.spec import load_spec, scene_names
 
-DEFAULT_POLICIES = ("random", "texture", "grid", "adaptive", "all", ORACLE)
+DEFAULT_POLICIES = ("random", "texture", "grid", "adaptive", "all", ORACLE, *PEERS)
 
 
 @dataclass(frozen=True)
@@ -52,7 +53,7 @@ class BenchConfig:
     def validate(self) -> BenchConfig:
         for s in self.scenes:
             load_spec(s)
-        check_policies([p for p in self.policies if p != ORACLE])
+        check_policies([p for p in self.policies if p not in (ORACLE, *PEERS)])
         check_protocols(self.protocols)
         unknown = [t for t in self.tasks if t not in TASKS]
         if unknown or not self.tasks:
@@ -72,21 +73,21 @@ class BenchConfig:
         return json.loads(json.dumps(asdict(self)))  # tuples as lists, as stored
 
     def units(self) -> list[tuple[str, int, str, int]]:
-        """Every (scene, seed, policy, budget) of the grid; `all` is one unit per scene and
-        seed, with budget 0 (the whole pool)."""
+        """Every (scene, seed, policy, budget) of the grid that has a job; `all` and `colmap`
+        are one unit per scene and seed, with budget 0 (the whole pool; COLMAP's default)."""
         return [
             (sc, sd, p, b)
             for sc in self.scenes
             for sd in self.seeds
             for p in self.policies
-            for b in ((0,) if p == "all" else self.budgets)
+            for b in ((0,) if p in ("all", "colmap") else self.budgets)
+            if self.jobs(p)
         ]
 
-    def jobs(self) -> list[tuple[str, str]]:
-        """Every (task, protocol) of a unit."""
-        return [
-            (t, pr) for t in self.tasks for pr in (self.protocols if t == "tri" else ("multiview",))
-        ]
+    def jobs(self, policy: str) -> list[tuple[str, str]]:
+        """Every (task, protocol) of a unit of `policy` (the peers run the sfm task only)."""
+        tasks = [t for t in self.tasks if t == "sfm" or policy not in PEERS]
+        return [(t, pr) for t in tasks for pr in self.protocols]
 
 
 def _claim_results_dir(results: Path, cfg: BenchConfig, overwrite: bool) -> None:
@@ -156,7 +157,7 @@ def run_benchmark(
     rows = df.to_dict("records") if len(df) else []
     todo = {}
     for unit in cfg.units():
-        missing = [j for j in cfg.jobs() if (*unit, *j) not in done]
+        missing = [j for j in cfg.jobs(unit[2]) if (*unit, *j) not in done]
         if missing:
             todo[unit] = missing
     n_rows = sum(len(j) for j in todo.values())
@@ -195,11 +196,13 @@ def run_benchmark(
             for (_, _, policy, budget), jobs in (
                 (u, j) for u, j in todo.items() if u[:2] == (sc, sd)
             ):
-                new = run_unit(
-                    entries[sc, sd], fe, truth, sc, sd, policy, budget, jobs, cfg.run, results
-                )
+                unit = (entries[sc, sd], fe, truth, sc, sd, policy, budget)
+                if policy in PEERS:
+                    new = run_peer_unit(*unit, jobs, cfg.run, results)
+                else:
+                    new = run_unit(*unit, jobs, cfg.run, results)
                 for k in ("select", "match", "verify"):
-                    stage_s[k] += new[0][f"{k}_ms"] / 1000
+                    stage_s[k] += new[0].get(f"{k}_ms", 0.0) / 1000
                 for r in new:
                     stage_s["task"] += r["task_ms"] / 1000
                     stage_s["evaluate"] += r["evaluate_ms"] / 1000

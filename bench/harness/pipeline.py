@@ -21,9 +21,17 @@ from pathlib import Path
 import numpy as np
 
 from bench.backend.matching import BackendConfig, match_and_verify
-from bench.backend.reconstruction import PROTOCOLS, image_names, known_pose_model, known_pose_task
-from bench.evaluation.metrics import SceneTruth, evaluate_known_pose, match_metrics
+from bench.backend.peers import PEERS, run_peer
+from bench.backend.reconstruction import (
+    PROTOCOLS,
+    image_names,
+    known_pose_model,
+    known_pose_task,
+    mapping_task,
+)
+from bench.evaluation.metrics import SceneTruth, coverage_pct, evaluate_known_pose, match_metrics
 from bench.evaluation.oracle import matchable_tracks, oracle_select
+from bench.evaluation.poses import evaluate_mapping
 from bench.files import content_key
 from bench.frontend.features import DetectorConfig
 from bench.frontend.policies import SIGNALS_USED, PolicyConfig, PolicyInput, select
@@ -31,12 +39,13 @@ from bench.frontend.signals import SignalConfig
 from bench.frontend.stage import FrontEnd
 from bench.render.config import RenderConfig
 
-TASKS = ("tri",)
-"""Reconstruction tasks: `tri` triangulates with the known poses."""
+TASKS = ("tri", "sfm")
+"""Reconstruction tasks: `tri` triangulates with the known poses; `sfm` maps with unknown
+poses and is scored by pose accuracy."""
 ORACLE = "oracle"
 """The ground-truth selection of `bench.evaluation.oracle`: a reference, never a policy."""
-REFERENCES = ("all", ORACLE)
-"""Rows that are references, not contenders (never a "best baseline")."""
+REFERENCES = ("all", ORACLE, *PEERS)
+"""Rows that are references or peers, not contenders (never a "best baseline")."""
 
 
 @dataclass(frozen=True)
@@ -141,41 +150,100 @@ def run_unit(
         "match": match_s["match"],
         "verify": match_s["verify"],
     }
-    meta = json.loads((Path(entry) / "meta.json").read_text())
     rows = []
     for task, protocol in jobs:
-        rec = known_pose_task(entry, cams, xy, pairs, cfg.backend, protocol)
         out = model_dir(results, scene, seed, policy, budget, task, protocol)
-        export_model(
-            rec.model
-            if rec.model is not None
-            else known_pose_model(cams, image_names(len(cams)), xy),
-            out,
-        )
+        if task == "tri":
+            rec = known_pose_task(entry, cams, xy, pairs, cfg.backend, protocol)
+            model = (
+                rec.model
+                if rec.model is not None
+                else known_pose_model(cams, image_names(len(cams)), xy)
+            )
+            export_model(model, out)
+        else:
+            rec = mapping_task(entry, cams, xy, pairs, cfg.backend, protocol)
+            _export_or_clear(rec.model, out)
         t = time.perf_counter()
-        metrics = evaluate_known_pose(truth, rec.model, PROTOCOLS[protocol])
+        if task == "tri":
+            metrics = evaluate_known_pose(truth, rec.model, PROTOCOLS[protocol])
+        else:
+            metrics = evaluate_mapping(truth, rec.model, _view_of_name(len(cams)))
         timing = seconds | {
             "task": rec.seconds,
             "evaluate": shared_eval_s + time.perf_counter() - t,
         }
-        row = {
-            "scene": scene,
-            "seed": seed,
-            "policy": policy,
-            "budget": budget,
-            "task": task,
-            "protocol": protocol,
-            "render_key": Path(entry).name,
-            "config_hash": cfg.hash,
-            **shared,
-            **metrics,
-            "render_s_per_view": float(np.mean(meta["seconds_per_view"])),
-            **{f"{k}_ms": 1000 * v for k, v in timing.items()},
-            "wall_ms": 1000 * sum(v for k, v in timing.items() if k != "evaluate"),
-            "status": "ok" if rec.failure is None else "failed",
-            "failure": rec.failure or "",
-        }
-        if rec.failure:
-            row["rmse"] = row["median_error"] = math.nan
-        rows.append(row)
+        ident = (entry, scene, seed, policy, budget, task, protocol, cfg)
+        rows.append(_row(ident, shared | metrics, timing, rec.failure))
     return rows
+
+
+def run_peer_unit(
+    entry: Path,
+    fe: FrontEnd,
+    truth: SceneTruth,
+    scene: str,
+    seed: int,
+    peer: str,
+    budget: int,
+    jobs: list[tuple[str, str]],
+    cfg: RunConfig,
+    results: Path,
+) -> list[dict]:
+    """The rows (task `sfm`, one per protocol) of a stock-COLMAP peer (`bench.backend.peers`)."""
+    cam = fe.views[0].camera
+    names = image_names(len(fe.views))
+    run = run_peer(Path(entry), names, cam, budget, cfg.backend, [pr for _, pr in jobs])
+    shared = {
+        "tentative_matches": run.tentative,
+        "verified_matches": run.verified,
+        "inlier_pct": 100.0 * run.verified / run.tentative if run.tentative else math.nan,
+        "coverage_pct": coverage_pct(run.keypoints, cam.width, cam.height),
+        "keypoints_per_view": float(np.mean([len(k) for k in run.keypoints])),
+    }
+    rows = []
+    for task, protocol in jobs:
+        rec = run.recs[protocol]
+        _export_or_clear(rec.model, model_dir(results, scene, seed, peer, budget, task, protocol))
+        t = time.perf_counter()
+        metrics = evaluate_mapping(truth, rec.model, _view_of_name(len(names)))
+        timing = run.seconds | {"task": rec.seconds, "evaluate": time.perf_counter() - t}
+        ident = (entry, scene, seed, peer, budget, task, protocol, cfg)
+        rows.append(_row(ident, shared | metrics, timing, rec.failure))
+    return rows
+
+
+def _view_of_name(n: int) -> dict[str, int]:
+    return {name: k for k, name in enumerate(image_names(n))}
+
+
+def _export_or_clear(model, out: Path) -> None:
+    """Export a model; without one, remove what an earlier run left there."""
+    if model is not None:
+        export_model(model, out)
+    elif out.exists():
+        shutil.rmtree(out)
+
+
+def _row(ident: tuple, metrics: dict, timing: dict[str, float], failure: str | None) -> dict:
+    entry, scene, seed, policy, budget, task, protocol, cfg = ident
+    meta = json.loads((Path(entry) / "meta.json").read_text())
+    row = {
+        "scene": scene,
+        "seed": seed,
+        "policy": policy,
+        "budget": budget,
+        "task": task,
+        "protocol": protocol,
+        "render_key": Path(entry).name,
+        "config_hash": cfg.hash,
+        **metrics,
+        "render_s_per_view": float(np.mean(meta["seconds_per_view"])),
+        **{f"{k}_ms": 1000 * v for k, v in timing.items()},
+        "wall_ms": 1000 * sum(v for k, v in timing.items() if k != "evaluate"),
+        "status": "ok" if failure is None else "failed",
+        "failure": failure or "",
+    }
+    if failure:
+        row["rmse"] = row["median_error"] = math.nan
+    return row

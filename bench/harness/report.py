@@ -17,7 +17,7 @@ from bench import BenchError
 from bench.console import log
 from bench.files import write_text_atomic
 from bench.harness.figures import figure2, figure3, figure_budget
-from bench.harness.tables import KEY, paired, table1, table2, with_oracle_share
+from bench.harness.tables import KEY, headline_frame, paired, table1, table2, with_oracle_share
 
 REQUIRED = (*KEY, "render_key", "status", "acc_completeness_pct", "rmse")
 
@@ -48,11 +48,12 @@ def write_report(df: pd.DataFrame, results: Path, renders: Path) -> None:
     """Every table and figure of `results` from the rows `df`."""
     results = Path(results)
     df = with_oracle_share(df)
-    t1, pairs = table1(df), paired(df)
+    frame = headline_frame(df)
+    t1, pairs = table1(frame), paired(frame)
     tables = {
         "table1.csv": t1,
-        "table1_twoview.csv": table1(df, "tri", "twoview"),
-        "table2.csv": table2(df, pairs),
+        "table1_twoview.csv": table1(headline_frame(df, "twoview")),
+        "table2.csv": table2(frame, pairs),
         "paired.csv": pairs,
     }
     for name, t in tables.items():

@@ -19,7 +19,16 @@ import numpy as np
 import pandas as pd
 
 RESAMPLES = 10_000
-LOWER_IS_BETTER = {"rmse", "median_error", "runtime_proxy", "wall_ms", "cam_center_err"}
+LOWER_IS_BETTER = {
+    "rmse",
+    "median_error",
+    "runtime_proxy",
+    "wall_ms",
+    "sfm_rmse",
+    "sfm_median_error",
+    "sfm_median_pose_err_deg",
+    "sfm_cam_center_err",
+}
 
 
 def bootstrap_mean(x, seed: int = 0) -> tuple[float, float, float]:

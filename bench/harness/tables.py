@@ -1,9 +1,11 @@
 """Table 1, Table 2 and the paired comparisons, from the rows of `runs.csv` alone.
 
 * `table1.csv`: per strategy and budget, the headline task and protocol (`tri`,
-  `multiview`): the mean of every metric over runs with a 95% bootstrap interval
-  (`<metric>_lo`, `<metric>_hi`; `bench.harness.stats`). `table1_twoview.csv`: the same
-  under the `twoview` track protocol, never mixed into the headline.
+  `multiview`) and beside it the `sfm` task's metrics (prefixed `sfm_`: mAA, registered
+  views, ...): the mean of every metric over runs with a 95% bootstrap interval
+  (`<metric>_lo`, `<metric>_hi`; `bench.harness.stats`). The stock-COLMAP peers have sfm
+  columns only. `table1_twoview.csv`: both tasks under the `twoview` track protocol, never
+  mixed into the headline.
 * `completeness_vs_oracle_pct`: a run's completeness as a percentage of the oracle's in the
   same scene, seed and budget (the oracle is the ground-truth selection under the same
   budget, `bench.evaluation.oracle`).
@@ -20,6 +22,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pandas as pd
 
 from bench.harness.pipeline import ORACLE, REFERENCES
@@ -33,6 +36,8 @@ DISPLAY = {
     "adaptive": "Adaptive optimized",
     "all": "All candidates (reference)",
     ORACLE: "Oracle (ground truth, reference)",
+    "colmap": "COLMAP default SIFT (peer)",
+    "colmap-b": "COLMAP SIFT capped at B (peer)",
 }
 BASELINES = ("random", "texture", "grid")
 CONTENDER = "adaptive"
@@ -65,36 +70,63 @@ TABLE1_METRICS = (
     "runtime_robust",
     "task_ms",
 )
-PAIRED_METRICS = ("acc_completeness_pct", "accuracy_pct", "rmse", "median_error")
+SFM_METRICS = (
+    "maa",
+    "registered_views",
+    "median_pose_err_deg",
+    "cam_center_err",
+    "points",
+    "accuracy_pct",
+    "rmse",
+    "median_error",
+    "mean_track_length",
+    "mean_reproj_px",
+    "task_ms",
+    "wall_ms",
+)
+"""The sfm task's columns in Table 1 (as `sfm_<name>`)."""
+PAIRED_METRICS = ("acc_completeness_pct", "accuracy_pct", "rmse", "median_error", "sfm_maa")
 """The headline metrics that paired statistics compare."""
+UNIT = ["scene", "seed", "policy", "budget"]
+
+
+def headline_frame(df: pd.DataFrame, protocol: str = HEADLINE[1]) -> pd.DataFrame:
+    """One row per (scene, seed, policy, budget) under a track protocol: the known-pose
+    task's columns, and the sfm task's as `sfm_<name>` (a unit with only one of the tasks
+    has NaN for the other)."""
+    rows = df[df["protocol"] == protocol]
+    tri = rows[rows["task"] == "tri"]
+    cols = [c for c in (*SFM_METRICS, "status") if c in df]
+    sfm = rows[rows["task"] == "sfm"][UNIT + cols].rename(columns={c: f"sfm_{c}" for c in cols})
+    return tri.merge(sfm, on=UNIT, how="outer")
 
 
 def with_oracle_share(df: pd.DataFrame) -> pd.DataFrame:
     """Add `completeness_vs_oracle_pct` (NaN where there is no oracle run or it is 0)."""
     keys = ["scene", "seed", "budget", "task", "protocol"]
     oracle = df[df["policy"] == ORACLE].set_index(keys)["acc_completeness_pct"]
-    ref = df.set_index(keys).index.map(lambda k: oracle.get(k, math.nan))
-    out = df.copy()
-    share = 100.0 * df["acc_completeness_pct"].to_numpy() / ref.to_numpy(dtype=float)
-    out["completeness_vs_oracle_pct"] = pd.Series(share, index=df.index).where(
-        ref.to_numpy(dtype=float) > 0
-    )
-    return out
+    ref = np.array([oracle.get(k, math.nan) for k in df.set_index(keys).index], dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = 100.0 * df["acc_completeness_pct"].to_numpy(dtype=float) / ref
+    return df.assign(completeness_vs_oracle_pct=np.where(ref > 0, share, math.nan))
 
 
 def _policy_order(policy: str) -> int:
     return list(DISPLAY).index(policy) if policy in DISPLAY else len(DISPLAY)
 
 
-def table1(df: pd.DataFrame, task: str = "tri", protocol: str = "multiview") -> pd.DataFrame:
-    """Per strategy and budget: every metric's mean and 95% bootstrap interval over runs."""
-    rows = df[(df["task"] == task) & (df["protocol"] == protocol)]
+def table1(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per strategy and budget: every metric's mean and 95% bootstrap interval over runs
+    (`rows`: `headline_frame`, or the rows of one task and protocol)."""
     out = []
+    metrics = [*TABLE1_METRICS, *(f"sfm_{m}" for m in SFM_METRICS)]
     for (policy, budget), g in rows.groupby(["policy", "budget"], sort=False):
         row = {"strategy": DISPLAY.get(policy, policy), "policy": policy, "budget": budget}
         row["runs"] = len(g)
-        row["failed_runs"] = int((g["status"] != "ok").sum())
-        for m in TABLE1_METRICS:
+        row["failed_runs"] = int((g["status"] == "failed").sum())
+        if "sfm_status" in g:
+            row["sfm_failed_runs"] = int((g["sfm_status"] == "failed").sum())
+        for m in metrics:
             if m in g:
                 row[m], row[f"{m}_lo"], row[f"{m}_hi"] = bootstrap_mean(g[m].astype(float))
         out.append(row)
@@ -112,17 +144,16 @@ def _units(df: pd.DataFrame, policy: str, budget: int, metric: str) -> pd.Series
     return g.set_index(["scene", "seed"])[metric].astype(float)
 
 
-def paired(df: pd.DataFrame) -> pd.DataFrame:
+def paired(rows: pd.DataFrame) -> pd.DataFrame:
     """Adaptive minus each baseline, per scene and pooled, per budget and headline metric
-    (headline task and protocol)."""
-    rows = df[(df["task"] == HEADLINE[0]) & (df["protocol"] == HEADLINE[1])]
+    (`rows`: `headline_frame`)."""
     baselines = [p for p in pd.unique(rows["policy"]) if p not in (CONTENDER, *REFERENCES)]
     out = []
     for budget in sorted(b for b in pd.unique(rows["budget"]) if b > 0):
         for scope in [*pd.unique(rows["scene"]), "all scenes"]:
             part = rows if scope == "all scenes" else rows[rows["scene"] == scope]
             for base in baselines:
-                for m in PAIRED_METRICS:
+                for m in (m for m in PAIRED_METRICS if m in part):
                     a, b = _units(part, CONTENDER, budget, m), _units(part, base, budget, m)
                     strata = pd.Series(a.index.get_level_values("scene"), index=a.index)
                     res = (
@@ -148,18 +179,18 @@ def paired(df: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
-def table2(df: pd.DataFrame, pairs: pd.DataFrame) -> pd.DataFrame:
+def table2(rows: pd.DataFrame, pairs: pd.DataFrame) -> pd.DataFrame:
     """Per scene (and pooled) and budget: adaptive, the best baseline of each headline metric
-    and the paired difference to it, plus the oracle's completeness."""
-    rows = df[(df["task"] == HEADLINE[0]) & (df["protocol"] == HEADLINE[1])]
+    and the paired difference to it, plus the oracle's completeness (`rows`:
+    `headline_frame`)."""
     out = []
     for budget in sorted(b for b in pd.unique(rows["budget"]) if b > 0):
         for scope in [*pd.unique(rows["scene"]), "all scenes"]:
             part = rows[rows["budget"] == budget]
             part = part if scope == "all scenes" else part[part["scene"] == scope]
-            means = part.groupby("policy")[list(PAIRED_METRICS)].mean()
+            means = part.groupby("policy")[[m for m in PAIRED_METRICS if m in part]].mean()
             row = {"scene": scope, "budget": budget}
-            for m in PAIRED_METRICS:
+            for m in (m for m in PAIRED_METRICS if m in means):
                 row[f"adaptive_{m}"] = means[m].get(CONTENDER, math.nan)
                 base = means.loc[[p for p in BASELINES if p in means.index], m].dropna()
                 best = (

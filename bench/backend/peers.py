@@ -1,0 +1,100 @@
+"""Stock COLMAP as the peer of the `sfm` task: what a user would run instead of a selection
+policy, on the same images, scored the same way.
+
+* `colmap`: pycolmap's own SIFT extraction at its default settings (8192 features at most),
+  exhaustive matching with COLMAP's own verification, incremental mapping with the same
+  known, fixed intrinsics (`bench.backend.reconstruction.map_database`).
+* `colmap-b`: the same with SIFT's maximum number of features set to the budget. COLMAP's
+  limit is soft: it keeps whole scale levels (octaves) of the detector until the limit is
+  reached, so a view may hold somewhat more or fewer features than B.
+
+The peers read the images and the intrinsics only, like every back end.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+
+from bench.backend.matching import BackendConfig
+from bench.backend.reconstruction import Reconstruction, map_database, quiet_colmap
+from bench.camera import Camera
+
+PEERS = ("colmap", "colmap-b")
+"""Peer rows: `colmap` (budget 0: COLMAP's default) and `colmap-b` (one per budget)."""
+
+
+@dataclass
+class PeerRun:
+    """A peer's reconstruction and what its front end produced."""
+
+    recs: dict[str, Reconstruction]
+    """Per track protocol, the mapper's result."""
+    keypoints: list[np.ndarray]
+    """Per view, COLMAP's keypoints (COLMAP's pixel convention)."""
+    tentative: int
+    verified: int
+    seconds: dict[str, float]
+
+
+def run_peer(
+    image_dir: Path,
+    names: list[str],
+    cam: Camera,
+    max_features: int,
+    cfg: BackendConfig,
+    protocols: list[str],
+) -> PeerRun:
+    """Extract and match once with stock COLMAP, then map under each track protocol (see
+    the module docstring)."""
+    work = Path(tempfile.mkdtemp(prefix="bench-peer-"))
+    db_path = work / "database.db"
+    reader = pycolmap.ImageReaderOptions()
+    reader.camera_model = "PINHOLE"
+    reader.camera_params = ",".join(repr(v) for v in (cam.fx, cam.fy, cam.cx, cam.cy))
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.num_threads = 1
+    if max_features:
+        extraction.sift.max_num_features = max_features
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = 1
+    verification = pycolmap.TwoViewGeometryOptions()
+    verification.ransac.random_seed = cfg.seed
+    try:
+        t = time.perf_counter()
+        with quiet_colmap():
+            pycolmap.extract_features(
+                db_path,
+                image_dir,
+                image_names=names,
+                camera_mode=pycolmap.CameraMode.SINGLE,
+                reader_options=reader,
+                extraction_options=extraction,
+                device=pycolmap.Device.cpu,
+            )
+            detect_s = time.perf_counter() - t
+            t = time.perf_counter()
+            pycolmap.match_exhaustive(
+                db_path,
+                matching_options=matching,
+                verification_options=verification,
+                device=pycolmap.Device.cpu,
+            )
+            match_s = time.perf_counter() - t
+        db = pycolmap.Database.open(str(db_path))
+        try:
+            ids = {img.name: img.image_id for img in db.read_all_images()}
+            keypoints = [db.read_keypoints(ids[n])[:, :2] for n in names]
+            tentative, verified = db.num_matches(), db.num_inlier_matches()
+        finally:
+            db.close()
+        recs = {pr: map_database(db_path, image_dir, cfg, pr) for pr in protocols}
+        return PeerRun(recs, keypoints, tentative, verified, {"detect": detect_s, "match": match_s})
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
