@@ -1,9 +1,12 @@
-"""Content-addressed cache entries: a directory written atomically, checked before use.
+"""Files the harness writes: content hashes, atomic writes and cache entries.
 
-An entry is complete when its `meta.json` (written last) parses and every file it lists
-exists with the recorded size. Writers take a per-entry lock, build the entry in a
-temporary directory beside it and rename it into place, so an interrupted write leaves
-no entry and two processes filling the same entry do not corrupt it.
+A cache entry is a directory that is complete when its `meta.json` (written last) parses
+and every file it lists exists with the recorded size and CRC-32 checksum (so a file
+overwritten with other bytes of the same size is caught too). Writers take a per-entry
+lock, build the entry in a temporary directory beside it and rename it into place, so an
+interrupted write leaves no entry and two processes filling the same entry do not corrupt
+it. Lock files and temporary files never outlive the writer, and everything written gets
+the permissions of the user's umask.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ import json
 import os
 import shutil
 import tempfile
+import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -37,16 +41,38 @@ def source_hash(*code) -> str:
     return h.hexdigest()[:12]
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def temp_dir_beside(target: Path) -> Path:
+    """A new temporary directory beside `target` (to be renamed onto it), with the
+    permissions the user's umask gives a directory (mkdtemp alone makes it 0700)."""
+    tmp = Path(tempfile.mkdtemp(prefix=f".tmp-{target.name}-", dir=target.parent))
+    tmp.chmod(0o777 & ~_umask())
+    return tmp
+
+
 def write_text_atomic(path: Path, text: str) -> None:
     """Write through a temporary name beside `path`, then rename: readers see the old file
-    or the new one, never half of one."""
+    or the new one, never half of one, and a failed write leaves no temporary file."""
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
+    try:
+        tmp.write_text(text)
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def checksum(path: Path) -> str:
+    """CRC-32 of a file's bytes, as 8 hex digits (catches damage, not tampering)."""
+    return f"{zlib.crc32(Path(path).read_bytes()):08x}"
 
 
 def entry_problem(entry: Path) -> str | None:
-    """Why `entry` is not a complete cache entry, or None if it is."""
+    """Why `entry` is not a complete, undamaged cache entry, or None if it is."""
     try:
         meta = json.loads((entry / "meta.json").read_text())
         files = meta["files"]
@@ -54,33 +80,56 @@ def entry_problem(entry: Path) -> str | None:
         return "meta.json missing"
     except (OSError, ValueError, KeyError, TypeError) as e:
         return f"meta.json unreadable ({type(e).__name__})"
-    for name, size in files.items():
+    for name, rec in files.items():
         p = entry / name
+        size, crc = (rec, None) if isinstance(rec, int) else (rec["bytes"], rec["crc32"])
         if not p.is_file():
             return f"{name} missing"
         if p.stat().st_size != size:
             return f"{name} truncated or altered ({p.stat().st_size} bytes, expected {size})"
+        if crc is not None and checksum(p) != crc:
+            return f"{name} altered (its checksum differs from the one recorded)"
     return None
 
 
+def lacks_checksums(entry: Path) -> bool:
+    """Whether `entry` was written before checksums were recorded (sizes only)."""
+    files = json.loads((entry / "meta.json").read_text())["files"]
+    return any(isinstance(rec, int) for rec in files.values())
+
+
 def write_meta(directory: Path, meta: dict) -> None:
-    """Write `meta.json` last, listing the size of every other file in the directory."""
-    files = {p.name: p.stat().st_size for p in sorted(directory.iterdir()) if p.name != "meta.json"}
-    (directory / "meta.json").write_text(json.dumps({**meta, "files": files}, indent=1))
+    """Write `meta.json` last, listing the size and checksum of every other file."""
+    files = {
+        p.name: {"bytes": p.stat().st_size, "crc32": checksum(p)}
+        for p in sorted(directory.iterdir())
+        if p.name != "meta.json"
+    }
+    write_text_atomic(directory / "meta.json", json.dumps({**meta, "files": files}, indent=1))
 
 
 @contextmanager
 def locked(entry: Path) -> Iterator[None]:
-    """Hold an exclusive lock for `entry` (other processes wait)."""
+    """Hold an exclusive lock for `entry` (other processes wait). The lock file is removed
+    by its holder; a waiter that wakes on a removed file takes a fresh one."""
+    path = entry.parent / f".{entry.name}.lock"
     try:
         entry.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(entry.parent / f".{entry.name}.lock", os.O_CREAT | os.O_RDWR, 0o644)
+        while True:
+            fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o666)
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            try:
+                if os.stat(path).st_ino == os.fstat(fd).st_ino:
+                    break  # still the lock file on disk: ours
+            except FileNotFoundError:
+                pass
+            os.close(fd)
     except OSError as e:
         raise BenchError(f"cannot write to {entry.parent}: {e.strerror}") from e
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
         yield
     finally:
+        path.unlink(missing_ok=True)
         fcntl.flock(fd, fcntl.LOCK_UN)
         os.close(fd)
 
@@ -90,7 +139,7 @@ def atomic_dir(entry: Path) -> Iterator[Path]:
     """Yield a temporary directory that replaces `entry` only if the block completes."""
     for stale in entry.parent.glob(f".tmp-{entry.name}-*"):
         shutil.rmtree(stale, ignore_errors=True)  # left by an interrupted writer (we hold the lock)
-    tmp = Path(tempfile.mkdtemp(prefix=f".tmp-{entry.name}-", dir=entry.parent))
+    tmp = temp_dir_beside(entry)
     try:
         yield tmp
         if entry.exists():

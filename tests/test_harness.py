@@ -3,9 +3,13 @@ run` and `bench plot`: files, resumption, configuration guard, reproducibility."
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+import os
 import shutil
+import stat
+from pathlib import Path
 
 import pandas as pd
 import pycolmap
@@ -16,13 +20,17 @@ from bench.backend.reconstruction import known_pose_model
 from bench.evaluation.groundtruth import load_ground_truth
 from bench.evaluation.metrics import SceneTruth
 from bench.frontend.stage import front_end
+from bench.harness import figures, pipeline
 from bench.harness import grid as harness
-from bench.harness.cli import main
+from bench.harness.cli import LATEST, PUBLISHED, QUICK, build_parser, main, parse_list
 from bench.harness.grid import BenchConfig, run_benchmark
 from bench.harness.pipeline import RunConfig, export_model, run_unit
+from bench.harness.report import publish, write_report
+from bench.harness.runs import read_runs
 from bench.harness.stats import bootstrap_mean, paired_difference
 from bench.harness.tables import KEY
-from tests.conftest import MEDIUM, synthetic_rig
+from bench.render import entry as render
+from tests.conftest import MEDIUM, TINY, synthetic_rig
 
 # --- one run ------------------------------------------------------------------------
 
@@ -117,6 +125,7 @@ TIMING = [
     "task_ms",
     "evaluate_ms",
     "wall_ms",
+    "invocation",
 ]
 POLICIES = ["random", "texture", "grid", "adaptive", "oracle", "colmap-b", "all", "colmap"]
 ROWS = 2 * (6 * 2 * 2 + 2 * 2)  # scenes x (selections x tasks x protocols + peers x protocols)
@@ -179,9 +188,8 @@ def test_quick_run_writes_every_file_with_documented_columns(quick_results):
         "best_baseline_acc_completeness_policy",
     } <= set(t2.columns)
     manifest = json.loads((quick_results / "manifest.json").read_text())
-    assert {"versions", "variant", "host", "config", "seeds", "git_commit", "seconds"} <= set(
-        manifest
-    )
+    keys = {"versions", "variant", "host", "settings", "grid", "git_commit", "seconds"}
+    assert keys | {"invocations"} <= set(manifest)
     assert manifest["seconds"]["total"] > 0 and "render" in manifest["seconds"]
     for run in ("adaptive-b64", "all-b0", "oracle-b64/twoview"):
         assert (quick_results / "models" / "table-s0" / run / "points3D.txt").is_file()
@@ -241,26 +249,47 @@ def test_interrupted_run_resumes_without_redoing_rows(renders_dir, tmp_path, mon
     assert calls == [] and rendered == []
 
 
-def test_another_configuration_into_the_same_directory_is_refused(
-    quick_results, renders_dir, tmp_path
+def test_growing_a_results_folder_runs_only_the_new_rows(
+    quick_results, renders_dir, tmp_path, monkeypatch
 ):
+    """Hole 4: a new budget needs no --overwrite and runs only its rows; a changed setting
+    is refused, naming the setting."""
     shutil.copytree(quick_results, tmp_path / "r")
-    other = BenchConfig(scenes=("table",), seeds=(0,), budgets=(32,), run=RunConfig(render=MEDIUM))
-    with pytest.raises(
-        BenchError, match="holds results of another configuration .*budgets.*--overwrite"
-    ):
+    calls = []
+    real = harness.run_unit
+    monkeypatch.setattr(harness, "run_unit", lambda *a, **k: calls.append(a[5:7]) or real(*a, **k))
+    grown = dataclasses.replace(SMALL, scenes=("table",), budgets=(64, 32))
+    run_benchmark(grown, tmp_path / "r", renders_dir)
+    assert sorted(set(calls)) == [(p, 32) for p in sorted(POLICIES[:5])]
+    runs = pd.read_csv(tmp_path / "r" / "runs.csv")
+    assert len(runs) == ROWS + 5 * 4 + 2  # the new budget's selections and its colmap-b
+    other = dataclasses.replace(SMALL, run=RunConfig(render=dataclasses.replace(MEDIUM, spp=4)))
+    with pytest.raises(BenchError, match=r"other settings \(render.spp: 16 there, 4 now\)"):
         run_benchmark(other, tmp_path / "r", renders_dir)
-    assert len(pd.read_csv(tmp_path / "r" / "runs.csv")) == ROWS  # nothing lost
-    run_benchmark(other, tmp_path / "r", renders_dir, overwrite=True)
-    assert len(pd.read_csv(tmp_path / "r" / "runs.csv")) == ROWS // 2
+    assert len(pd.read_csv(tmp_path / "r" / "runs.csv")) == len(runs)  # nothing lost
+
+
+def test_rows_computed_by_other_code_are_computed_again(
+    quick_results, renders_dir, tmp_path, monkeypatch
+):
+    """Hole 2: the key that decides whether a row is finished covers the stages' code."""
+    shutil.copytree(quick_results, tmp_path / "r")
+    monkeypatch.setattr(pipeline, "code_hash", lambda: "another-code")
+    calls = []
+    real = harness.run_unit
+    monkeypatch.setattr(harness, "run_unit", lambda *a, **k: calls.append(a[5:7]) or real(*a, **k))
+    run_benchmark(dataclasses.replace(SMALL, scenes=("table",)), tmp_path / "r", renders_dir)
+    assert len(calls) == 6  # every selection unit of the table scene, again
+    runs = pd.read_csv(tmp_path / "r" / "runs.csv")
+    assert runs["config_hash"].nunique() == 1 and len(runs) == ROWS // 2
 
 
 @pytest.mark.parametrize(
     "content, message",
     [
         (None, "runs.csv not found"),
-        ("scene,seed\n\x00\x01,\n", "malformed: missing columns"),
-        ('scene,seed,policy\n"unclosed', "malformed"),
+        ("scene,seed\n\x00\x01,\n", "damaged: its header lacks policy"),
+        ('scene,seed,policy\n"unclosed', "damaged: its header lacks"),
     ],
 )
 def test_plot_rejects_bad_runs_csv_in_one_line(tmp_path, capsys, content, message):
@@ -343,3 +372,122 @@ def test_a_budget_above_every_pool_is_refused_in_one_line(tmp_path, capsys):
     assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert "budget 100000 exceeds every candidate pool of table seed 0" in err[-1]
+
+
+# --- the harness cannot lie (issue 10): one test per hole ------------------------------
+
+
+def _cut(path: Path, row: int) -> str:
+    """Cut `runs.csv` in the middle of data row `row`; return the cut line."""
+    lines = path.read_text().splitlines()
+    cut = lines[row][: len(lines[row]) // 2]
+    path.write_text("\n".join([*lines[:row], cut]) + "\n")
+    return cut
+
+
+def test_hole1_a_damaged_runs_csv_is_refused_naming_the_row_and_set_aside_on_request(
+    quick_results, renders_dir, tmp_path, capsys
+):
+    r = tmp_path / "r"
+    shutil.copytree(quick_results, r)
+    before = (r / "table1.csv").read_bytes()
+    cut = _cut(r / "runs.csv", 30)
+    medium = ["--width", "320", "--height", "240", "--spp", "16", "--max-depth", "2"]
+    grid = ["run", "--scenes", "table,facade", "--seeds", "0", "--budget", "64", *medium]
+    for argv in (["plot"], grid):
+        assert main([*argv, "--results", str(r), "--renders", str(renders_dir)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert f"{r / 'runs.csv'} is damaged: row at line 31" in err[-1]
+    assert (r / "table1.csv").read_bytes() == before  # nothing published from it
+    run_benchmark(SMALL, r, renders_dir, set_aside=True)
+    assert cut in (r / "runs.damaged.csv").read_text()
+    runs = read_runs(r / "runs.csv")
+    assert len(runs) == ROWS and not runs.duplicated(list(KEY)).any()  # recomputed
+    # a column removed: refused in one line, no traceback
+    df = pd.read_csv(r / "runs.csv").drop(columns=["rmse", "status"])
+    df.to_csv(r / "runs.csv", index=False)
+    assert main(["plot", "--results", str(r), "--renders", str(renders_dir)]) == 2
+    assert "its header lacks status" in capsys.readouterr().err
+
+
+def test_hole3_repeated_list_items_run_once(capsys):
+    assert parse_list("--seeds", "0,1,0,1-2", int) == (0, 1, 2)
+    assert parse_list("--policies", "texture,texture", str) == ("texture",)
+    assert "--seeds repeats 0, 1; each runs once" in capsys.readouterr().err
+
+
+def test_hole5_runs_never_write_the_published_snapshot():
+    args = build_parser().parse_args(["run"])
+    assert args.results is None  # resolved to results/latest (results/quick with --quick)
+    for argv in (["plot"], ["publish"], ["gallery"]):
+        args = build_parser().parse_args(argv)
+        target = args.out if argv == ["gallery"] else args.results
+        assert PUBLISHED not in target.parents and target != PUBLISHED
+    assert LATEST != PUBLISHED and QUICK != PUBLISHED
+
+
+def test_hole5_publish_copies_a_checked_folder_and_removes_stale_files(quick_results, tmp_path):
+    snap = tmp_path / "published"
+    snap.mkdir()
+    (snap / "figure_budget.png").write_bytes(b"stale")  # quick_results has one budget
+    assert publish(quick_results, snap) >= 8
+    assert (snap / "table1.csv").read_bytes() == (quick_results / "table1.csv").read_bytes()
+    assert not (snap / "figure_budget.png").exists()
+
+
+def test_hole7_bad_input_leaves_no_lock_or_temporary_file(tmp_path, capsys):
+    renders = tmp_path / "renders"
+    assert main(["render", "table", "--seed", "-1", "--renders", str(renders)]) == 2
+    assert "seed must be a non-negative integer" in capsys.readouterr().err
+    assert not renders.exists() or not any(renders.iterdir())
+    results = tmp_path / "results"
+    assert main(["run", "--seeds", "-2", "--results", str(results)]) == 2
+    assert not results.exists()
+
+
+def test_hole8_a_rerun_that_does_nothing_keeps_the_manifest_timings(
+    quick_results, renders_dir, tmp_path
+):
+    shutil.copytree(quick_results, tmp_path / "r")
+    first = json.loads((tmp_path / "r" / "manifest.json").read_text())
+    run_benchmark(SMALL, tmp_path / "r", renders_dir)  # every row done
+    again = json.loads((tmp_path / "r" / "manifest.json").read_text())
+    assert again["seconds"] == first["seconds"] and again["seconds"]["total"] > 0
+    (inv,) = again["invocations"]
+    runs = pd.read_csv(tmp_path / "r" / "runs.csv")
+    assert inv["rows"] == inv["rows_now"] == ROWS and set(runs["invocation"]) == {inv["id"]}
+
+
+def test_hole9_figures_state_nothing_impossible(quick_results, tmp_path, renders_dir, monkeypatch):
+    runs = read_runs(quick_results / "runs.csv")
+    t1 = pd.read_csv(quick_results / "table1.csv")
+    for m in ("acc_completeness_pct", "accuracy_pct", "coverage_pct", "inlier_pct"):
+        assert (t1[f"{m}_lo"].dropna() >= 0).all() and (t1[f"{m}_hi"].dropna() <= 100).all()
+    drawn = {}
+    monkeypatch.setattr(figures, "save", lambda fig, out, fmts: drawn.__setitem__(out.name, fig))
+    (tmp_path / "figure2.png").write_bytes(b"an older figure")
+    budgeted = runs[runs["budget"] > 0]
+    write_report(pd.concat([runs, budgeted.assign(budget=128)]), tmp_path, renders_dir)
+    assert not (tmp_path / "figure2.png").exists()  # not drawable here: removed, not stale
+    ticks = [t.get_text() for t in drawn["figure_budget"].axes[0].get_xticklabels()]
+    assert ticks == ["64", "128"]
+    texts = [t.get_text() for ax in drawn["figure3"].axes for t in ax.texts]
+    assert "n/a" in texts  # the peers have no known-pose metrics: drawn as missing
+
+
+def test_hole10_written_files_respect_the_umask(tmp_path):
+    old = os.umask(0o022)
+    try:
+        entry = render.render_scene("table", 3, TINY, tmp_path)
+        cams, X = synthetic_rig()
+        export_model(
+            known_pose_model(
+                cams, [f"v{k}.png" for k in range(4)], [c.project(X)[0] for c in cams]
+            ),
+            tmp_path / "m",
+        )
+    finally:
+        os.umask(old)
+    for p in (entry, tmp_path / "m"):
+        assert stat.S_IMODE(p.stat().st_mode) == 0o755, p
+    assert stat.S_IMODE((entry / "meta.json").stat().st_mode) == 0o644

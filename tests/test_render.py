@@ -115,6 +115,14 @@ def test_damaged_entry_is_detected_and_rendered_again(tmp_path, counted, capsys)
     (entry / "meta.json").write_text("{not json")
     render.render_scene("table", 2, TINY, tmp_path)
     assert len(counted) == 24 and json.loads((entry / "meta.json").read_text())["seed"] == 2
+    # hole 6 of issue 10: a view overwritten with other bytes of the same size
+    png = entry / "view_01.png"
+    png.write_bytes(
+        np.random.default_rng(0).integers(0, 256, png.stat().st_size, np.uint8).tobytes()
+    )
+    render.render_scene("table", 2, TINY, tmp_path)
+    assert len(counted) == 30 and "view_01.png altered" in capsys.readouterr().err
+    assert cv2.imread(str(png)) is not None
 
 
 def test_interrupted_render_leaves_no_entry(tmp_path, monkeypatch):
@@ -130,6 +138,7 @@ def test_interrupted_render_leaves_no_entry(tmp_path, monkeypatch):
         render.render_scene("table", 5, TINY, tmp_path)
     assert [p.name for p in tmp_path.iterdir() if not p.name.startswith(".")] == []
     assert not list(tmp_path.glob(".tmp-*"))
+    assert not list(tmp_path.glob(".*.lock"))  # issue 10, hole 7: no lock file left behind
 
 
 def test_two_processes_rendering_one_entry(tmp_path):

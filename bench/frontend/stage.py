@@ -69,11 +69,13 @@ def front_end(entry: Path, det: DetectorConfig, sig: SignalConfig, cache_dir: Pa
     arrays = {f"{f}_{v}": getattr(c, f) for v, c in enumerate(pools) for f in _CAND}
     arrays |= {f"{s}_{v}": getattr(g, s) for v, g in enumerate(sigs) for s in SIGNALS}
     arrays |= {f"seconds_{k}": np.float64(s) for k, s in seconds.items()}
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
         np.savez(tmp, **arrays)
         tmp.replace(path)
     except OSError as e:
         raise BenchError(f"cannot write the front-end cache {path}: {e.strerror}") from e
+    finally:
+        tmp.unlink(missing_ok=True)
     return FrontEnd(views, pools, sigs, seconds, cached=False)

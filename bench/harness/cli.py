@@ -11,6 +11,7 @@ from functools import cache
 from pathlib import Path
 
 from bench import DISTRIBUTION, ROOT, BenchError, __version__
+from bench.console import log
 from bench.frontend.features import DETECTORS, DetectorConfig
 from bench.frontend.policies import PolicyConfig
 from bench.render.config import QUICK_RENDER, VARIANTS, RenderConfig
@@ -110,7 +111,11 @@ def parse_list(option: str, text: str, kind: type = str, example: str = "") -> t
             items += list(range(int(lo), int(hi) + 1)) if dash else [kind(x)]
     except ValueError:
         raise BenchError(f"{how}; {text!r} is not a list of {kind.__name__}") from None
-    return tuple(items)
+    unique = tuple(dict.fromkeys(items))
+    if len(unique) < len(items):
+        repeated = sorted({str(x) for x in items if items.count(x) > 1})
+        log(f"{option} repeats {', '.join(repeated)}; each runs once (a repeat is not a replicate)")
+    return unique
 
 
 def cmd_run(args: argparse.Namespace) -> None:
@@ -143,7 +148,10 @@ def cmd_run(args: argparse.Namespace) -> None:
         parse_list("--protocols", args.protocols, str, "multiview,twoview"),
         run,
     )
-    df = run_benchmark(cfg, args.results, args.renders, overwrite=args.overwrite)
+    results = args.results or (QUICK if args.quick else LATEST)
+    df = run_benchmark(
+        cfg, results, args.renders, overwrite=args.overwrite, set_aside=args.set_aside_damaged
+    )
     t = table1(headline_frame(with_oracle_share(df)))
     cols = ["strategy", "budget", "runs", "acc_completeness_pct", "completeness_vs_oracle_pct"]
     cols += [
@@ -158,16 +166,35 @@ def cmd_run(args: argparse.Namespace) -> None:
 
 
 def cmd_plot(args: argparse.Namespace) -> None:
-    from bench.harness.report import load_runs, write_report
+    from bench.harness.report import write_report
+    from bench.harness.runs import read_runs
 
-    write_report(load_runs(args.results / "runs.csv"), args.results, args.renders)
+    write_report(read_runs(args.results / "runs.csv"), args.results, args.renders)
     print(f"tables and figures rewritten in {args.results}")
 
 
-def _dir_arg(parser: argparse.ArgumentParser, name: str, what: str) -> None:
+def cmd_publish(args: argparse.Namespace) -> None:
+    from bench.harness.report import publish
+
+    print(f"published {publish(args.results, args.to)} files of {args.results} in {args.to}")
+
+
+LATEST, QUICK, PUBLISHED = Path("results/latest"), Path("results/quick"), Path("results/published")
+"""Default results folders, relative to the current directory. Runs never write to the
+published snapshot; only `bench publish` does."""
+
+
+def _renders_arg(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        f"--{name}", type=Path, default=ROOT / name, help=f"{what} (default: {name}/)"
+        "--renders",
+        type=Path,
+        default=ROOT / "renders",
+        help=f"render cache directory (default: {ROOT / 'renders'})",
     )
+
+
+def _results_arg(parser: argparse.ArgumentParser, default: Path | None, what: str) -> None:
+    parser.add_argument("--results", type=Path, default=default, help=what)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -193,7 +220,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument(
         "--force", action="store_true", help="render again even if a complete entry exists"
     )
-    _dir_arg(r, "renders", "render cache directory")
+    _renders_arg(r)
     r.set_defaults(func=cmd_render)
 
     from bench.backend.reconstruction import PROTOCOLS
@@ -270,8 +297,19 @@ def build_parser() -> argparse.ArgumentParser:
             **kind,
             help=f"{docs[f.name]} (default: {f.default}, or {quick} with --quick)",
         )
-    _dir_arg(u, "results", "results directory")
-    _dir_arg(u, "renders", "render cache directory")
+    _results_arg(
+        u,
+        None,
+        f"results folder (default: ./{LATEST}, or ./{QUICK} with --quick; runs never write "
+        f"the published snapshot ./{PUBLISHED}, see `bench publish`)",
+    )
+    _renders_arg(u)
+    u.add_argument(
+        "--set-aside-damaged",
+        action="store_true",
+        help="move damaged rows of RESULTS/runs.csv to runs.damaged.csv and compute them again "
+        "(without it, a damaged runs.csv is refused)",
+    )
     u.add_argument(
         "--overwrite",
         action="store_true",
@@ -286,9 +324,22 @@ def build_parser() -> argparse.ArgumentParser:
         "from RESULTS/runs.csv alone, and figure2.png from it plus the exported model and the "
         "cached render.",
     )
-    _dir_arg(pl, "results", "results directory")
-    _dir_arg(pl, "renders", "render cache directory")
+    _results_arg(pl, LATEST, f"results folder (default: ./{LATEST})")
+    _renders_arg(pl)
     pl.set_defaults(func=cmd_plot)
+
+    pb = sub.add_parser(
+        "publish",
+        help="copy a results folder's runs, tables and figures into the published snapshot",
+        description="Check RESULTS/runs.csv row by row, then copy it with config.json, "
+        "manifest.json, the tables and the figures into TO (the snapshot the repository "
+        "tracks), removing report files there that RESULTS does not have.",
+    )
+    _results_arg(pb, LATEST, f"results folder to publish (default: ./{LATEST})")
+    pb.add_argument(
+        "--to", type=Path, default=PUBLISHED, help=f"snapshot folder (default: ./{PUBLISHED})"
+    )
+    pb.set_defaults(func=cmd_publish)
 
     g = sub.add_parser(
         "gallery",
@@ -298,12 +349,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     g.add_argument("--seed", type=int, default=0, help="scene seed (default: %(default)s)")
     add_config_args(g, RenderConfig)
-    _dir_arg(g, "renders", "render cache directory")
+    _renders_arg(g)
     g.add_argument(
         "--out",
         type=Path,
-        default=ROOT / "results" / "scenes.png",
-        help="output image (default: results/scenes.png)",
+        default=LATEST / "scenes.png",
+        help=f"output image (default: ./{LATEST}/scenes.png; `bench publish` copies it)",
     )
     g.set_defaults(func=cmd_gallery)
     return p

@@ -132,8 +132,11 @@ def save(fig, out: Path, formats) -> None:
     for fmt in formats:
         path = out.with_suffix(f".{fmt}")
         tmp = path.with_name(f".{path.stem}.tmp.{fmt}")
-        fig.savefig(tmp, dpi=120)
-        tmp.replace(path)
+        try:
+            fig.savefig(tmp, dpi=120)
+            tmp.replace(path)
+        finally:
+            tmp.unlink(missing_ok=True)
     plt.close(fig)
 
 

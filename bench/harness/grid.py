@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import os
 import platform
-import shutil
 import subprocess
 import time
 from dataclasses import asdict, dataclass, field
@@ -31,7 +30,9 @@ from bench.files import write_text_atomic
 from bench.frontend.policies import check_policies
 from bench.frontend.stage import front_end
 from bench.harness.pipeline import ORACLE, TASKS, RunConfig, run_peer_unit, run_unit
-from bench.harness.report import KEY, write_report
+from bench.harness.report import write_report
+from bench.harness.runs import DAMAGED, claim_results_dir, read_runs, set_aside_damaged
+from bench.harness.tables import KEY
 from bench.render.entry import render_scene
 from bench.scenes.spec import load_spec, scene_names
 
@@ -90,44 +91,6 @@ class BenchConfig:
         return [(t, pr) for t in tasks for pr in self.protocols]
 
 
-def _claim_results_dir(results: Path, cfg: BenchConfig, overwrite: bool) -> None:
-    try:
-        results.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise BenchError(f"cannot write to {results}: {e.strerror}") from e
-    stored_path = results / "config.json"
-    if stored_path.exists() and not overwrite:
-        try:
-            stored = json.loads(stored_path.read_text())
-        except ValueError as e:
-            raise BenchError(
-                f"{stored_path} is unreadable ({e}); use --overwrite to start again"
-            ) from e
-        if stored != cfg.as_dict():
-            differ = sorted(
-                k for k in set(stored) | set(cfg.as_dict()) if stored.get(k) != cfg.as_dict().get(k)
-            )
-            raise BenchError(
-                f"{results} holds results of another configuration (differs in: {', '.join(differ)}); "
-                "use --overwrite to replace them, or --results DIR"
-            )
-    if overwrite:
-        for name in ("runs.csv", "models"):
-            p = results / name
-            shutil.rmtree(p) if p.is_dir() else p.unlink(missing_ok=True)
-    write_text_atomic(stored_path, json.dumps(cfg.as_dict(), indent=1))
-
-
-def read_finished(runs_csv: Path, config_hash: str) -> pd.DataFrame:
-    if not runs_csv.exists():
-        return pd.DataFrame()
-    try:
-        df = pd.read_csv(runs_csv)
-    except (ValueError, pd.errors.ParserError) as e:
-        raise BenchError(f"{runs_csv} is malformed ({e}); use --overwrite to start again") from e
-    return df[df["config_hash"] == config_hash] if "config_hash" in df else pd.DataFrame()
-
-
 def check_budgets(budgets, fe, scene: str, seed: int) -> None:
     """A budget above every view's pool would make every policy select the whole pool, so
     the run would compare nothing: refuse it. A budget above some pools only takes those
@@ -143,18 +106,36 @@ def check_budgets(budgets, fe, scene: str, seed: int) -> None:
 
 
 def run_benchmark(
-    cfg: BenchConfig, results: Path, renders: Path, overwrite: bool = False
+    cfg: BenchConfig,
+    results: Path,
+    renders: Path,
+    overwrite: bool = False,
+    set_aside: bool = False,
 ) -> pd.DataFrame:
-    """Run whatever of the grid is missing from `results/runs.csv`, then write the report."""
+    """Run whatever of the grid is missing from `results/runs.csv`, then write the report
+    (see `bench.harness.runs` for what counts as finished, damaged or refused)."""
     cfg.validate()
     results, renders = Path(results), Path(renders)
     t_start = time.perf_counter()
-    commit = _git_commit()  # before this run rewrites any tracked result file
-    _claim_results_dir(results, cfg, overwrite)
+    invocation = {
+        "id": time.strftime("%Y%m%dT%H%M%S") + f"-{os.getpid()}",
+        "git_commit": _git_commit(),  # before this run rewrites any tracked result file
+    }
+    claim_results_dir(results, cfg.run.as_dict(), overwrite)
     runs_csv = results / "runs.csv"
-    df = read_finished(runs_csv, cfg.run.hash)
-    done = set(map(tuple, df[list(KEY)].itertuples(index=False))) if len(df) else set()
-    rows = df.to_dict("records") if len(df) else []
+    if set_aside and runs_csv.exists():
+        log(f"{set_aside_damaged(runs_csv)} damaged row(s) of {runs_csv} set aside in {DAMAGED}")
+    df = (
+        read_runs(runs_csv)
+        if runs_csv.exists()
+        else pd.DataFrame(columns=list(KEY) + ["config_hash"])
+    )
+    stale = df["config_hash"] != cfg.run.hash
+    if stale.any():
+        log(f"{int(stale.sum())} row(s) were computed by other code; computing them again")
+    df = df[~stale]
+    done = set(map(tuple, df[list(KEY)].itertuples(index=False)))
+    rows = df.to_dict("records")
     todo = {}
     for unit in cfg.units():
         missing = [j for j in cfg.jobs(unit[2]) if (*unit, *j) not in done]
@@ -206,26 +187,20 @@ def run_benchmark(
                 for r in new:
                     stage_s["task"] += r["task_ms"] / 1000
                     stage_s["evaluate"] += r["evaluate_ms"] / 1000
-                rows += new
+                rows += [r | {"invocation": invocation["id"]} for r in new]
                 write_text_atomic(runs_csv, pd.DataFrame(rows).to_csv(index=False))
                 bar.set_postfix_str(f"{sc} s{sd} {policy} b{budget}: {new[0]['points']} points")
                 bar.update()
             del truth
     t = time.perf_counter()
-    out = pd.read_csv(runs_csv)
+    out = read_runs(runs_csv)
     write_report(out, results, renders)
     stage_s["report"] = time.perf_counter() - t
-    total = time.perf_counter() - t_start
-    write_manifest(
-        results,
-        cfg,
-        commit,
-        [renders / k for k in out["render_key"].unique()],
-        stage_s,
-        total,
-        n_rows,
+    invocation |= {"rows": n_rows, "seconds": {"total": time.perf_counter() - t_start, **stage_s}}
+    write_manifest(results, cfg, invocation, out, renders)
+    log(
+        f"{n_rows} rows done, {len(done)} reused, in {invocation['seconds']['total']:.0f} s; results in {results}"
     )
-    log(f"{n_rows} rows done, {len(done)} reused, in {total:.0f} s; results in {results}")
     return out
 
 
@@ -247,19 +222,30 @@ def _git_commit() -> str:
 
 
 def write_manifest(
-    results: Path,
-    cfg: BenchConfig,
-    commit: str,
-    entries: list[Path],
-    stage_s: dict,
-    total: float,
-    n_runs: int,
+    results: Path, cfg: BenchConfig, invocation: dict, rows: pd.DataFrame, renders: Path
 ) -> None:
-    """Versions, variant, host, configuration, seeds, commit and seconds of this invocation."""
+    """Versions, variant, host, settings and the invocations that computed the rows of
+    `runs.csv`: each with its commit and seconds per stage, kept while it owns a row (a rerun
+    that computes nothing adds nothing), and their sum."""
+    path = results / "manifest.json"
+    try:
+        earlier = json.loads(path.read_text()).get("invocations", [])
+    except (OSError, ValueError, AttributeError):
+        earlier = []
+    live = set(rows["invocation"])
+    kept = [i for i in earlier if isinstance(i, dict) and i.get("id") in live]
+    if invocation["rows"]:
+        kept.append(invocation)
+    for inv in kept:
+        inv["rows_now"] = int((rows["invocation"] == inv["id"]).sum())
+    total: dict[str, float] = {}
+    for inv in kept:
+        for k, v in inv["seconds"].items():
+            total[k] = total.get(k, 0.0) + v
+    entries = [renders / k for k in rows["render_key"].unique()]
     metas = [
         json.loads((e / "meta.json").read_text()) for e in entries if (e / "meta.json").is_file()
     ]
-    variants = sorted({m["variant"] for m in metas})
     packages = [
         "mitsuba",
         "drjit",
@@ -272,15 +258,14 @@ def write_manifest(
     ]
     manifest = {
         "versions": {"python": platform.python_version(), **{p: version(p) for p in packages}},
-        "variant": variants,
+        "variant": sorted({m["variant"] for m in metas}),
         "host": {"node": platform.node(), "platform": platform.platform(), "cpus": os.cpu_count()},
-        "config": cfg.as_dict(),
+        "settings": cfg.run.as_dict(),
         "config_hash": cfg.run.hash,
-        "seeds": list(cfg.seeds),
-        "policies": list(cfg.policies),
-        "git_commit": commit,
-        "runs_this_invocation": n_runs,
-        "seconds": {"total": total, **stage_s},
+        "grid": {k: sorted(map(str, rows[k].unique())) for k in KEY},
+        "git_commit": sorted({inv["git_commit"] for inv in kept}),
+        "invocations": kept,
+        "seconds": total,
         "render_entries": sorted(e.name for e in entries),
     }
-    write_text_atomic(results / "manifest.json", json.dumps(manifest, indent=1))
+    write_text_atomic(path, json.dumps(manifest, indent=1))

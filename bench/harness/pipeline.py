@@ -12,14 +12,16 @@ from __future__ import annotations
 import json
 import math
 import shutil
-import tempfile
+import sys
 import time
 import zlib
 from dataclasses import asdict, dataclass, field
+from functools import cache
 from pathlib import Path
 
 import numpy as np
 
+from bench.backend import matching, peers, reconstruction
 from bench.backend.matching import BackendConfig, match_and_verify
 from bench.backend.peers import PEERS, run_peer
 from bench.backend.reconstruction import (
@@ -29,10 +31,12 @@ from bench.backend.reconstruction import (
     known_pose_task,
     mapping_task,
 )
+from bench.evaluation import groundtruth, metrics, oracle, poses
 from bench.evaluation.metrics import SceneTruth, coverage_pct, evaluate_known_pose, match_metrics
 from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.evaluation.poses import evaluate_mapping
-from bench.files import content_key
+from bench.files import content_key, source_hash, temp_dir_beside
+from bench.frontend import features, policies, signals, stage
 from bench.frontend.features import DetectorConfig
 from bench.frontend.policies import SIGNALS_USED, PolicyConfig, PolicyInput, select
 from bench.frontend.signals import SignalConfig
@@ -48,9 +52,30 @@ REFERENCES = ("all", ORACLE, *PEERS)
 """Rows that are references or peers, not contenders (never a "best baseline")."""
 
 
+@cache
+def code_hash() -> str:
+    """Hash of the source of every stage that produces a row's numbers after the render
+    (whose code is in the render key): front end, back end, evaluation and this module."""
+    return source_hash(
+        features,
+        signals,
+        policies,
+        stage,
+        matching,
+        reconstruction,
+        peers,
+        groundtruth,
+        metrics,
+        oracle,
+        poses,
+        sys.modules[__name__],
+    )
+
+
 @dataclass(frozen=True)
 class RunConfig:
-    """Everything that decides a run's metrics (its hash is stored in every row)."""
+    """The settings that decide a run's metrics; its hash, with the code's, is stored in
+    every row (`config_hash`)."""
 
     render: RenderConfig = field(default_factory=RenderConfig)
     detector: DetectorConfig = field(default_factory=DetectorConfig)
@@ -63,7 +88,7 @@ class RunConfig:
 
     @property
     def hash(self) -> str:
-        return content_key(self.as_dict())
+        return content_key({"settings": self.as_dict(), "code": code_hash()})
 
 
 def policy_rng(seed: int, policy: str, budget: int, view: int) -> np.random.Generator:
@@ -96,7 +121,7 @@ def select_features(
 def export_model(model, out: Path) -> None:
     """COLMAP text model + points.ply, written to a temporary directory then renamed."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".tmp-{out.name}-", dir=out.parent))
+    tmp = temp_dir_beside(out)
     try:
         model.write_text(str(tmp))
         model.export_PLY(str(tmp / "points.ply"))
@@ -166,15 +191,15 @@ def run_unit(
             _export_or_clear(rec.model, out)
         t = time.perf_counter()
         if task == "tri":
-            metrics = evaluate_known_pose(truth, rec.model, PROTOCOLS[protocol])
+            scores = evaluate_known_pose(truth, rec.model, PROTOCOLS[protocol])
         else:
-            metrics = evaluate_mapping(truth, rec.model, _view_of_name(len(cams)))
+            scores = evaluate_mapping(truth, rec.model, _view_of_name(len(cams)))
         timing = seconds | {
             "task": rec.seconds,
             "evaluate": shared_eval_s + time.perf_counter() - t,
         }
         ident = (entry, scene, seed, policy, budget, task, protocol, cfg)
-        rows.append(_row(ident, shared | metrics, timing, rec.failure))
+        rows.append(_row(ident, shared | scores, timing, rec.failure))
     return rows
 
 
@@ -206,10 +231,10 @@ def run_peer_unit(
         rec = run.recs[protocol]
         _export_or_clear(rec.model, model_dir(results, scene, seed, peer, budget, task, protocol))
         t = time.perf_counter()
-        metrics = evaluate_mapping(truth, rec.model, _view_of_name(len(names)))
+        scores = evaluate_mapping(truth, rec.model, _view_of_name(len(names)))
         timing = run.seconds | {"task": rec.seconds, "evaluate": time.perf_counter() - t}
         ident = (entry, scene, seed, peer, budget, task, protocol, cfg)
-        rows.append(_row(ident, shared | metrics, timing, rec.failure))
+        rows.append(_row(ident, shared | scores, timing, rec.failure))
     return rows
 
 

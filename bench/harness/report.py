@@ -9,34 +9,16 @@ A figure that cannot be drawn from these rows is removed, never left stale.
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import pandas as pd
 
-from bench import BenchError
 from bench.console import log
 from bench.files import write_text_atomic
 from bench.harness.figures import figure2, figure3, figure_budget
-from bench.harness.tables import KEY, headline_frame, paired, table1, table2, with_oracle_share
-
-REQUIRED = (*KEY, "render_key", "status", "acc_completeness_pct", "rmse")
-
-
-def load_runs(path: Path) -> pd.DataFrame:
-    """Read and check `runs.csv`; a missing or malformed file is a one-line `BenchError`."""
-    path = Path(path)
-    if not path.is_file():
-        raise BenchError(f"{path} not found: run `bench run` first (or pass --results DIR)")
-    try:
-        df = pd.read_csv(path)
-    except (ValueError, pd.errors.ParserError, UnicodeDecodeError) as e:
-        raise BenchError(f"{path} is malformed: {str(e).splitlines()[0]}") from e
-    missing = [c for c in REQUIRED if c not in df.columns]
-    if missing:
-        raise BenchError(f"{path} is malformed: missing columns {', '.join(missing)}")
-    if df.empty:
-        raise BenchError(f"{path} holds no runs")
-    return df
+from bench.harness.runs import read_runs
+from bench.harness.tables import headline_frame, paired, table1, table2, with_oracle_share
 
 
 def _drop(*paths: Path) -> None:
@@ -74,3 +56,30 @@ def write_report(df: pd.DataFrame, results: Path, renders: Path) -> None:
     if why:
         _drop(results / "figure2.png")
         log(f"figure2.png not drawn (and any older one removed): {why}")
+
+
+PUBLISHED_FILES = ("runs.csv", "config.json", "manifest.json", "scenes.png")
+REPORT_FILES = ("table1.csv", "table1_twoview.csv", "table2.csv", "paired.csv")
+FIGURES = ("figure2.png", "figure3.png", "figure3.pdf", "figure_budget.png")
+
+
+def publish(results: Path, to: Path) -> int:
+    """Copy a results folder's rows, settings, manifest, tables and figures into the
+    snapshot `to`, after checking every row; report files `results` lacks are removed
+    from `to`, so the snapshot never mixes runs. How many files were copied."""
+    read_runs(Path(results) / "runs.csv")  # a damaged file is refused, nothing is copied
+    to.mkdir(parents=True, exist_ok=True)
+    copied = 0
+    for name in (*PUBLISHED_FILES, *REPORT_FILES, *FIGURES):
+        src, dst = Path(results) / name, to / name
+        if src.is_file():
+            tmp = dst.with_name(f".{name}.tmp")
+            try:
+                shutil.copyfile(src, tmp)
+                tmp.replace(dst)
+            finally:
+                tmp.unlink(missing_ok=True)
+            copied += 1
+        elif name != "scenes.png":
+            dst.unlink(missing_ok=True)
+    return copied

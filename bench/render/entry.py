@@ -4,6 +4,7 @@ ground truth, the rig), rendered through `bench.render.mitsuba` only when missin
 
 from __future__ import annotations
 
+import json
 import time
 from importlib.metadata import version
 from pathlib import Path
@@ -11,7 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from bench import camera, files
+from bench import BenchError, camera, files
 from bench.camera import write_colmap_rig
 from bench.console import log
 from bench.render import mitsuba
@@ -54,8 +55,11 @@ _announced: set[str] = set()
 def render_scene(
     name: str, seed: int, cfg: RenderConfig, renders_dir: Path, force: bool = False
 ) -> Path:
-    """The cache entry of (scene, seed, settings), rendered only if missing or damaged."""
+    """The cache entry of (scene, seed, settings), rendered only if missing or damaged
+    (every file's size and checksum are verified on a hit)."""
     cfg.validate()
+    if not isinstance(seed, int) or seed < 0:
+        raise BenchError(f"seed must be a non-negative integer, got {seed!r}")
     spec = load_spec(name)
     renders_dir = Path(renders_dir)
     variant, why = resolve_variant(cfg.variant, renders_dir)
@@ -66,6 +70,9 @@ def render_scene(
     with files.locked(entry):
         problem = files.entry_problem(entry) if entry.exists() else None
         if entry.exists() and problem is None and not force:
+            if files.lacks_checksums(entry):  # written before checksums were recorded
+                meta = json.loads((entry / "meta.json").read_text())
+                files.write_meta(entry, {k: v for k, v in meta.items() if k != "files"})
             return entry
         if problem:
             log(f"damaged cache entry {entry.name} ({problem}); rendering it again")

@@ -24,6 +24,9 @@ def write_gallery(entries: dict[str, Path], out: Path, thumb_width: int = 320) -
         rows.append(np.concatenate(thumbs, 1))
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.name}.tmp.png")
-    cv2.imwrite(str(tmp), np.concatenate(rows, 0))
-    tmp.replace(out)
+    try:
+        cv2.imwrite(str(tmp), np.concatenate(rows, 0))
+        tmp.replace(out)
+    finally:
+        tmp.unlink(missing_ok=True)
     return out
