@@ -20,7 +20,7 @@ from bench.backend.reconstruction import known_pose_model
 from bench.evaluation.groundtruth import load_ground_truth
 from bench.evaluation.metrics import SceneTruth
 from bench.frontend.stage import front_end
-from bench.harness import figures, pipeline
+from bench.harness import execute, figures, pipeline
 from bench.harness import grid as harness
 from bench.harness.cli import LATEST, PUBLISHED, QUICK, build_parser, main, parse_list
 from bench.harness.grid import BenchConfig, run_benchmark
@@ -224,7 +224,7 @@ def test_same_command_gives_identical_metrics(quick_results, renders_dir, tmp_pa
 
 def test_interrupted_run_resumes_without_redoing_rows(renders_dir, tmp_path, monkeypatch):
     calls = []
-    real = harness.run_unit
+    real = execute.run_unit
 
     def interrupt_after_three(*args, **kwargs):
         if len(calls) == 3:
@@ -232,12 +232,12 @@ def test_interrupted_run_resumes_without_redoing_rows(renders_dir, tmp_path, mon
         calls.append(args[4:7])
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(harness, "run_unit", interrupt_after_three)
+    monkeypatch.setattr(execute, "run_unit", interrupt_after_three)
     with pytest.raises(KeyboardInterrupt):
         run_benchmark(SMALL, tmp_path, renders_dir)
     assert len(pd.read_csv(tmp_path / "runs.csv")) == 3 * 4  # tasks x protocols
     calls.clear()
-    monkeypatch.setattr(harness, "run_unit", lambda *a, **k: calls.append(a[4:7]) or real(*a, **k))
+    monkeypatch.setattr(execute, "run_unit", lambda *a, **k: calls.append(a[4:7]) or real(*a, **k))
     run_benchmark(SMALL, tmp_path, renders_dir)
     assert len(calls) == 2 * 6 - 3  # the peers do not go through run_unit
     runs = pd.read_csv(tmp_path / "runs.csv")
@@ -256,8 +256,8 @@ def test_growing_a_results_folder_runs_only_the_new_rows(
     is refused, naming the setting."""
     shutil.copytree(quick_results, tmp_path / "r")
     calls = []
-    real = harness.run_unit
-    monkeypatch.setattr(harness, "run_unit", lambda *a, **k: calls.append(a[5:7]) or real(*a, **k))
+    real = execute.run_unit
+    monkeypatch.setattr(execute, "run_unit", lambda *a, **k: calls.append(a[5:7]) or real(*a, **k))
     grown = dataclasses.replace(SMALL, scenes=("table",), budgets=(64, 32))
     run_benchmark(grown, tmp_path / "r", renders_dir)
     assert sorted(set(calls)) == [(p, 32) for p in sorted(POLICIES[:5])]
@@ -276,8 +276,8 @@ def test_rows_computed_by_other_code_are_computed_again(
     shutil.copytree(quick_results, tmp_path / "r")
     monkeypatch.setattr(pipeline, "code_hash", lambda: "another-code")
     calls = []
-    real = harness.run_unit
-    monkeypatch.setattr(harness, "run_unit", lambda *a, **k: calls.append(a[5:7]) or real(*a, **k))
+    real = execute.run_unit
+    monkeypatch.setattr(execute, "run_unit", lambda *a, **k: calls.append(a[5:7]) or real(*a, **k))
     run_benchmark(dataclasses.replace(SMALL, scenes=("table",)), tmp_path / "r", renders_dir)
     assert len(calls) == 6  # every selection unit of the table scene, again
     runs = pd.read_csv(tmp_path / "r" / "runs.csv")
@@ -368,7 +368,18 @@ def test_bootstrap_interval_stays_within_the_metric_range():
 
 def test_a_budget_above_every_pool_is_refused_in_one_line(tmp_path, capsys):
     tiny = ["--width", "64", "--height", "48", "--spp", "2", "--max-depth", "2"]
-    argv = ["run", "--scenes", "table", "--seeds", "0", "--budget", "100000", *tiny]
+    argv = [
+        "run",
+        "--scenes",
+        "table",
+        "--seeds",
+        "0",
+        "--budget",
+        "100000",
+        "--workers",
+        "1",
+        *tiny,
+    ]
     assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert "budget 100000 exceeds every candidate pool of table seed 0" in err[-1]
@@ -491,3 +502,45 @@ def test_hole10_written_files_respect_the_umask(tmp_path):
     for p in (entry, tmp_path / "m"):
         assert stat.S_IMODE(p.stat().st_mode) == 0o755, p
     assert stat.S_IMODE((entry / "meta.json").stat().st_mode) == 0o644
+
+
+# --- execution on Dask (issue 14) --------------------------------------------------------
+
+PARALLEL = dataclasses.replace(
+    SMALL, scenes=("table",), policies=("texture", "adaptive", "oracle", "colmap-b")
+)
+
+
+def test_two_dask_workers_give_the_same_metrics_as_one_process(renders_dir, tmp_path):
+    one = run_benchmark(PARALLEL, tmp_path / "one", renders_dir, workers=1)
+    two = run_benchmark(PARALLEL, tmp_path / "two", renders_dir, workers=2)
+    metrics = [c for c in one.columns if c not in TIMING]
+    pd.testing.assert_frame_equal(
+        one[metrics].sort_values(list(KEY), ignore_index=True),
+        two[metrics].sort_values(list(KEY), ignore_index=True),
+    )
+
+
+def test_a_unit_failing_on_a_worker_is_retried_once_then_recorded(
+    renders_dir, tmp_path, monkeypatch
+):
+    from distributed import LocalCluster
+
+    calls = []
+    real = execute.run_unit
+
+    def flaky(*a, **k):
+        calls.append(a[5])
+        if a[5] == "texture":
+            raise RuntimeError("worker lost")
+        return real(*a, **k)
+
+    monkeypatch.setattr(execute, "run_unit", flaky)
+    with LocalCluster(n_workers=1, processes=False, dashboard_address=None) as cluster:
+        run_benchmark(PARALLEL, tmp_path, renders_dir, scheduler=cluster.scheduler_address)
+    assert calls.count("texture") == 2  # tried, then retried once
+    runs = read_runs(tmp_path / "runs.csv")
+    failed = runs[runs["policy"] == "texture"]
+    assert len(failed) == 4 and (failed["status"] == "failed").all()
+    assert failed["failure"].str.contains("retried once: RuntimeError: worker lost").all()
+    assert (runs.loc[runs["policy"] != "texture", "status"] == "ok").any()

@@ -119,6 +119,7 @@ def parse_list(option: str, text: str, kind: type = str, example: str = "") -> t
 
 
 def cmd_run(args: argparse.Namespace) -> None:
+    from bench.harness.execute import default_workers
     from bench.harness.grid import BenchConfig, run_benchmark
     from bench.harness.pipeline import RunConfig
     from bench.harness.tables import headline_frame, table1, with_oracle_share
@@ -149,8 +150,17 @@ def cmd_run(args: argparse.Namespace) -> None:
         run,
     )
     results = args.results or (QUICK if args.quick else LATEST)
+    if args.workers is not None and args.workers < 1:
+        raise BenchError(f"--workers must be at least 1, got {args.workers}")
+    workers = args.workers or default_workers()
     df = run_benchmark(
-        cfg, results, args.renders, overwrite=args.overwrite, set_aside=args.set_aside_damaged
+        cfg,
+        results,
+        args.renders,
+        overwrite=args.overwrite,
+        set_aside=args.set_aside_damaged,
+        workers=workers,
+        scheduler=args.scheduler,
     )
     t = table1(headline_frame(with_oracle_share(df)))
     cols = ["strategy", "budget", "runs", "acc_completeness_pct", "completeness_vs_oracle_pct"]
@@ -304,6 +314,20 @@ def build_parser() -> argparse.ArgumentParser:
         f"the published snapshot ./{PUBLISHED}, see `bench publish`)",
     )
     _renders_arg(u)
+    u.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="Dask workers of a local cluster, one single-threaded process each (default: the "
+        "machine's cores); 1 runs everything in this process, with no cluster",
+    )
+    u.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="submit the units to an existing Dask cluster (e.g. tcp://host:8786) instead; "
+        "its workers must see the same renders/ and results folder",
+    )
     u.add_argument(
         "--set-aside-damaged",
         action="store_true",

@@ -18,18 +18,17 @@ from dataclasses import asdict, dataclass, field
 from importlib.metadata import version
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from bench import ROOT, BenchError
 from bench.backend.peers import PEERS
 from bench.backend.reconstruction import PROTOCOLS, check_protocols
 from bench.console import log, progress
-from bench.evaluation.groundtruth import load_ground_truth
-from bench.evaluation.metrics import SceneTruth
 from bench.files import write_text_atomic
 from bench.frontend.policies import check_policies
-from bench.frontend.stage import front_end
-from bench.harness.pipeline import ORACLE, TASKS, RunConfig, run_peer_unit, run_unit
+from bench.harness.execute import execute
+from bench.harness.pipeline import ORACLE, TASKS, RunConfig
 from bench.harness.report import write_report
 from bench.harness.runs import DAMAGED, claim_results_dir, read_runs, set_aside_damaged
 from bench.harness.tables import KEY
@@ -91,26 +90,14 @@ class BenchConfig:
         return [(t, pr) for t in tasks for pr in self.protocols]
 
 
-def check_budgets(budgets, fe, scene: str, seed: int) -> None:
-    """A budget above every view's pool would make every policy select the whole pool, so
-    the run would compare nothing: refuse it. A budget above some pools only takes those
-    pools whole (every policy selects min(B, N) per view)."""
-    largest = max(len(p) for p in fe.pools)
-    too_big = [b for b in budgets if b > largest]
-    if too_big:
-        raise BenchError(
-            f"budget {too_big[0]} exceeds every candidate pool of {scene} seed {seed} "
-            f"(the largest has {largest}); every policy would select the whole pool. "
-            f"Use budgets up to {largest}"
-        )
-
-
 def run_benchmark(
     cfg: BenchConfig,
     results: Path,
     renders: Path,
     overwrite: bool = False,
     set_aside: bool = False,
+    workers: int = 1,
+    scheduler: str | None = None,
 ) -> pd.DataFrame:
     """Run whatever of the grid is missing from `results/runs.csv`, then write the report
     (see `bench.harness.runs` for what counts as finished, damaged or refused)."""
@@ -143,12 +130,12 @@ def run_benchmark(
             todo[unit] = missing
     n_rows = sum(len(j) for j in todo.values())
     stage_s = dict.fromkeys(
-        ["render", "frontend", "truth", "select", "match", "verify", "task", "evaluate"], 0.0
+        ["render", "frontend", "select", "match", "verify", "task", "evaluate"], 0.0
     )
     log(f"{len(done)} of {len(done) + n_rows} rows already in {runs_csv}; {n_rows} to do")
 
     pending = sorted({u[:2] for u in todo}, key=lambda g: (cfg.scenes.index(g[0]), g[1]))
-    entries, fronts = {}, {}
+    entries = {}
     with progress("render", len(pending)) as bar:
         for sc, sd in pending:
             t = time.perf_counter()
@@ -156,42 +143,29 @@ def run_benchmark(
             stage_s["render"] += time.perf_counter() - t
             bar.set_postfix_str(f"{sc} seed {sd}")
             bar.update()
-    with progress("frontend", len(pending)) as bar:
-        for sc, sd in pending:
-            t = time.perf_counter()
-            fronts[sc, sd] = front_end(
-                entries[sc, sd], cfg.run.detector, cfg.run.signals, renders / "frontend"
-            )
-            stage_s["frontend"] += time.perf_counter() - t
-            check_budgets(cfg.budgets, fronts[sc, sd], sc, sd)
-            bar.set_postfix_str(f"{sc} seed {sd}")
+    t_runs = time.perf_counter()
+    with progress("frontend", len(pending)) as fbar, progress("runs", len(todo)) as bar:
+
+        def scene_ready(group, info):
+            stage_s["frontend"] += info["seconds"]
+            fbar.set_postfix_str(f"{group[0]} seed {group[1]}")
+            fbar.update()
+
+        for new in execute(
+            entries, todo, cfg.run, cfg.budgets, results, renders, workers, scheduler, scene_ready
+        ):
+            for k in ("select", "match", "verify"):
+                stage_s[k] += np.nan_to_num(new[0].get(f"{k}_ms", 0.0)) / 1000
+            for r in new:
+                stage_s["task"] += np.nan_to_num(r.get("task_ms", 0.0)) / 1000
+                stage_s["evaluate"] += np.nan_to_num(r.get("evaluate_ms", 0.0)) / 1000
+            rows += [r | {"invocation": invocation["id"]} for r in new]
+            table = pd.DataFrame(rows).sort_values(list(KEY), kind="stable")
+            write_text_atomic(runs_csv, table.to_csv(index=False))
+            r = new[0]
+            bar.set_postfix_str(f"{r['scene']} s{r['seed']} {r['policy']} b{r['budget']}")
             bar.update()
-    with progress("runs", len(todo)) as bar:
-        for sc, sd in pending:
-            fe = fronts.pop((sc, sd))
-            t = time.perf_counter()
-            truth = SceneTruth.build(
-                [v.camera for v in fe.views], load_ground_truth(entries[sc, sd]), fe.pools
-            )
-            stage_s["truth"] += time.perf_counter() - t
-            for (_, _, policy, budget), jobs in (
-                (u, j) for u, j in todo.items() if u[:2] == (sc, sd)
-            ):
-                unit = (entries[sc, sd], fe, truth, sc, sd, policy, budget)
-                if policy in PEERS:
-                    new = run_peer_unit(*unit, jobs, cfg.run, results)
-                else:
-                    new = run_unit(*unit, jobs, cfg.run, results)
-                for k in ("select", "match", "verify"):
-                    stage_s[k] += new[0].get(f"{k}_ms", 0.0) / 1000
-                for r in new:
-                    stage_s["task"] += r["task_ms"] / 1000
-                    stage_s["evaluate"] += r["evaluate_ms"] / 1000
-                rows += [r | {"invocation": invocation["id"]} for r in new]
-                write_text_atomic(runs_csv, pd.DataFrame(rows).to_csv(index=False))
-                bar.set_postfix_str(f"{sc} s{sd} {policy} b{budget}: {new[0]['points']} points")
-                bar.update()
-            del truth
+    stage_s["runs_wall"] = time.perf_counter() - t_runs
     t = time.perf_counter()
     out = read_runs(runs_csv)
     write_report(out, results, renders)

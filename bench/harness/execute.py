@@ -1,0 +1,179 @@
+"""Executing the units of the grid: in this process (`--workers 1`) or on Dask (a local
+cluster of N single-threaded worker processes, or an existing cluster by address).
+
+Units of work, with their dependencies: the front end of each (scene, seed), after its
+render; then each (scene, seed, policy, budget) unit, which waits for its scene's front
+end. Renders stay in the main process, so one process renders per machine (Mitsuba's LLVM
+and CUDA variants use every core, or the GPU, on their own). A worker holds one scene's
+front end and ground truth at a time (`_scene`). Rows come back to the main process,
+which alone writes `runs.csv`. A unit whose worker dies is retried once, then recorded as
+failed rows with the reason; a `BenchError` (bad input) stops the run as it does in
+process. With a cluster given by address, the workers must see the same `renders/` and
+results folder (a shared file system).
+
+Every unit computes the same numbers wherever it runs: its inputs are files and
+settings, its generators are seeded per unit, and COLMAP runs single-threaded and seeded.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+from bench import BenchError
+from bench.backend.peers import PEERS
+from bench.evaluation.groundtruth import load_ground_truth
+from bench.evaluation.metrics import SceneTruth
+from bench.frontend.stage import front_end
+from bench.harness.pipeline import RunConfig, run_peer_unit, run_unit
+
+_HELD: dict = {}
+"""The one scene (front end and ground truth) this process holds."""
+
+
+def _scene(entry: Path, cfg: RunConfig, renders: Path):
+    key = (str(entry), cfg.hash)
+    if _HELD.get("key") != key:
+        _HELD.clear()  # let the previous scene go before loading the next
+        fe = front_end(entry, cfg.detector, cfg.signals, renders / "frontend")
+        truth = SceneTruth.build([v.camera for v in fe.views], load_ground_truth(entry), fe.pools)
+        _HELD.update(key=key, fe=fe, truth=truth)
+    return _HELD["fe"], _HELD["truth"]
+
+
+def scene_task(entry: Path, cfg: RunConfig, renders: Path, budgets) -> dict:
+    """The front end of one render entry (computed or read from its cache), checked
+    against the budgets; returns its seconds and pool sizes."""
+    t = time.perf_counter()
+    fe = front_end(entry, cfg.detector, cfg.signals, renders / "frontend")
+    largest = max(len(p) for p in fe.pools)
+    too_big = [b for b in budgets if b > largest]
+    if too_big:
+        scene, seed = Path(entry).name.split("-s")[0], Path(entry).name.split("-s")[1].split("-")[0]
+        raise BenchError(
+            f"budget {too_big[0]} exceeds every candidate pool of {scene} seed {seed} "
+            f"(the largest has {largest}); every policy would select the whole pool. "
+            f"Use budgets up to {largest}"
+        )
+    return {"seconds": time.perf_counter() - t, "largest_pool": largest}
+
+
+def unit_task(
+    entry: Path, unit: tuple, jobs: list, cfg: RunConfig, results: Path, renders: Path, *_after
+) -> list[dict]:
+    """The rows of one (scene, seed, policy, budget) unit (`_after`: what it waits for)."""
+    scene, seed, policy, budget = unit
+    fe, truth = _scene(entry, cfg, renders)
+    args = (entry, fe, truth, scene, seed, policy, budget, jobs, cfg, results)
+    return run_peer_unit(*args) if policy in PEERS else run_unit(*args)
+
+
+def failed_rows(entry: Path, unit: tuple, jobs: list, cfg: RunConfig, why: str) -> list[dict]:
+    """Rows recording a unit that could not be computed."""
+    scene, seed, policy, budget = unit
+    return [
+        {
+            "scene": scene,
+            "seed": seed,
+            "policy": policy,
+            "budget": budget,
+            "task": task,
+            "protocol": protocol,
+            "render_key": Path(entry).name,
+            "config_hash": cfg.hash,
+            "wall_ms": math.nan,
+            "status": "failed",
+            "failure": why,
+        }
+        for task, protocol in jobs
+    ]
+
+
+def execute(
+    scenes: dict[tuple, Path],
+    units: dict[tuple, list],
+    cfg: RunConfig,
+    budgets,
+    results: Path,
+    renders: Path,
+    workers: int,
+    scheduler: str | None,
+    on_scene,
+) -> Iterator[list[dict]]:
+    """Yield the rows of each unit as it finishes. `scenes`: render entry per (scene,
+    seed); `units`: jobs per unit; `on_scene(group, info)` is told when a front end is ready."""
+    results, renders = Path(results).resolve(), Path(renders).resolve()
+    if workers == 1 and scheduler is None:
+        for group, entry in scenes.items():
+            on_scene(group, scene_task(entry, cfg, renders, budgets))
+            for unit, jobs in ((u, j) for u, j in units.items() if u[:2] == group):
+                yield unit_task(entry, unit, jobs, cfg, results, renders)
+        _HELD.clear()
+        return
+    yield from _on_dask(scenes, units, cfg, budgets, results, renders, workers, scheduler, on_scene)
+
+
+def _on_dask(scenes, units, cfg, budgets, results, renders, workers, scheduler, on_scene):
+    from distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+        )
+    client = Client(scheduler or cluster)
+    try:
+        fronts = {
+            client.submit(scene_task, entry, cfg, renders, budgets, pure=False): group
+            for group, entry in scenes.items()
+        }
+        by_group = {g: f for f, g in fronts.items()}
+        pending = {
+            client.submit(
+                unit_task,
+                scenes[u[:2]],
+                u,
+                jobs,
+                cfg,
+                results,
+                renders,
+                by_group[u[:2]],
+                retries=1,
+                pure=False,
+            ): (u, jobs)
+            for u, jobs in units.items()
+        }
+        for future in as_completed([*fronts, *pending]):
+            if future in fronts:
+                exc = future.exception()
+                if exc is not None:
+                    raise (
+                        exc
+                        if isinstance(exc, BenchError)
+                        else BenchError(
+                            f"front end of {fronts[future]} failed: {type(exc).__name__}: {exc}"
+                        )
+                    )
+                on_scene(fronts[future], future.result())
+                continue
+            unit, jobs = pending[future]
+            exc = future.exception()
+            if isinstance(exc, BenchError):
+                raise exc
+            if exc is not None:
+                why = f"failed on a worker, retried once: {type(exc).__name__}: {exc}"
+                yield failed_rows(scenes[unit[:2]], unit, jobs, cfg, why.replace("\n", " ")[:300])
+            else:
+                yield future.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def default_workers() -> int:
+    """One worker per core."""
+    return os.cpu_count() or 1
