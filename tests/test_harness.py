@@ -123,6 +123,7 @@ TIMING = [
     "match_ms",
     "verify_ms",
     "task_ms",
+    "evaluate_matches_ms",
     "evaluate_ms",
     "wall_ms",
     "invocation",

@@ -242,10 +242,12 @@ def build_parser() -> argparse.ArgumentParser:
         "run",
         help="run the full benchmark: every scene, seed, policy and budget; tables and figures",
         description="Run every (scene, seed, policy, budget) of the grid: render (cached), "
-        "candidates and signals (cached), selection, COLMAP matching, verification and "
-        "triangulation with the known poses, evaluation against ground truth. Rows go to "
-        "RESULTS/runs.csv as they finish; an interrupted run resumes where it stopped. Then "
-        "table1.csv, table2.csv, figure2.png, figure3.png/.pdf and manifest.json.",
+        "candidates and signals (cached), selection, COLMAP matching and verification, then "
+        "each task (tri: triangulation with the known poses; sfm: incremental mapping with "
+        "unknown poses) under each track protocol, evaluated against ground truth. Rows go to "
+        "RESULTS/runs.csv as they finish; an interrupted run resumes where it stopped, and a "
+        "grown grid runs only its new rows. Then table1.csv, table1_twoview.csv, table2.csv, "
+        "paired.csv, figure2.png, figure3.png/.pdf, figure_budget.png and manifest.json.",
     )
 
     def list_arg(name: str, default: str | None, metavar: str, what: str) -> None:

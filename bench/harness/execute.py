@@ -28,7 +28,7 @@ from bench.backend.peers import PEERS
 from bench.evaluation.groundtruth import load_ground_truth
 from bench.evaluation.metrics import SceneTruth
 from bench.frontend.stage import front_end
-from bench.harness.pipeline import RunConfig, run_peer_unit, run_unit
+from bench.harness.pipeline import RunConfig, row_identity, run_peer_unit, run_unit
 
 _HELD: dict = {}
 """The one scene (front end and ground truth) this process holds."""
@@ -73,21 +73,9 @@ def unit_task(
 
 def failed_rows(entry: Path, unit: tuple, jobs: list, cfg: RunConfig, why: str) -> list[dict]:
     """Rows recording a unit that could not be computed."""
-    scene, seed, policy, budget = unit
     return [
-        {
-            "scene": scene,
-            "seed": seed,
-            "policy": policy,
-            "budget": budget,
-            "task": task,
-            "protocol": protocol,
-            "render_key": Path(entry).name,
-            "config_hash": cfg.hash,
-            "wall_ms": math.nan,
-            "status": "failed",
-            "failure": why,
-        }
+        row_identity((entry, *unit, task, protocol, cfg))
+        | {"wall_ms": math.nan, "status": "failed", "failure": why}
         for task, protocol in jobs
     ]
 

@@ -130,7 +130,8 @@ def run_benchmark(
             todo[unit] = missing
     n_rows = sum(len(j) for j in todo.values())
     stage_s = dict.fromkeys(
-        ["render", "frontend", "select", "match", "verify", "task", "evaluate"], 0.0
+        ["render", "frontend", "select", "match", "verify", "task", "evaluate_matches", "evaluate"],
+        0.0,
     )
     log(f"{len(done)} of {len(done) + n_rows} rows already in {runs_csv}; {n_rows} to do")
 
@@ -154,7 +155,7 @@ def run_benchmark(
         for new in execute(
             entries, todo, cfg.run, cfg.budgets, results, renders, workers, scheduler, scene_ready
         ):
-            for k in ("select", "match", "verify"):
+            for k in ("select", "match", "verify", "evaluate_matches"):
                 stage_s[k] += np.nan_to_num(new[0].get(f"{k}_ms", 0.0)) / 1000
             for r in new:
                 stage_s["task"] += np.nan_to_num(r.get("task_ms", 0.0)) / 1000

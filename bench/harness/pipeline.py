@@ -174,6 +174,7 @@ def run_unit(
         "select": select_s,
         "match": match_s["match"],
         "verify": match_s["verify"],
+        "evaluate_matches": shared_eval_s,
     }
     rows = []
     for task, protocol in jobs:
@@ -196,7 +197,7 @@ def run_unit(
             scores = evaluate_mapping(truth, rec.model, _view_of_name(len(cams)))
         timing = seconds | {
             "task": rec.seconds,
-            "evaluate": shared_eval_s + time.perf_counter() - t,
+            "evaluate": time.perf_counter() - t,
         }
         ident = (entry, scene, seed, policy, budget, task, protocol, cfg)
         rows.append(_row(ident, shared | scores, timing, rec.failure))
@@ -250,10 +251,11 @@ def _export_or_clear(model, out: Path) -> None:
         shutil.rmtree(out)
 
 
-def _row(ident: tuple, metrics: dict, timing: dict[str, float], failure: str | None) -> dict:
+def row_identity(ident: tuple) -> dict:
+    """The columns that say which run a row is: (entry, scene, seed, policy, budget, task,
+    protocol, config) as a dict."""
     entry, scene, seed, policy, budget, task, protocol, cfg = ident
-    meta = json.loads((Path(entry) / "meta.json").read_text())
-    row = {
+    return {
         "scene": scene,
         "seed": seed,
         "policy": policy,
@@ -262,10 +264,17 @@ def _row(ident: tuple, metrics: dict, timing: dict[str, float], failure: str | N
         "protocol": protocol,
         "render_key": Path(entry).name,
         "config_hash": cfg.hash,
+    }
+
+
+def _row(ident: tuple, metrics: dict, timing: dict[str, float], failure: str | None) -> dict:
+    meta = json.loads((Path(ident[0]) / "meta.json").read_text())
+    row = {
+        **row_identity(ident),
         **metrics,
         "render_s_per_view": float(np.mean(meta["seconds_per_view"])),
         **{f"{k}_ms": 1000 * v for k, v in timing.items()},
-        "wall_ms": 1000 * sum(v for k, v in timing.items() if k != "evaluate"),
+        "wall_ms": 1000 * sum(v for k, v in timing.items() if not k.startswith("evaluate")),
         "status": "ok" if failure is None else "failed",
         "failure": failure or "",
     }
