@@ -26,7 +26,7 @@ cfg = BenchConfig(scenes=(a.scene,), seeds=(a.seed,))
 renders = ROOT / "renders"
 entry = render_scene(a.scene, a.seed, cfg.run.render, renders)
 before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-scene_task(entry, cfg.run, renders, cfg.budgets)
+scene_task((a.scene, a.seed), entry, cfg.run, renders, cfg.budgets)
 with tempfile.TemporaryDirectory() as tmp:
     for unit in cfg.units():
         unit_task(entry, unit, cfg.jobs(unit[2]), cfg.run, Path(tmp), renders)

@@ -44,17 +44,16 @@ def _scene(entry: Path, cfg: RunConfig, renders: Path):
     return _HELD["fe"], _HELD["truth"]
 
 
-def scene_task(entry: Path, cfg: RunConfig, renders: Path, budgets) -> dict:
-    """The front end of one render entry (computed or read from its cache), checked
-    against the budgets; returns its seconds and pool sizes."""
+def scene_task(group: tuple, entry: Path, cfg: RunConfig, renders: Path, budgets) -> dict:
+    """The front end of the render entry of `group` (scene, seed), computed or read from
+    its cache, checked against the budgets; returns its seconds and largest pool."""
     t = time.perf_counter()
     fe = front_end(entry, cfg.detector, cfg.signals, renders / "frontend")
     largest = max(len(p) for p in fe.pools)
     too_big = [b for b in budgets if b > largest]
     if too_big:
-        scene, seed = Path(entry).name.split("-s")[0], Path(entry).name.split("-s")[1].split("-")[0]
         raise BenchError(
-            f"budget {too_big[0]} exceeds every candidate pool of {scene} seed {seed} "
+            f"budget {too_big[0]} exceeds every candidate pool of {group[0]} seed {group[1]} "
             f"(the largest has {largest}); every policy would select the whole pool. "
             f"Use budgets up to {largest}"
         )
@@ -96,7 +95,7 @@ def execute(
     results, renders = Path(results).resolve(), Path(renders).resolve()
     if workers == 1 and scheduler is None:
         for group, entry in scenes.items():
-            on_scene(group, scene_task(entry, cfg, renders, budgets))
+            on_scene(group, scene_task(group, entry, cfg, renders, budgets))
             for unit, jobs in ((u, j) for u, j in units.items() if u[:2] == group):
                 yield unit_task(entry, unit, jobs, cfg, results, renders)
         _HELD.clear()
@@ -115,7 +114,7 @@ def _on_dask(scenes, units, cfg, budgets, results, renders, workers, scheduler, 
     client = Client(scheduler or cluster)
     try:
         fronts = {
-            client.submit(scene_task, entry, cfg, renders, budgets, pure=False): group
+            client.submit(scene_task, group, entry, cfg, renders, budgets, pure=False): group
             for group, entry in scenes.items()
         }
         by_group = {g: f for f, g in fronts.items()}

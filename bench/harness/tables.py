@@ -156,16 +156,7 @@ def paired(rows: pd.DataFrame) -> pd.DataFrame:
                 for m in (m for m in PAIRED_METRICS if m in part):
                     a, b = _units(part, CONTENDER, budget, m), _units(part, base, budget, m)
                     strata = pd.Series(a.index.get_level_values("scene"), index=a.index)
-                    res = (
-                        paired_difference(a, b, strata, m)
-                        if len(a) and len(b)
-                        else paired_difference(
-                            pd.Series(dtype=float),
-                            pd.Series(dtype=float),
-                            pd.Series(dtype=object),
-                            m,
-                        )
-                    )
+                    res = paired_difference(a, b, strata, m)  # n = 0 when either is missing
                     out.append(
                         {
                             "scene": scope,
