@@ -45,18 +45,24 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"bench: error: {message} (see `{self.prog} --help`)\n")
 
 
-def add_config_args(parser: argparse.ArgumentParser, cls: type) -> None:
-    """One `--option` per dataclass field, its docstring as help and its default shown."""
+def add_config_args(parser: argparse.ArgumentParser, cls: type, quick=None) -> None:
+    """One `--option` per dataclass field, its docstring as help and its default shown.
+    With a `quick` preset the options default to None (the preset or the class default is
+    chosen later, by --quick) and the help names both defaults."""
     docs = field_docs(cls)
     for f in dataclasses.fields(cls):
-        kwargs = {
-            "type": type(f.default),
-            "default": f.default,
-            "help": f"{docs.get(f.name, '')} (default: %(default)s)",
-        }
-        if f.name == "variant":
-            kwargs["choices"] = VARIANTS
-        parser.add_argument("--" + f.name.replace("_", "-"), dest=f.name, **kwargs)
+        kind = {"choices": VARIANTS} if f.name == "variant" else {"type": type(f.default)}
+        if quick is None:
+            default, shown = f.default, "%(default)s"
+        else:
+            default, shown = None, f"{f.default}, or {getattr(quick, f.name)} with --quick"
+        parser.add_argument(
+            "--" + f.name.replace("_", "-"),
+            dest=f.name,
+            default=default,
+            **kind,
+            help=f"{docs.get(f.name, '')} (default: {shown})",
+        )
 
 
 def config_from_args(cls: type, args: argparse.Namespace):
@@ -298,17 +304,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=DETECTORS,
         help="candidate detector (default: %(default)s)",
     )
-    docs = field_docs(RenderConfig)
-    for f in dataclasses.fields(RenderConfig):
-        kind = {"choices": VARIANTS} if f.name == "variant" else {"type": type(f.default)}
-        quick = getattr(QUICK_RENDER, f.name)
-        u.add_argument(
-            "--" + f.name.replace("_", "-"),
-            dest=f.name,
-            default=None,
-            **kind,
-            help=f"{docs[f.name]} (default: {f.default}, or {quick} with --quick)",
-        )
+    add_config_args(u, RenderConfig, quick=QUICK_RENDER)
     _results_arg(
         u,
         None,
