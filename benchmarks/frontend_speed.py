@@ -1,5 +1,7 @@
 """Front-end timings per view on a default render: candidates, detection, each signal, each
-policy's selection, and the adaptive front end's time relative to the texture-only one.
+policy's selection, and each policy's front end (detection, the signals it reads, its
+selection) relative to the texture-only one. `adaptive-loop` is not here: its selection
+includes matching rounds (see frontend_cost.csv of a benchmark run).
 
     .venv/bin/python benchmarks/frontend_speed.py [--scene table] [--seed 0] [--budget 256]
 """
@@ -65,9 +67,11 @@ def main() -> None:
             + sel_ms[policy]
         )
 
-    print(
-        f"front end per view: texture-only {front('texture'):.1f} ms, adaptive {front('adaptive'):.1f} ms, ratio {front('adaptive') / front('texture'):.2f}x"
-    )
+    for policy in POLICIES:
+        print(
+            f"front end per view: {policy:<18} {front(policy):6.1f} ms, "
+            f"{front(policy) / front('texture'):.2f}x texture-only"
+        )
 
 
 if __name__ == "__main__":

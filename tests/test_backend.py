@@ -15,9 +15,14 @@ from bench.backend.matching import (
     tentative_matches,
     verify,
 )
-from bench.backend.reconstruction import image_names, mapping_task, triangulate
+from bench.backend.reconstruction import mapping_task, triangulate
 from bench.evaluation.poses import pose_metrics, registered_poses
 from tests.conftest import synthetic_rig
+
+
+def _names(n: int) -> list[str]:
+    return [f"view_{k:02d}.png" for k in range(n)]
+
 
 # --- synthetic two-view geometry ----------------------------------------------------------
 
@@ -136,7 +141,7 @@ def _matched_rig(tmp_path, views):
         for i in range(len(cams))
         for j in range(i + 1, len(cams))
     ]
-    for n in image_names(len(cams)):
+    for n in _names(len(cams)):
         cv2.imwrite(str(tmp_path / n), np.zeros((480, 640, 3), np.uint8))
     return cams, xy, pairs
 
@@ -145,24 +150,24 @@ def test_a_hand_made_two_view_scene_is_registered_and_scored(tmp_path):
     cams, xy, pairs = _matched_rig(tmp_path, [0, 3])
     # COLMAP's default mapper ignores two-view tracks, so only the twoview protocol can map
     # a scene seen by two views
-    assert mapping_task(tmp_path, cams, xy, pairs, BackendConfig()).model is None
-    rec = mapping_task(tmp_path, cams, xy, pairs, BackendConfig(), "twoview")
+    assert mapping_task(tmp_path, cams, _names(len(cams)), xy, pairs, BackendConfig()).model is None
+    rec = mapping_task(tmp_path, cams, _names(len(cams)), xy, pairs, BackendConfig(), "twoview")
     assert rec.failure is None and rec.model.num_reg_images() == 2
-    est = registered_poses(rec.model, {n: k for k, n in enumerate(image_names(2))})
+    est = registered_poses(rec.model, {n: k for k, n in enumerate(_names(2))})
     row, _ = pose_metrics(est, cams)
     assert row["registered_views"] == 2 and row["maa"] == 1.0
     assert row["median_pose_err_deg"] < 0.01
     # with four views, COLMAP's default mapper (multiview) registers them all
     cams, xy, pairs = _matched_rig(tmp_path, [0, 1, 2, 3])
-    rec = mapping_task(tmp_path, cams, xy, pairs, BackendConfig())
-    est = registered_poses(rec.model, {n: k for k, n in enumerate(image_names(4))})
+    rec = mapping_task(tmp_path, cams, _names(len(cams)), xy, pairs, BackendConfig())
+    est = registered_poses(rec.model, {n: k for k, n in enumerate(_names(4))})
     assert pose_metrics(est, cams)[0]["maa"] == 1.0
 
 
 def test_a_mapping_without_matches_is_a_recorded_failure(tmp_path):
     cams, xy, pairs = _matched_rig(tmp_path, [0, 1, 2])
     empty = [PairMatches(p.i, p.j, p.tentative[:0], p.verified[:0], "UNDEFINED") for p in pairs]
-    rec = mapping_task(tmp_path, cams, xy, empty, BackendConfig())
+    rec = mapping_task(tmp_path, cams, _names(len(cams)), xy, empty, BackendConfig())
     assert rec.model is None and "no pair of views has verified matches" in rec.failure
     row, _ = pose_metrics(registered_poses(rec.model, {}), cams)
     assert row["maa"] == 0.0

@@ -62,19 +62,25 @@ def test_coverage_of_a_known_layout():
         [[1.0, 1.0], [2.0, 2.0], [100.0, 1.0], [630.0, 470.0]]
     )  # 3 cells of 16x12
     every_cell = np.array([[(c + 0.5) * 40, (r + 0.5) * 40] for r in range(12) for c in range(16)])
-    assert coverage_pct([three_cells, every_cell], 640, 480) == pytest.approx(
+    cam = look_at((0, 0, 0), (0, 1, 0))  # 640 x 480
+    assert coverage_pct([three_cells, every_cell], [cam, cam]) == pytest.approx(
         100 * (3 / 192 + 1) / 2
     )
 
 
 def test_runtime_proxy_parts():
-    r = runtime_proxy([1000, 1000], 5, [10, 20, 30], tentative=[100, 0], verified=[50, 0])
+    r = runtime_proxy([1000, 1000], 5, [([10, 20, 30], [100, 0], [50, 0])])
     assert r["runtime_scoring"] == pytest.approx(10.0)  # 2000 candidates x 5 signals / 1000
     assert r["runtime_matching"] == pytest.approx((200 + 300 + 600) / 1000)
     assert r["runtime_robust"] == pytest.approx(100 * expected_ransac_iterations(0.5) / 1000)
     assert r["runtime_proxy"] == pytest.approx(
         r["runtime_scoring"] + r["runtime_matching"] + r["runtime_robust"]
     )
+    # a second match-and-verify pass (the feedback loop's) counts in matching and robust
+    two = runtime_proxy([1000, 1000], 5, [([10, 20, 30], [100, 0], [50, 0])] * 2)
+    assert two["runtime_matching"] == pytest.approx(2 * r["runtime_matching"])
+    assert two["runtime_robust"] == pytest.approx(2 * r["runtime_robust"])
+    assert two["runtime_scoring"] == r["runtime_scoring"]
 
 
 # --- reconstructable points on a hand-made scene --------------------------------------------

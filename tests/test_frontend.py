@@ -1,4 +1,4 @@
-"""The candidate pool, the five signals and the four policies (plus `all`)."""
+"""The candidate pool, the signals and the per-view policies (plus `all`)."""
 
 from __future__ import annotations
 
@@ -14,9 +14,7 @@ from bench.frontend.signals import (
     SIGNALS,
     SignalConfig,
     Signals,
-    _same_view_distances,
-    ambiguity,
-    distinctiveness,
+    compute_signals,
     parallax,
 )
 from bench.frontend.stage import front_end
@@ -68,7 +66,7 @@ def test_signals_are_in_unit_interval(table_front):
         for name in SIGNALS:
             x = getattr(sig, name)
             assert x.shape == (len(cand),) and np.all((x >= 0) & (x <= 1)), name
-            if name != "parallax":  # every candidate of the table arc has ample parallax
+            if name not in ("parallax", "epipolar"):  # the table arc: ample parallax
                 assert x.max() > x.min(), f"{name} does not discriminate"
 
 
@@ -146,7 +144,7 @@ def _motif_image() -> tuple[np.ndarray, np.ndarray]:
 def test_repeated_motif_is_ambiguous_unique_motif_is_distinctive():
     img, centres = _motif_image()
     cam = look_at((0, -7, 0), (0, 0, 0), width=480, height=240)
-    view = View(0, np.repeat(img[..., None], 3, 2), cam)
+    view = View(0, "motif.png", np.repeat(img[..., None], 3, 2), cam, posed=False)
     cand = detect(view, DetectorConfig(sift_contrast=0.02))
     d, owner = (
         np.linalg.norm(cand.xy[:, None] - centres[None] - 0.5, axis=2).min(1),
@@ -155,14 +153,15 @@ def test_repeated_motif_is_ambiguous_unique_motif_is_distinctive():
     near = d < 14
     repeated, unique = near & (owner < 8), near & (owner >= 8)
     assert repeated.sum() >= 8 and unique.sum() >= 8
-    D = _same_view_distances(cand)
-    a = ambiguity(D, [cand], 0, [cam], "sift", 7.0)
-    q = distinctiveness(D)
+    det = DetectorConfig(sift_contrast=0.02)
+    (sig,), _ = compute_signals([view], [cand], det, SignalConfig())
+    a, q = sig.ambiguity, sig.distinctiveness
+    assert not sig.parallax.any() and not sig.epipolar.any()  # no poses: off
     assert a[repeated].mean() > a[unique].mean() + 0.2
     assert q[repeated].mean() < q[unique].mean() - 0.2
     n = len(cand)
     flat = np.full(n, 0.5)
-    sig = Signals(texture=flat, repeatability=flat, distinctiveness=q, ambiguity=a, parallax=flat)
+    sig = Signals(**{name: flat for name in SIGNALS} | {"distinctiveness": q, "ambiguity": a})
     k = int(unique.sum())
     idx = select(
         "adaptive",
@@ -189,7 +188,7 @@ def test_parallax_is_low_near_the_epipole():
 def test_bad_policy_input_is_a_clear_error(table_front):
     inp = _inputs(table_front)[0]
     with pytest.raises(
-        BenchError, match="unknown policy 'best'; valid: random, texture, grid, adaptive, all"
+        BenchError, match="unknown policy 'best'; valid: random, texture, grid, adaptive, "
     ):
         select("best", inp, BUDGET, np.random.default_rng(0))
     with pytest.raises(BenchError, match="budget must be positive"):
@@ -206,7 +205,13 @@ def test_policy_input_has_no_ground_truth_fields():
     from bench.frontend.features import Candidates
 
     assert [f.name for f in dataclasses.fields(PolicyInput)] == ["view", "candidates", "signals"]
-    assert [f.name for f in dataclasses.fields(View)] == ["index", "image", "camera"]
+    assert [f.name for f in dataclasses.fields(View)] == [
+        "index",
+        "name",
+        "image",
+        "camera",
+        "posed",
+    ]
     assert [f.name for f in dataclasses.fields(Candidates)] == [
         "xy",
         "size",

@@ -59,13 +59,13 @@ def tentative_matches(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float) -> n
     return np.stack([a[keep], nn_ab[keep]], 1)
 
 
-def colmap_camera(cam: Camera) -> pycolmap.Camera:
+def colmap_camera(cam: Camera, camera_id: int = 1) -> pycolmap.Camera:
     c = pycolmap.Camera(
         model="PINHOLE",
         width=cam.width,
         height=cam.height,
         params=[cam.fx, cam.fy, cam.cx, cam.cy],
-        camera_id=1,
+        camera_id=camera_id,
     )
     c.has_prior_focal_length = True  # otherwise COLMAP does not estimate a calibrated geometry
     return c

@@ -23,7 +23,7 @@ import numpy as np
 import pycolmap
 
 from bench.backend.matching import BackendConfig
-from bench.backend.reconstruction import Reconstruction, map_database, quiet_colmap
+from bench.backend.reconstruction import Reconstruction, map_database, quiet_colmap, write_images
 from bench.camera import Camera
 
 PEERS = ("colmap", "colmap-b")
@@ -46,7 +46,7 @@ class PeerRun:
 def run_peer(
     image_dir: Path,
     names: list[str],
-    cam: Camera,
+    cams: list[Camera],
     max_features: int,
     cfg: BackendConfig,
     protocols: list[str],
@@ -55,9 +55,11 @@ def run_peer(
     the module docstring)."""
     work = Path(tempfile.mkdtemp(prefix="bench-peer-"))
     db_path = work / "database.db"
-    reader = pycolmap.ImageReaderOptions()
-    reader.camera_model = "PINHOLE"
-    reader.camera_params = ",".join(repr(v) for v in (cam.fx, cam.fy, cam.cx, cam.cy))
+    db = pycolmap.Database.open(str(db_path))
+    try:  # the known intrinsics: COLMAP's extractor keeps the camera of an image it finds
+        write_images(db, cams, names)
+    finally:
+        db.close()
     extraction = pycolmap.FeatureExtractionOptions()
     extraction.num_threads = 1
     if max_features:
@@ -73,8 +75,6 @@ def run_peer(
                 db_path,
                 image_dir,
                 image_names=names,
-                camera_mode=pycolmap.CameraMode.SINGLE,
-                reader_options=reader,
                 extraction_options=extraction,
                 device=pycolmap.Device.cpu,
             )

@@ -67,9 +67,27 @@ def check_protocols(names) -> list[str]:
     return list(names)
 
 
-def image_names(n: int) -> list[str]:
-    """The image names of a render entry's views, as the back end's models record them."""
-    return [f"view_{k:02d}.png" for k in range(n)]
+def camera_ids(cams: list[Camera]) -> list[int]:
+    """COLMAP camera id of each view: views with the same intrinsics share one camera."""
+    seen: dict[tuple, int] = {}
+    return [
+        seen.setdefault((c.width, c.height, c.fx, c.fy, c.cx, c.cy), len(seen) + 1) for c in cams
+    ]
+
+
+def _colmap_cameras(cams: list[Camera]) -> dict[int, pycolmap.Camera]:
+    out = {}
+    for cid, cam in zip(camera_ids(cams), cams):
+        out.setdefault(cid, colmap_camera(cam, cid))
+    return out
+
+
+def write_images(db: pycolmap.Database, cams: list[Camera], names: list[str]) -> None:
+    """The cameras (shared where the intrinsics are) and images (ids 1..n) of a database."""
+    for cam in _colmap_cameras(cams).values():
+        db.write_camera(cam, use_camera_id=True)
+    for k, (cid, name) in enumerate(zip(camera_ids(cams), names)):
+        db.write_image(pycolmap.Image(name=name, camera_id=cid, image_id=k + 1), use_image_id=True)
 
 
 @dataclass
@@ -81,17 +99,37 @@ class Reconstruction:
     seconds: float
 
 
-def _write_database(
-    path: Path, cams: list[Camera], names: list[str], xy: list[np.ndarray], pairs: list[PairMatches]
+def colmap_descriptors(desc: np.ndarray) -> np.ndarray:
+    """SIFT descriptors in COLMAP's format: L1-root normalised (COLMAP's default), then
+    512 x value rounded and clipped to uint8."""
+    d = np.abs(np.asarray(desc, np.float64))
+    d = np.sqrt(d / np.maximum(d.sum(1, keepdims=True), 1e-12))
+    return np.clip(np.round(512 * d), 0, 255).astype(np.uint8)
+
+
+def write_database(
+    path: Path,
+    cams: list[Camera],
+    names: list[str],
+    xy: list[np.ndarray],
+    pairs: list[PairMatches] = (),
+    descriptors: list[np.ndarray] | None = None,
 ) -> None:
+    """A COLMAP database: cameras, images, keypoints (and their descriptors, given SIFT
+    ones), tentative matches and each verified pair with the configuration its
+    verification found (unverified pairs get no two-view geometry)."""
     db = pycolmap.Database.open(str(path))
     try:
-        db.write_camera(colmap_camera(cams[0]), use_camera_id=True)
-        for k, name in enumerate(names):
-            db.write_image(
-                pycolmap.Image(name=name, camera_id=1, image_id=k + 1), use_image_id=True
-            )
+        write_images(db, cams, names)
+        for k in range(len(names)):
             db.write_keypoints(k + 1, xy[k].astype(np.float32).reshape(-1, 2))
+            if descriptors is not None:
+                db.write_descriptors(
+                    k + 1,
+                    pycolmap.FeatureDescriptors(
+                        pycolmap.FeatureExtractorType.SIFT, colmap_descriptors(descriptors[k])
+                    ),
+                )
         for p in pairs:
             db.write_matches(p.i + 1, p.j + 1, p.tentative.astype(np.uint32))
             if len(p.verified):
@@ -109,12 +147,13 @@ def known_pose_model(
     """A COLMAP model with the rig's intrinsics and poses, each image holding its selected
     keypoints (all of them, so the export is a complete record of the selection)."""
     rec = pycolmap.Reconstruction()
-    rec.add_camera_with_trivial_rig(colmap_camera(cams[0]))
-    for k, (cam, name) in enumerate(zip(cams, names)):
+    for cam in _colmap_cameras(cams).values():
+        rec.add_camera_with_trivial_rig(cam)
+    for k, (cam, cid, name) in enumerate(zip(cams, camera_ids(cams), names)):
         image = pycolmap.Image(
             name=name,
             keypoints=xy[k].astype(np.float64).reshape(-1, 2),
-            camera_id=1,
+            camera_id=cid,
             image_id=k + 1,
         )
         rec.add_image_with_trivial_frame(image, pycolmap.Rigid3d(pycolmap.Rotation3d(cam.R), cam.t))
@@ -141,7 +180,7 @@ def triangulate(
     track protocol (see the module docstring)."""
     work = Path(tempfile.mkdtemp(prefix="bench-colmap-"))
     try:
-        _write_database(work / "database.db", cams, names, xy, pairs)
+        write_database(work / "database.db", cams, names, xy, pairs)
         rec = known_pose_model(cams, names, xy)
         opts = pycolmap.IncrementalPipelineOptions()
         opts.triangulation.ignore_two_view_tracks = PROTOCOLS[protocol] > 2
@@ -164,6 +203,7 @@ def triangulate(
 def known_pose_task(
     image_dir: Path,
     cams: list[Camera],
+    names: list[str],
     xy: list[np.ndarray],
     pairs: list[PairMatches],
     cfg: BackendConfig,
@@ -174,7 +214,7 @@ def known_pose_task(
     if sum(len(p.verified) for p in pairs) == 0:
         return Reconstruction(None, "no pair of views has verified matches", 0.0)
     try:
-        model = triangulate(image_dir, cams, image_names(len(cams)), xy, pairs, cfg, protocol)
+        model = triangulate(image_dir, cams, names, xy, pairs, cfg, protocol)
     except Exception as e:  # COLMAP failures become a recorded reason
         return Reconstruction(
             None, f"triangulation failed: {type(e).__name__}: {e}", time.perf_counter() - t
@@ -227,6 +267,7 @@ def map_database(
 def mapping_task(
     image_dir: Path,
     cams: list[Camera],
+    names: list[str],
     xy: list[np.ndarray],
     pairs: list[PairMatches],
     cfg: BackendConfig,
@@ -238,7 +279,7 @@ def mapping_task(
         return Reconstruction(None, "no pair of views has verified matches", 0.0)
     work = Path(tempfile.mkdtemp(prefix="bench-sfm-"))
     try:
-        _write_database(work / "database.db", cams, image_names(len(cams)), xy, pairs)
+        write_database(work / "database.db", cams, names, xy, pairs)
         return map_database(work / "database.db", image_dir, cfg, protocol)
     finally:
         shutil.rmtree(work, ignore_errors=True)

@@ -1,4 +1,8 @@
-"""Evaluation against the rendered ground truth: the only stage that reads it.
+"""Evaluation against the ground truth: the only stage that reads it.
+
+A render entry has every layer. A dataset (`bench.evaluation.groundtruth`) has the poses,
+and optionally a point cloud (point accuracy) and per-pixel truth (match precision,
+ground-truth tracks, completeness); a metric whose truth is missing is NaN.
 
 Track protocol (`bench.backend.reconstruction`): the headline scores points whose tracks
 span at least three views (`multiview`, COLMAP's default point triangulation); keeping
@@ -39,7 +43,8 @@ Metrics (DESIGN.md), for one run (scene, seed, policy, budget, task, protocol):
   sum_pairs n_i * n_j descriptor comparisons, robust = sum_pairs M_pair * T(w_pair) with
   M the tentative matches, w the measured inlier ratio and T(w) = log(0.001) /
   log(1 - w^5) the expected 5-point RANSAC iterations at 99.9% confidence, clipped
-  to COLMAP's RANSAC bounds [100, 10000].
+  to COLMAP's RANSAC bounds [100, 10000]. A policy that matches and verifies more than
+  once (`adaptive-loop`) has every pass counted in matching and robust.
 """
 
 from __future__ import annotations
@@ -47,6 +52,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from itertools import combinations
+from pathlib import Path
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -55,7 +61,7 @@ from scipy.spatial import cKDTree
 
 from bench.backend.matching import PairMatches, expected_ransac_iterations
 from bench.camera import Camera
-from bench.evaluation.groundtruth import GroundTruth
+from bench.evaluation.groundtruth import GroundTruth, load_dataset_truth, load_ground_truth
 from bench.frontend.features import Candidates
 
 THRESHOLDS = (0.02, 0.05, 0.10, 0.20)
@@ -76,23 +82,27 @@ def completeness_pct(errors: np.ndarray, reconstructable: int, tau: float) -> fl
     return 100.0 * float(np.sum(errors < tau)) / reconstructable if reconstructable else math.nan
 
 
-def coverage_pct(
-    xy_per_view: list[np.ndarray], width: int, height: int, grid=COVERAGE_GRID
-) -> float:
+def coverage_pct(xy_per_view: list[np.ndarray], cams: list[Camera], grid=COVERAGE_GRID) -> float:
     shares = []
-    for xy in xy_per_view:
+    for xy, cam in zip(xy_per_view, cams):
+        width, height = cam.width, cam.height
         cx = np.clip((xy[:, 0] / width * grid[0]).astype(int), 0, grid[0] - 1)
         cy = np.clip((xy[:, 1] / height * grid[1]).astype(int), 0, grid[1] - 1)
         shares.append(len(set(zip(cx.tolist(), cy.tolist()))) / (grid[0] * grid[1]))
     return 100.0 * float(np.mean(shares))
 
 
-def runtime_proxy(
-    pool_sizes, n_signals: int, selected_sizes, tentative, verified
-) -> dict[str, float]:
+def runtime_proxy(pool_sizes, n_signals: int, passes) -> dict[str, float]:
+    """The proxy of the module docstring; `passes`: (selected sizes per view, tentative and
+    verified matches per pair) of every match-and-verify pass."""
     scoring = sum(pool_sizes) * n_signals
-    matching = sum(a * b for a, b in combinations(selected_sizes, 2))
-    robust = sum(m * expected_ransac_iterations(v / m) for m, v in zip(tentative, verified) if m)
+    matching = sum(a * b for sizes, _, _ in passes for a, b in combinations(sizes, 2))
+    robust = sum(
+        m * expected_ransac_iterations(v / m)
+        for _, tentative, verified in passes
+        for m, v in zip(tentative, verified)
+        if m
+    )
     parts = {
         "runtime_scoring": scoring / 1e3,
         "runtime_matching": matching / 1e3,
@@ -123,20 +133,43 @@ def _visible(X: np.ndarray, cam: Camera, gt: GroundTruth) -> tuple[np.ndarray, n
 class SceneTruth:
     """Ground-truth structures of one render entry and candidate pool, shared by all runs."""
 
-    surface: cKDTree
+    surface: cKDTree | None
+    """Ground-truth surface samples (None: no point accuracy)."""
     cams: list[Camera]
-    gts: list[GroundTruth]
-    points: list[np.ndarray]
+    gts: list[GroundTruth] | None
+    """Per-pixel truth (None: a dataset without it)."""
+    points: list[np.ndarray] | None
     """Per view: the 3D point under each candidate (NaN on occlusion edges)."""
     pool_xy: list[np.ndarray]
-    track: list[np.ndarray]
+    track: list[np.ndarray] | None
     """Per view: the ground-truth track (connected component) of each candidate."""
-    track_views: np.ndarray
+    track_views: np.ndarray | None
     """Per track: the number of distinct views it spans."""
+    kind: str = "rendered"
+    """What truth there is: rendered, per-pixel (a dataset's), point cloud or poses."""
+
+    @property
+    def per_pixel(self) -> bool:
+        return self.gts is not None
 
     @staticmethod
-    def build(cams: list[Camera], gts: list[GroundTruth], pools: list[Candidates]) -> SceneTruth:
-        samples = np.concatenate([g.position[g.single_surface] for g in gts]).astype(np.float64)
+    def build(
+        cams: list[Camera],
+        gts: list[GroundTruth] | None,
+        pools: list[Candidates],
+        cloud: np.ndarray | None = None,
+    ) -> SceneTruth:
+        """From per-pixel truth (its single-surface positions are the surface unless a
+        point cloud is given), or from a point cloud alone."""
+        if gts is None:
+            surface = cKDTree(np.asarray(cloud, np.float64)) if cloud is not None else None
+            kind = "poses" if cloud is None else "point cloud"
+            return SceneTruth(surface, cams, None, None, [c.xy for c in pools], None, None, kind)
+        samples = (
+            np.concatenate([g.position[g.single_surface] for g in gts]).astype(np.float64)
+            if cloud is None
+            else np.asarray(cloud, np.float64)
+        )
         points = []
         for cam, gt, cand in zip(cams, gts, pools):
             col = np.clip(cand.xy[:, 0].astype(int), 0, cam.width - 1)
@@ -148,9 +181,10 @@ class SceneTruth:
         track, track_views = _tracks(cams, gts, points, pool_xy)
         return SceneTruth(cKDTree(samples), cams, gts, points, pool_xy, track, track_views)
 
-    def reconstructable(self, min_views: int) -> int:
-        """Ground-truth tracks spanning at least `min_views` views."""
-        return int(np.sum(self.track_views >= min_views))
+    def reconstructable(self, min_views: int) -> int | None:
+        """Ground-truth tracks spanning at least `min_views` views (None without per-pixel
+        truth)."""
+        return None if self.track_views is None else int(np.sum(self.track_views >= min_views))
 
     def correspondences(self, i: int, j: int, ki: np.ndarray, kj: np.ndarray) -> np.ndarray:
         """Whether candidate ki[m] of view i and kj[m] of view j correspond (ground truth)."""
@@ -160,6 +194,17 @@ class SceneTruth:
             return ok & (np.linalg.norm(uv - self.pool_xy[b][kb], axis=1) <= CORRESPONDENCE_PX)
 
         return one_way(i, j, ki, kj) | one_way(j, i, kj, ki)
+
+
+def load_truth(source: Path, cams: list[Camera], names: list[str], pools) -> SceneTruth:
+    """The truth of a render entry, or whatever truth a dataset folder holds."""
+    if (Path(source) / "meta.json").is_file():
+        return SceneTruth.build(cams, load_ground_truth(source), pools)
+    cloud, gts = load_dataset_truth(source, names, cams)
+    truth = SceneTruth.build(cams, gts, pools, cloud)
+    if gts is not None:
+        truth.kind = "per-pixel"
+    return truth
 
 
 def _tracks(cams, gts, points, pool_xy) -> tuple[list[np.ndarray], np.ndarray]:
@@ -194,48 +239,62 @@ def match_metrics(
     selections: list[np.ndarray],
     pairs: list[PairMatches],
     n_signals: int,
+    earlier: list = (),
 ) -> dict[str, float]:
-    """The metrics of the selection and its matches (shared by every task of a run)."""
+    """The metrics of the selection and its matches (shared by every task of a run);
+    `earlier`: (selected sizes, tentative, verified per pair) of the match-and-verify passes
+    a feedback policy made before its final one, counted in the runtime proxy."""
     row: dict[str, float] = {}
     tentative = [len(p.tentative) for p in pairs]
     verified = [len(p.verified) for p in pairs]
     row["tentative_matches"], row["verified_matches"] = sum(tentative), sum(verified)
     row["inlier_pct"] = 100.0 * sum(verified) / sum(tentative) if sum(tentative) else math.nan
-    correct = sum(
-        int(
-            truth.correspondences(
-                p.i, p.j, selections[p.i][p.verified[:, 0]], selections[p.j][p.verified[:, 1]]
-            ).sum()
+    if truth.per_pixel and sum(verified):
+        correct = sum(
+            int(
+                truth.correspondences(
+                    p.i, p.j, selections[p.i][p.verified[:, 0]], selections[p.j][p.verified[:, 1]]
+                ).sum()
+            )
+            for p in pairs
+            if len(p.verified)
         )
-        for p in pairs
-        if len(p.verified)
-    )
-    row["match_precision_pct"] = 100.0 * correct / sum(verified) if sum(verified) else math.nan
-    cam = truth.cams[0]
+        row["match_precision_pct"] = 100.0 * correct / sum(verified)
+    else:
+        row["match_precision_pct"] = math.nan
     row["coverage_pct"] = coverage_pct(
-        [pools[v].xy[s] for v, s in enumerate(selections)], cam.width, cam.height
+        [pools[v].xy[s] for v, s in enumerate(selections)], truth.cams
     )
-    row |= runtime_proxy(
-        [len(p) for p in pools], n_signals, [len(s) for s in selections], tentative, verified
-    )
+    passes = [*earlier, ([len(s) for s in selections], tentative, verified)]
+    row |= runtime_proxy([len(p) for p in pools], n_signals, passes)
     return row
 
 
-def point_metrics(X: np.ndarray, surface: cKDTree, reconstructable: int | None) -> dict[str, float]:
+def point_metrics(
+    X: np.ndarray, surface: cKDTree | None, reconstructable: int | None
+) -> dict[str, float]:
     """Accuracy of reconstructed points X (N, 3): rmse, median error, accuracy within each
-    tau and, given the reconstructable points, completeness within each tau."""
+    tau and, given the reconstructable points, completeness within each tau (NaN where the
+    surface or the reconstructable points are unknown)."""
+    if surface is None:
+        row = {"points": len(X), "rmse": math.nan, "median_error": math.nan}
+        for tau in THRESHOLDS:
+            suffix = "" if tau == 0.10 else f"_{tau:.2f}"
+            row[f"accuracy_pct{suffix}"] = row[f"acc_completeness_pct{suffix}"] = math.nan
+        return row
     e = point_error(X, surface)
     row: dict[str, float] = {"points": len(X), "rmse": rmse(e)}
     row["median_error"] = float(np.median(e)) if len(e) else math.nan
     for tau in THRESHOLDS:
         suffix = "" if tau == 0.10 else f"_{tau:.2f}"
         row[f"accuracy_pct{suffix}"] = 100.0 * float(np.mean(e < tau)) if len(e) else math.nan
-        if reconstructable is not None:
-            row[f"acc_completeness_pct{suffix}"] = (
-                completeness_pct(e, reconstructable, tau)
-                if len(e)
-                else (0.0 if reconstructable else math.nan)
-            )
+        row[f"acc_completeness_pct{suffix}"] = (
+            math.nan
+            if reconstructable is None
+            else completeness_pct(e, reconstructable, tau)
+            if len(e)
+            else (0.0 if reconstructable else math.nan)
+        )
     return row
 
 
@@ -269,7 +328,7 @@ def evaluate_known_pose(truth: SceneTruth, model, min_views: int) -> dict[str, f
     track protocol (tracks spanning at least `min_views` views)."""
     n = truth.reconstructable(min_views)
     return (
-        {"reconstructable": n}
+        {"reconstructable": math.nan if n is None else n}
         | point_metrics(model_points(model), truth.surface, n)
         | track_metrics(model)
     )

@@ -97,10 +97,21 @@ def detect_points(gray: np.ndarray, cfg: DetectorConfig) -> np.ndarray:
     return keypoint_arrays(cfg.create().detect(gray, None))[0]
 
 
-def descriptor_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Pairwise descriptor distances: L2 for float descriptors, Hamming fraction for binary."""
+def descriptor_distances(a: np.ndarray, b: np.ndarray, squared: bool = False) -> np.ndarray:
+    """Pairwise descriptor distances (float32): L2 for float descriptors, Hamming fraction
+    for binary ones; `squared` returns their squares (cheaper, same order)."""
     if a.dtype == np.uint8:
         A, B = (np.unpackbits(x, axis=1).astype(np.float32) for x in (a, b))
-        return (A @ (1 - B).T + (1 - A) @ B.T) / A.shape[1]
-    d2 = (a * a).sum(1)[:, None] + (b * b).sum(1)[None] - 2 * a @ b.T
-    return np.sqrt(np.maximum(d2, 0))
+        D = (A @ (1 - B).T + (1 - A) @ B.T) / A.shape[1]
+        return D * D if squared else D
+    a, b = a.astype(np.float32, copy=False), b.astype(np.float32, copy=False)
+    na, nb = (a * a).sum(1), (b * b).sum(1)
+    d2 = a @ b.T
+    d2 *= -2
+    if np.allclose(na, 1, atol=1e-4) and np.allclose(nb, 1, atol=1e-4):
+        d2 += 2  # unit descriptors (SIFT candidates): |a - b|^2 = 2 - 2 a.b
+    else:
+        d2 += na[:, None]
+        d2 += nb[None]
+    np.maximum(d2, 0, out=d2)
+    return d2 if squared else np.sqrt(d2, out=d2)

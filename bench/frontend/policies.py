@@ -3,14 +3,22 @@
 A policy receives a `PolicyInput` (the view's image and calibration, its candidates and
 their signals: no ground truth can reach it) with a budget B and a seeded generator, and
 returns exactly min(B, N) distinct candidate indices. Adding a policy is one decorated
-function.
+function; `bench run --policy-module FILE` (or an installed package's `bench.policies`
+entry point) registers policies from outside the package (`bench.harness.plugins`).
+
+The contract, checked on every call (`select`), each rule named in its error:
+exact budget (min(B, N) indices; `all` the whole pool), distinct indices, valid range
+(0 <= index < N); and no ground truth (checked on a policy module's source before it runs).
 """
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
 
 import numpy as np
 
@@ -41,6 +49,16 @@ class PolicyConfig:
     cap_factor: float = 2.0
     """Adaptive soft cap: a tile may hold at most cap_factor x B / (non-empty tiles)
     selections, until the cap must grow to fill the budget."""
+    epipolar_weight: float = 0.28
+    """Weight of the epipolar signal in the `cross-view` score (the paper's largest weight,
+    fixed before any run)."""
+    loop_rounds: int = 2
+    """`adaptive-loop`: how many times the selection is revised from its own matches."""
+    learned_weights: str = ""
+    """`learned`: the weights file written by `bench train-weights` (empty: the weights
+    shipped with the package, bench/frontend/learned_weights.json)."""
+    modules: tuple[str, ...] = ()
+    """Python files whose policies are registered before selecting (`--policy-module`)."""
 
     def validate(self) -> PolicyConfig:
         if len(self.weights) != 5 or not all(
@@ -49,6 +67,8 @@ class PolicyConfig:
             raise BenchError(f"weights must be five numbers (t, r, q, p, a), got {self.weights!r}")
         if min(self.tiles) <= 0 or self.cap_factor <= 0:
             raise BenchError("tiles and cap_factor must be positive")
+        if self.loop_rounds < 0:
+            raise BenchError(f"loop_rounds must be >= 0, got {self.loop_rounds}")
         return self
 
 
@@ -59,6 +79,8 @@ SIGNALS_USED: dict[str, tuple[str, ...]] = {}
 
 
 def policy(name: str, signals: tuple[str, ...] = ()) -> Callable[[Policy], Policy]:
+    """Register a policy under `name`, with the signals it reads (for its reported cost)."""
+
     def register(fn: Policy) -> Policy:
         POLICIES[name], SIGNALS_USED[name] = fn, signals
         return fn
@@ -66,11 +88,23 @@ def policy(name: str, signals: tuple[str, ...] = ()) -> Callable[[Policy], Polic
     return register
 
 
-def check_policies(names) -> list[str]:
-    unknown = [n for n in names if n not in POLICIES]
+def check_policies(names, extra=()) -> list[str]:
+    unknown = [n for n in names if n not in POLICIES and n not in extra]
     if unknown:
-        raise BenchError(f"unknown policy {unknown[0]!r}; valid: {', '.join(POLICIES)}")
+        valid = ", ".join([*POLICIES, *extra])
+        raise BenchError(f"unknown policy {unknown[0]!r}; valid: {valid}")
     return list(names)
+
+
+def contract_violation(idx: np.ndarray, want: int, n: int) -> str | None:
+    """The first contract rule that a selection breaks, or None."""
+    if len(idx) != want:
+        return f"exact budget: {len(idx)} indices returned, {want} expected"
+    if len(np.unique(idx)) != len(idx):
+        return f"distinct indices: {len(idx) - len(np.unique(idx))} repeated"
+    if len(idx) and (idx.min() < 0 or idx.max() >= n):
+        return f"valid range: indices must lie in [0, {n}), got {idx.min()}..{idx.max()}"
+    return None
 
 
 def select(
@@ -80,20 +114,23 @@ def select(
     rng: np.random.Generator,
     cfg: PolicyConfig = PolicyConfig(),
 ) -> np.ndarray:
-    """Run a policy and check its contract: min(B, N) distinct valid indices (`all`, the
-    whole pool, takes no budget)."""
+    """Run a policy and check its contract (module docstring)."""
     check_policies([name])
     if budget <= 0 and name != "all":
         raise BenchError(f"budget must be positive, got {budget}")
-    idx = np.asarray(POLICIES[name](inp, budget, rng, cfg), dtype=np.int64)
+    try:
+        idx = np.asarray(POLICIES[name](inp, budget, rng, cfg)).reshape(-1)
+    except BenchError:
+        raise
+    except Exception as e:
+        raise BenchError(f"policy {name} failed: {type(e).__name__}: {e}") from e
     n = len(inp.candidates)
-    want = n if name == "all" else min(budget, n)
-    if (
-        len(idx) != want
-        or len(np.unique(idx)) != len(idx)
-        or (len(idx) and (idx.min() < 0 or idx.max() >= n))
-    ):
-        raise RuntimeError(f"policy {name} broke its contract ({len(idx)} indices for {want})")
+    if idx.dtype.kind not in "iu":
+        raise BenchError(f"policy {name} broke the contract rule 'integer indices': {idx.dtype}")
+    idx = idx.astype(np.int64)
+    broken = contract_violation(idx, n if name == "all" else min(budget, n), n)
+    if broken:
+        raise BenchError(f"policy {name} broke the contract rule '{broken}'")
     return idx
 
 
@@ -147,14 +184,18 @@ def grid_policy(inp, budget, rng, cfg):
     return by_round[:budget]
 
 
-@policy("adaptive", ("texture", "repeatability", "distinctiveness", "ambiguity", "parallax"))
-def adaptive_policy(inp, budget, rng, cfg):
-    """Greedy by score s under a soft per-tile cap: at most ceil(cap_factor * B / T) per
-    tile (T = tiles holding candidates); only if the pool cannot fill B under that cap is
-    it raised, one step at a time, until the budget is met."""
+ADAPTIVE_SIGNALS = ("texture", "repeatability", "distinctiveness", "ambiguity", "parallax")
+
+
+def capped_greedy(
+    score: np.ndarray, inp: PolicyInput, budget: int, cfg: PolicyConfig
+) -> np.ndarray:
+    """Greedy by score under a soft per-tile cap: at most ceil(cap_factor * B / T) per tile
+    (T = tiles holding candidates); only if the pool cannot fill B under that cap is it
+    raised, one step at a time, until the budget is met."""
     cam = inp.view.camera
     tile = tile_of(inp.candidates.xy, cam.width, cam.height, cfg.tiles)
-    order = _order(adaptive_score(inp.signals, cfg.weights))
+    order = _order(score)
     want = min(budget, len(order))
     cap = math.ceil(cfg.cap_factor * budget / max(len(np.unique(tile)), 1))
     picked: list[int] = []
@@ -170,6 +211,162 @@ def adaptive_policy(inp, budget, rng, cfg):
                 picked.append(i)
         cap += 1
     return np.array(picked, dtype=np.int64)
+
+
+@policy("adaptive", ADAPTIVE_SIGNALS)
+def adaptive_policy(inp, budget, rng, cfg):
+    """The paper's score s (with the cheap repeatability estimate) under the soft tile cap
+    of `capped_greedy`."""
+    return capped_greedy(adaptive_score(inp.signals, cfg.weights), inp, budget, cfg)
+
+
+@policy(
+    "adaptive-redetect",
+    ("texture", "repeatability_redetect", "distinctiveness", "ambiguity", "parallax"),
+)
+def adaptive_redetect_policy(inp, budget, rng, cfg):
+    """`adaptive` with the paper's repeatability (four re-detections per view)."""
+    s = inp.signals
+    wt, wr, wq, wp, wa = cfg.weights
+    score = (
+        wt * s.texture
+        + wr * s.repeatability_redetect
+        + wq * s.distinctiveness
+        + wp * s.parallax
+        - wa * s.ambiguity
+    )
+    return capped_greedy(score, inp, budget, cfg)
+
+
+@policy("cross-view", (*ADAPTIVE_SIGNALS, "epipolar"))
+def cross_view_policy(inp, budget, rng, cfg):
+    """`adaptive` plus epipolar_weight x the epipolar signal: candidates with a
+    ratio-passing match on their epipolar lines in other views first (beyond the paper)."""
+    score = adaptive_score(inp.signals, cfg.weights) + cfg.epipolar_weight * inp.signals.epipolar
+    return capped_greedy(score, inp, budget, cfg)
+
+
+MIN_PARALLAX = 0.15
+"""`learned`'s parallax constraint: candidates whose parallax signal is below this (1.5
+degrees, COLMAP's minimum triangulation angle, at the depth prior) come last."""
+
+
+SHIPPED_WEIGHTS = Path(__file__).with_name("learned_weights.json")
+
+
+def weights_file(path: str) -> Path:
+    """The weights file a `learned_weights` setting names."""
+    return Path(path) if path else SHIPPED_WEIGHTS
+
+
+@cache
+def learned_weights(path: str) -> dict:
+    """The weights (and training seeds) of a weights file of `bench train-weights` (see
+    `bench.harness.training`)."""
+    path = weights_file(path)
+    try:
+        data = json.loads(Path(path).read_text())
+        return {k: float(data["weights"][k]) for k in ADAPTIVE_SIGNALS} | {"seeds": data["seeds"]}
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise BenchError(f"cannot read the learned weights {path}: {e}") from e
+
+
+@policy("learned", ADAPTIVE_SIGNALS)
+def learned_policy(inp, budget, rng, cfg):
+    """The logit of a logistic model of "became an accurate point" over the five signals
+    (weights fitted by `bench train-weights` on training seeds), under the adaptive tile
+    cap (coverage) and a parallax constraint (MIN_PARALLAX)."""
+    w = learned_weights(cfg.learned_weights)
+    logit = sum(w[k] * getattr(inp.signals, k) for k in ADAPTIVE_SIGNALS)
+    span = np.ptp(logit) if len(logit) else 0.0
+    score = logit - (span + 1) * (inp.signals.parallax < MIN_PARALLAX)
+    return capped_greedy(score, inp, budget, cfg)
+
+
+@policy("response")
+def response_policy(inp, budget, rng, cfg):
+    """The B strongest detector responses: what COLMAP-style and learned pipelines keep."""
+    return _order(inp.candidates.response)[:budget]
+
+
+@policy("ssc")
+def ssc_policy(inp, budget, rng, cfg):
+    """Suppression via Square Covering (Bailo et al., "Efficient adaptive non-maximal
+    suppression algorithms for homogeneous spatial keypoint distribution", Pattern
+    Recognition Letters 2018): on response-ranked keypoints, a keypoint is kept unless a
+    kept one covers its cell (a kept keypoint covers the grid cells of side w/2 within w
+    of its own); binary search for the widest w that keeps at least B, whose first B (by
+    response) are returned."""
+    order = _order(inp.candidates.response)
+    xy = inp.candidates.xy[order]
+    want = min(budget, len(order))
+    cam = inp.view.camera
+
+    def cover(w: float) -> np.ndarray:
+        cell = w / 2
+        cols = int(cam.width / cell) + 1
+        rows = int(cam.height / cell) + 1
+        covered = np.zeros((rows + 1, cols + 1), bool)
+        keep = []
+        reach = int(math.ceil(w / cell))
+        for k, (x, y) in enumerate(xy):
+            r, c = min(int(y / cell), rows), min(int(x / cell), cols)
+            if covered[r, c]:
+                continue
+            keep.append(k)
+            covered[max(r - reach, 0) : r + reach + 1, max(c - reach, 0) : c + reach + 1] = True
+            if len(keep) >= want:
+                break
+        return np.array(keep, dtype=np.int64)
+
+    lo, hi = 1.0, float(max(cam.width, cam.height))
+    best = cover(lo)
+    if len(best) < want:  # keypoints closer than a pixel: plain response order
+        return order[:want]
+    while hi - lo >= 0.5:  # the widest covering to half a pixel
+        mid = (lo + hi) / 2
+        kept = cover(mid)
+        if len(kept) >= want:
+            best, lo = kept, mid
+        else:
+            hi = mid
+    return order[best[:want]]
+
+
+@policy("quadtree")
+def quadtree_policy(inp, budget, rng, cfg):
+    """ORB-SLAM's DistributeOctTree (Mur-Artal et al. 2015): split the image into
+    quadrants, most populous first, until there are at least B cells or none can split;
+    keep the strongest response per cell (the B strongest cells if there are more), and
+    fill a shortfall with the next strongest keypoints."""
+    xy, resp = inp.candidates.xy, inp.candidates.response
+    want = min(budget, len(xy))
+    cam = inp.view.camera
+    cells = [(0.0, 0.0, float(cam.width), float(cam.height), np.arange(len(xy)))]
+    while len(cells) < want:
+        splittable = [k for k, c in enumerate(cells) if len(c[4]) > 1 and c[2] - c[0] > 1]
+        if not splittable:
+            break
+        k = max(splittable, key=lambda k: (len(cells[k][4]), -k))
+        x0, y0, x1, y1, members = cells.pop(k)
+        mx, my = (x0 + x1) / 2, (y0 + y1) / 2
+        for ax, ay, bx, by in (
+            (x0, y0, mx, my),
+            (mx, y0, x1, my),
+            (x0, my, mx, y1),
+            (mx, my, x1, y1),
+        ):
+            p = xy[members]
+            inside = members[(p[:, 0] >= ax) & (p[:, 0] < bx) & (p[:, 1] >= ay) & (p[:, 1] < by)]
+            if len(inside):
+                cells.append((ax, ay, bx, by, inside))
+    best = np.array([c[4][_order(resp[c[4]])[0]] for c in cells], dtype=np.int64)
+    best = best[_order(resp[best])][:want]
+    if len(best) < want:
+        rest = np.setdiff1d(_order(resp), best, assume_unique=True)
+        rest = rest[_order(resp[rest])]
+        best = np.concatenate([best, rest[: want - len(best)]])
+    return best
 
 
 @policy("all")

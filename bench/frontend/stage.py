@@ -1,4 +1,5 @@
-"""The front-end stage: a render entry's views to candidate pools with their five signals.
+"""The front-end stage: the views of a render entry or dataset to candidate pools with
+their signals.
 
 Cached (npz beside the render cache) by the render entry, the detector and signal settings
 and the code that computes them; the seconds measured when it was computed are stored with
@@ -21,7 +22,7 @@ from bench.files import content_key, source_hash
 from bench.frontend import features, signals
 from bench.frontend.features import Candidates, DetectorConfig
 from bench.frontend.signals import SIGNALS, SignalConfig, Signals, compute_signals
-from bench.frontend.views import View, load_views
+from bench.frontend.views import Source, View, load_views
 
 _CAND = [f.name for f in fields(Candidates)]
 
@@ -34,17 +35,26 @@ class FrontEnd:
     pools: list[Candidates]
     signals: list[Signals]
     seconds: dict[str, float]
-    """Measured seconds over the six views: 'detect' and one per signal."""
+    """Measured seconds over all views: 'detect' and one per signal."""
     cached: bool
 
 
+def _dataset_identity(root: Path) -> list:
+    """A dataset's files (model and images) with their sizes and modification times."""
+    src = Source.of(root)
+    files = [src.model / "cameras.txt", src.model / "images.txt"]
+    files += sorted(p for p in src.images.rglob("*") if p.is_file())
+    return [str(root.resolve())] + [(p.name, p.stat().st_size, p.stat().st_mtime_ns) for p in files]
+
+
 def front_end(entry: Path, det: DetectorConfig, sig: SignalConfig, cache_dir: Path) -> FrontEnd:
-    """Candidates and signals of every view of `entry`, computed or read from the cache."""
+    """Candidates and signals of every view of `entry` (a render entry or a dataset),
+    computed or read from the cache."""
     entry = Path(entry)
     views = load_views(entry)
     key = content_key(
         {
-            "entry": entry.name,
+            "entry": entry.name if (entry / "meta.json").is_file() else _dataset_identity(entry),
             "detector": asdict(det),
             "signals": asdict(sig),
             "opencv": cv2.__version__,

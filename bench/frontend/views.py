@@ -1,7 +1,16 @@
-"""What a real front end sees of a render entry: the images and the calibration. Nothing else.
+"""What a real front end sees: the images and the calibration. Nothing else.
 
-This module is the front end's and back end's only way into `renders/`; it never opens
-the ground-truth files.
+Three sources give the same list of `View`s:
+
+* a render entry (`renders/<scene>-s<seed>-<key>/`): its images and its COLMAP rig;
+* a dataset in the COLMAP layout, `DIR/images/` and a model `DIR/sparse/` (`cameras.txt`,
+  `images.txt`): the views of the model, posed;
+* a folder of images without poses (`bench select`): every JPEG or PNG in it, with a camera
+  from a COLMAP model when one is given, else from the focal-length prior (EXIF's 35 mm
+  equivalent focal length, or COLMAP's default 1.2 x max(width, height)).
+
+This module is the front end's and back end's only way into the data; it never opens
+ground-truth files.
 """
 
 from __future__ import annotations
@@ -11,10 +20,15 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from bench import BenchError
-from bench.camera import Camera, read_colmap_rig
+from bench.camera import Camera
 from bench.files import entry_problem
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+DEFAULT_FOCAL_FACTOR = 1.2
+"""COLMAP's focal-length prior without EXIF: 1.2 x max(width, height)."""
 
 
 @dataclass(frozen=True)
@@ -22,26 +36,150 @@ class View:
     """One calibrated image."""
 
     index: int
+    name: str
+    """File name relative to the image folder (the name COLMAP records)."""
     image: np.ndarray
     """8-bit sRGB, HxWx3 (RGB order)."""
     camera: Camera
+    posed: bool = True
+    """Whether `camera` holds a real pose (False: intrinsics only, identity pose)."""
 
     @property
     def gray(self) -> np.ndarray:
         return cv2.cvtColor(self.image, cv2.COLOR_RGB2GRAY)
 
 
-def load_views(entry: Path) -> list[View]:
-    """The six calibrated views of a render entry (a damaged entry is a `BenchError`)."""
-    entry = Path(entry)
-    problem = entry_problem(entry)
-    if problem:
-        raise BenchError(f"render entry {entry} is not usable: {problem}")
-    cams = read_colmap_rig(entry)
+@dataclass(frozen=True)
+class Source:
+    """Where a set of views lives: the image folder and the posed model, if any."""
+
+    images: Path
+    model: Path | None
+
+    @staticmethod
+    def of(path: Path) -> Source:
+        """A render entry, or a dataset folder with `images/` and `sparse/`."""
+        path = Path(path)
+        if (path / "meta.json").is_file():
+            problem = entry_problem(path)
+            if problem:
+                raise BenchError(f"render entry {path} is not usable: {problem}")
+            return Source(path, path)
+        if (path / "images").is_dir() and (path / "sparse" / "images.txt").is_file():
+            return Source(path / "images", path / "sparse")
+        raise BenchError(
+            f"{path} is neither a render entry nor a dataset (images/ and sparse/images.txt)"
+        )
+
+
+def read_image(path: Path) -> np.ndarray:
+    """An image as 8-bit RGB, pixels as stored (EXIF orientation ignored, as COLMAP does)."""
+    img = cv2.imread(str(path), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+    if img is None:
+        raise BenchError(f"cannot read image {path}")
+    return img[..., ::-1].copy()
+
+
+_ZERO_DISTORTION = {"SIMPLE_PINHOLE": 3, "PINHOLE": 4, "SIMPLE_RADIAL": 4, "RADIAL": 4, "OPENCV": 4}
+"""Camera models accepted, and how many parameters precede their distortion ones."""
+
+
+def _intrinsics(model: str, w: int, h: int, p: list[float], where: Path) -> tuple:
+    if model not in _ZERO_DISTORTION or any(p[_ZERO_DISTORTION[model] :]):
+        raise BenchError(
+            f"{where}: camera model {model} with distortion is not supported; undistort the "
+            "images first (colmap image_undistorter)"
+        )
+    if model == "PINHOLE":
+        return w, h, *p[:4]
+    if model == "OPENCV":
+        return w, h, *p[:4]
+    return w, h, p[0], p[0], p[1], p[2]
+
+
+def read_colmap_model(model: Path) -> list[tuple[str, Camera]]:
+    """(image name, camera) of every image of a COLMAP text model, in name order."""
+    model = Path(model)
+    try:
+        cam_lines = (model / "cameras.txt").read_text().splitlines()
+        img_lines = [
+            ln for ln in (model / "images.txt").read_text().splitlines() if not ln.startswith("#")
+        ]
+        intr = {}
+        for line in cam_lines:
+            if line.strip() and not line.startswith("#"):
+                cid, kind, w, h, *p = line.split()
+                intr[cid] = _intrinsics(kind, int(w), int(h), [float(x) for x in p], model)
+        out = []
+        for line in img_lines[::2]:
+            if not line.strip():
+                continue
+            _, qw, qx, qy, qz, tx, ty, tz, cid, name = line.split(maxsplit=9)
+            R = Rotation.from_quat([float(qx), float(qy), float(qz), float(qw)]).as_matrix()
+            t = np.array([float(tx), float(ty), float(tz)])
+            out.append((name.strip(), Camera(*intr[cid], R=R, t=t)))
+    except (OSError, ValueError, KeyError) as e:
+        raise BenchError(f"cannot read the COLMAP model in {model}: {e}") from e
+    if not out:
+        raise BenchError(f"the COLMAP model in {model} has no images")
+    return sorted(out, key=lambda nc: nc[0])
+
+
+def focal_prior(path: Path, width: int, height: int) -> float:
+    """Focal length in pixels: EXIF's 35 mm equivalent when present, else COLMAP's default."""
+    try:
+        from PIL import Image  # a dependency of matplotlib
+
+        with Image.open(path) as im:
+            f35 = im.getexif().get_ifd(0x8769).get(0xA405)
+        if f35:
+            return float(f35) / 36.0 * max(width, height)
+    except Exception:  # no EXIF, or a format PIL cannot read: the default prior
+        pass
+    return DEFAULT_FOCAL_FACTOR * max(width, height)
+
+
+def load_views(source: Path | Source) -> list[View]:
+    """The calibrated, posed views of a render entry or a dataset (see the module docstring)."""
+    src = source if isinstance(source, Source) else Source.of(source)
     views = []
-    for i, cam in enumerate(cams):
-        img = cv2.imread(str(entry / f"view_{i:02d}.png"), cv2.IMREAD_COLOR)
-        if img is None:
-            raise BenchError(f"cannot read {entry / f'view_{i:02d}.png'}")
-        views.append(View(i, img[..., ::-1].copy(), cam))
+    for i, (name, cam) in enumerate(read_colmap_model(src.model)):
+        img = read_image(src.images / name)
+        if img.shape[:2] != (cam.height, cam.width):
+            raise BenchError(
+                f"{src.images / name} is {img.shape[1]}x{img.shape[0]}, its camera says "
+                f"{cam.width}x{cam.height}"
+            )
+        views.append(View(i, name, img, cam))
+    return views
+
+
+def image_files(folder: Path) -> list[str]:
+    """The JPEG and PNG files of a folder (recursively), as sorted relative names."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise BenchError(f"image folder {folder} does not exist")
+    return sorted(
+        p.relative_to(folder).as_posix()
+        for p in folder.rglob("*")
+        if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()
+    )
+
+
+def load_image_folder(folder: Path, model: Path | None = None) -> list[View]:
+    """Every image of a folder: posed from a COLMAP model when one is given (only its
+    images), else unposed with the focal-length prior. At least two images."""
+    folder = Path(folder)
+    if model is not None:
+        views = load_views(Source(folder, Path(model)))
+    else:
+        views = []
+        for i, name in enumerate(image_files(folder)):
+            img = read_image(folder / name)
+            h, w = img.shape[:2]
+            f = focal_prior(folder / name, w, h)
+            cam = Camera(w, h, f, f, w / 2, h / 2, np.eye(3), np.zeros(3))
+            views.append(View(i, name, img, cam, posed=False))
+    if len(views) < 2:
+        raise BenchError(f"{folder} holds {len(views)} usable image(s); at least two are needed")
     return views

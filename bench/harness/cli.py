@@ -1,4 +1,5 @@
-"""The `bench` command line: scenes, render, run, plot, gallery."""
+"""The `bench` command line: scenes, render, run, plot, publish, gallery, train-weights,
+select, export."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from pathlib import Path
 from bench import DISTRIBUTION, ROOT, BenchError, __version__
 from bench.console import log
 from bench.frontend.features import DETECTORS, DetectorConfig
-from bench.frontend.policies import PolicyConfig
+from bench.frontend.policies import SHIPPED_WEIGHTS, PolicyConfig
 from bench.render.config import QUICK_RENDER, VARIANTS, RenderConfig
 
 
@@ -137,25 +138,43 @@ def cmd_run(args: argparse.Namespace) -> None:
         if getattr(args, f.name) is not None
     }
     render = dataclasses.replace(render, **overrides)
+    modules = tuple(str(Path(m).resolve()) for m in args.policy_module)
     run = RunConfig(
         render=render,
         detector=DetectorConfig(detector=args.detector),
         policy=PolicyConfig(
-            weights=parse_list("--weights", args.weights, float, "0.28,0.27,0.22,0.19,0.20")
+            weights=parse_list("--weights", args.weights, float, "0.28,0.27,0.22,0.19,0.20"),
+            modules=modules,
         ),
     )
-    seeds = args.seeds if args.seeds is not None else ("0" if args.quick else "0,1,2")
+    policies = parse_list("--policies", args.policies, str, "texture,adaptive")
+    if args.dataset is not None:
+        dataset = dataset_arg(args.dataset)
+        scenes, seeds = (dataset.name,), (0,)
+        policies = tuple(p for p in policies if p != "oracle" or has_pixel_truth(dataset))
+    else:
+        seeds = parse_list(
+            "--seeds", args.seeds or ("0" if args.quick else "0,1,2"), int, "0,1,2 or 100-119"
+        )
+        scenes = parse_list("--scenes", args.scenes, str, "table,facade")
     budget = args.budget if args.budget is not None else ("256" if args.quick else "128,256,512")
     cfg = BenchConfig(
-        parse_list("--scenes", args.scenes, str, "table,facade"),
-        parse_list("--seeds", seeds, int, "0,1,2 or 100-119"),
-        parse_list("--policies", args.policies, str, "texture,adaptive"),
+        scenes,
+        seeds,
+        policies,
         parse_list("--budget", budget, int, "128,256,512"),
         parse_list("--tasks", args.tasks, str, "tri"),
         parse_list("--protocols", args.protocols, str, "multiview,twoview"),
         run,
+        str(dataset) if args.dataset is not None else None,
     )
-    results = args.results or (QUICK if args.quick else LATEST)
+    results = args.results or (
+        QUICK
+        if args.quick
+        else LATEST.with_name(f"dataset-{dataset.name}")
+        if args.dataset
+        else LATEST
+    )
     if args.workers is not None and args.workers < 1:
         raise BenchError(f"--workers must be at least 1, got {args.workers}")
     workers = args.workers or default_workers()
@@ -193,6 +212,72 @@ def cmd_publish(args: argparse.Namespace) -> None:
     from bench.harness.report import publish
 
     print(f"published {publish(args.results, args.to)} files of {args.results} in {args.to}")
+
+
+def dataset_arg(path: Path) -> Path:
+    """A `--dataset` folder, checked: `images/` and a model in `sparse/`."""
+    from bench.frontend.views import Source
+
+    Source.of(path)  # a clear error if it is not a dataset
+    if (Path(path) / "meta.json").is_file():
+        raise BenchError(f"{path} is a render entry; --dataset takes DIR with images/ and sparse/")
+    return Path(path).resolve()
+
+
+def has_pixel_truth(dataset: Path) -> bool:
+    """Whether a dataset has per-pixel ground truth (which the oracle needs)."""
+    from bench.evaluation.groundtruth import TRUTH_DIR
+    from bench.frontend.views import read_colmap_model
+
+    ok = all(
+        (dataset / TRUTH_DIR / f"{n}.npz").is_file()
+        for n, _ in read_colmap_model(dataset / "sparse")
+    )
+    if not ok:
+        log(f"{dataset} has no per-pixel ground truth: the oracle is left out")
+    return ok
+
+
+def cmd_train_weights(args: argparse.Namespace) -> None:
+    from bench.harness.pipeline import RunConfig
+    from bench.harness.training import train_weights
+    from bench.scenes.spec import load_spec
+
+    seeds = parse_list("--seeds", args.seeds, int, "100-119")
+    scenes = parse_list("--scenes", args.scenes, str, "table,facade")
+    for s in scenes:
+        load_spec(s)
+    w = train_weights(list(scenes), list(seeds), RunConfig(), args.renders, args.out)
+    for k, v in w["weights"].items():
+        print(f"{k:<16} learned {v:+.3f}   paper {w['paper_weights'][k]:+.2f}")
+
+
+def cmd_select(args: argparse.Namespace) -> None:
+    from bench.harness.select import select_to_database
+
+    if args.budget <= 0:
+        raise BenchError(f"--budget must be positive, got {args.budget}")
+    out = select_to_database(
+        args.images,
+        args.out,
+        args.policy,
+        args.budget,
+        cameras=args.cameras,
+        match=args.match,
+        overlays=args.overlays,
+        policy_modules=tuple(args.policy_module),
+    )
+    print(out)
+
+
+def cmd_export(args: argparse.Namespace) -> None:
+    from bench.harness.export import export_dataset
+    from bench.render.entry import render_scene
+
+    entry = render_scene(
+        args.scene, args.seed, config_from_args(RenderConfig, args).validate(), args.renders
+    )
+    print(export_dataset(entry, args.out))
 
 
 LATEST, QUICK, PUBLISHED = Path("results/latest"), Path("results/quick"), Path("results/published")
@@ -299,6 +384,25 @@ def build_parser() -> argparse.ArgumentParser:
         "--quick", action="store_true", help="smoke run: tiny renders, one seed, budget 256"
     )
     u.add_argument(
+        "--dataset",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="benchmark on a dataset in the COLMAP layout instead of the rendered scenes: "
+        "DIR/images/, the ground-truth poses in DIR/sparse/ (cameras.txt, images.txt), "
+        "optionally DIR/ground_truth/points.ply (point accuracy) and per-image "
+        "DIR/ground_truth/<image>.npz (tracks, completeness, oracle); results default to "
+        "./results/dataset-<name>",
+    )
+    u.add_argument(
+        "--policy-module",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="a Python file whose @policy functions are registered (repeatable); see "
+        "examples/my_policy.py",
+    )
+    u.add_argument(
         "--detector",
         default="sift",
         choices=DETECTORS,
@@ -362,6 +466,83 @@ def build_parser() -> argparse.ArgumentParser:
         "--to", type=Path, default=PUBLISHED, help=f"snapshot folder (default: ./{PUBLISHED})"
     )
     pb.set_defaults(func=cmd_publish)
+
+    tw = sub.add_parser(
+        "train-weights",
+        help="fit the `learned` policy's weights on training seeds",
+        description="Render (or reuse) every scene at the training seeds, match and "
+        "triangulate each whole candidate pool with the known poses, label every candidate "
+        "by whether it observes a point within 0.10 of the ground-truth surface, and fit a "
+        "logistic model of that label on the five adaptive signals. Writes the weights with "
+        "their provenance (seeds, scenes, code hash, settings). A benchmark whose seeds meet "
+        "the training seeds is refused.",
+    )
+    tw.add_argument("--seeds", default="100-102", help="training seeds (default: %(default)s)")
+    tw.add_argument(
+        "--scenes", default=",".join(scene_names()), help="scene types (default: %(default)s)"
+    )
+    tw.add_argument(
+        "--out",
+        type=Path,
+        default=SHIPPED_WEIGHTS,
+        help="weights file (default: the one shipped with the package, %(default)s)",
+    )
+    _renders_arg(tw)
+    tw.set_defaults(func=cmd_train_weights)
+
+    se = sub.add_parser(
+        "select",
+        help="select B keypoints per image of your own photographs into a COLMAP database",
+        description="Detect the candidate pool on every JPEG/PNG image in DIR (two or more, "
+        "any size), compute the signals, select B per image with POLICY and write "
+        "OUT/database.db: cameras, images, the selected keypoints and their SIFT descriptors "
+        "in COLMAP's format (COLMAP's matchers and mapper accept it). Calibration from "
+        "--cameras (a COLMAP model with poses) or else one camera per image size from the "
+        "focal-length prior (EXIF 35 mm equivalent, else 1.2 x max(width, height)); without "
+        "poses the parallax, cross-view ambiguity and epipolar signals are off.",
+    )
+    se.add_argument("--images", type=Path, required=True, metavar="DIR", help="image folder")
+    se.add_argument("--policy", default="adaptive", help="selection policy (default: %(default)s)")
+    se.add_argument(
+        "--budget", type=int, default=1024, help="keypoints per image (default: %(default)s)"
+    )
+    se.add_argument("--out", type=Path, required=True, metavar="OUT", help="output folder")
+    se.add_argument(
+        "--cameras",
+        type=Path,
+        default=None,
+        metavar="MODEL",
+        help="COLMAP text model (folder with cameras.txt and images.txt) giving intrinsics and "
+        "poses",
+    )
+    se.add_argument(
+        "--match",
+        action="store_true",
+        help="also write the matches and verified two-view geometries (colmap mapper runs on "
+        "the database directly)",
+    )
+    se.add_argument(
+        "--overlays", action="store_true", help="write OUT/overlays/<image>.png of each selection"
+    )
+    se.add_argument(
+        "--policy-module", action="append", default=[], metavar="FILE", help="as for `bench run`"
+    )
+    se.set_defaults(func=cmd_select)
+
+    ex = sub.add_parser(
+        "export",
+        help="write a rendered scene as a dataset in the COLMAP layout (for `bench run --dataset`)",
+        description="Render (or reuse) SCENE at --seed and write OUT/images/, the ground-truth "
+        "model OUT/sparse/ (cameras.txt, images.txt, points3D.txt), the ground-truth point "
+        "cloud OUT/ground_truth/points.ply and per-image OUT/ground_truth/<image>.npz (z, "
+        "position).",
+    )
+    ex.add_argument("scene", metavar="SCENE", help="scene type (see `bench scenes`)")
+    ex.add_argument("--seed", type=int, default=0, help="scene seed (default: %(default)s)")
+    ex.add_argument("--out", type=Path, required=True, metavar="DIR", help="dataset folder")
+    add_config_args(ex, RenderConfig)
+    _renders_arg(ex)
+    ex.set_defaults(func=cmd_export)
 
     g = sub.add_parser(
         "gallery",

@@ -25,8 +25,7 @@ from pathlib import Path
 
 from bench import BenchError
 from bench.backend.peers import PEERS
-from bench.evaluation.groundtruth import load_ground_truth
-from bench.evaluation.metrics import SceneTruth
+from bench.evaluation.metrics import load_truth
 from bench.frontend.stage import front_end
 from bench.harness.pipeline import RunConfig, row_identity, run_peer_unit, run_unit
 
@@ -39,7 +38,8 @@ def _scene(entry: Path, cfg: RunConfig, renders: Path):
     if _HELD.get("key") != key:
         _HELD.clear()  # let the previous scene go before loading the next
         fe = front_end(entry, cfg.detector, cfg.signals, renders / "frontend")
-        truth = SceneTruth.build([v.camera for v in fe.views], load_ground_truth(entry), fe.pools)
+        cams, names = [v.camera for v in fe.views], [v.name for v in fe.views]
+        truth = load_truth(entry, cams, names, fe.pools)
         _HELD.update(key=key, fe=fe, truth=truth)
     return _HELD["fe"], _HELD["truth"]
 

@@ -51,8 +51,8 @@ def figure3(t1: pd.DataFrame, out: Path, title: str = "") -> None:
     95% bootstrap intervals."""
     b = headline_budget(t1)
     t = t1[(t1["budget"] == b) | (t1["budget"] == 0)].reset_index(drop=True)
-    fig, axes = plt.subplots(3, 3, figsize=(15, 11))
-    colors = plt.cm.tab10(np.arange(len(t)))
+    fig, axes = plt.subplots(3, 3, figsize=(max(15, len(t)), 11))
+    colors = plt.cm.tab20(np.arange(len(t)) % 20)
     for ax, (m, label) in zip(axes.ravel(), PANELS):
         if m not in t:
             ax.set_visible(False)
@@ -80,7 +80,7 @@ def figure3(t1: pd.DataFrame, out: Path, title: str = "") -> None:
             fontsize=7,
         )
         ax.set_title(label, fontsize=10)
-        if m in LOG_SCALE:
+        if m in LOG_SCALE and (values[ok] > 0).any():
             ax.set_yscale("log")
     fig.suptitle(
         title
@@ -99,6 +99,7 @@ def figure_budget(t1: pd.DataFrame, out: Path) -> None:
         if m not in t1:
             ax.set_visible(False)
             continue
+        ax.set_prop_cycle(color=plt.cm.tab20(np.arange(20)))
         for policy, g in t1[t1["budget"] > 0].groupby("policy", sort=False):
             g = g.sort_values("budget")
             style = {"linestyle": ":", "color": "black"} if policy == ORACLE else {}
@@ -120,9 +121,9 @@ def figure_budget(t1: pd.DataFrame, out: Path) -> None:
         ax.set_xticklabels([str(b) for b in budgets])
         ax.set_xlabel("budget per view")
         ax.set_title(label, fontsize=10)
-        if m in LOG_SCALE:
+        if m in LOG_SCALE and (t1[m] > 0).any():
             ax.set_yscale("log")
-    axes[0, 0].legend(fontsize=7)
+    axes[0, 0].legend(fontsize=6)
     fig.suptitle("Headline metrics against the budget (mean and 95% bootstrap band over runs)")
     fig.tight_layout()
     save(fig, out, ("png",))

@@ -26,7 +26,9 @@ from bench.backend.peers import PEERS
 from bench.backend.reconstruction import PROTOCOLS, check_protocols
 from bench.console import log, progress
 from bench.files import write_text_atomic
-from bench.frontend.policies import check_policies
+from bench.frontend import feedback
+from bench.frontend.policies import check_policies, learned_weights
+from bench.harness import plugins
 from bench.harness.execute import execute
 from bench.harness.pipeline import ORACLE, TASKS, RunConfig
 from bench.harness.report import write_report
@@ -35,7 +37,22 @@ from bench.harness.tables import KEY
 from bench.render.entry import render_scene
 from bench.scenes.spec import load_spec, scene_names
 
-DEFAULT_POLICIES = ("random", "texture", "grid", "adaptive", "all", ORACLE, *PEERS)
+DEFAULT_POLICIES = (
+    "random",
+    "texture",
+    "grid",
+    "adaptive",
+    "response",
+    "ssc",
+    "quadtree",
+    "adaptive-redetect",
+    feedback.NAME,
+    "learned",
+    "cross-view",
+    "all",
+    ORACLE,
+    *PEERS,
+)
 
 
 @dataclass(frozen=True)
@@ -49,11 +66,25 @@ class BenchConfig:
     tasks: tuple[str, ...] = TASKS
     protocols: tuple[str, ...] = tuple(PROTOCOLS)
     run: RunConfig = field(default_factory=RunConfig)
+    dataset: str | None = None
+    """A dataset folder (`bench run --dataset`) instead of rendered scenes: its one scene
+    is the folder's name, with seed 0."""
 
     def validate(self) -> BenchConfig:
-        for s in self.scenes:
-            load_spec(s)
-        check_policies([p for p in self.policies if p not in (ORACLE, *PEERS)])
+        if self.dataset is None:
+            for s in self.scenes:
+                load_spec(s)
+        plugins.load(self.run.policy.modules)
+        check_policies(self.policies, extra=(feedback.NAME, ORACLE, *PEERS))
+        if "learned" in self.policies and self.dataset is None:
+            trained = set(learned_weights(self.run.policy.learned_weights)["seeds"])
+            shared = sorted(trained & set(self.seeds))
+            if shared:
+                raise BenchError(
+                    f"the learned weights were trained on seed(s) {shared}, which are also "
+                    "evaluation seeds; evaluate on other seeds, or train on others "
+                    "(bench train-weights --seeds ...)"
+                )
         check_protocols(self.protocols)
         unknown = [t for t in self.tasks if t not in TASKS]
         if unknown or not self.tasks:
@@ -140,7 +171,11 @@ def run_benchmark(
     with progress("render", len(pending)) as bar:
         for sc, sd in pending:
             t = time.perf_counter()
-            entries[sc, sd] = render_scene(sc, sd, cfg.run.render, renders)
+            entries[sc, sd] = (
+                Path(cfg.dataset)
+                if cfg.dataset is not None
+                else render_scene(sc, sd, cfg.run.render, renders)
+            )
             stage_s["render"] += time.perf_counter() - t
             bar.set_postfix_str(f"{sc} seed {sd}")
             bar.update()

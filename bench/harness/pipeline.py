@@ -26,7 +26,6 @@ from bench.backend.matching import BackendConfig, match_and_verify
 from bench.backend.peers import PEERS, run_peer
 from bench.backend.reconstruction import (
     PROTOCOLS,
-    image_names,
     known_pose_model,
     known_pose_task,
     mapping_task,
@@ -35,12 +34,20 @@ from bench.evaluation import groundtruth, metrics, oracle, poses
 from bench.evaluation.metrics import SceneTruth, coverage_pct, evaluate_known_pose, match_metrics
 from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.evaluation.poses import evaluate_mapping
-from bench.files import content_key, source_hash, temp_dir_beside
-from bench.frontend import features, policies, signals, stage
+from bench.files import content_key, source_hash, temp_dir_beside, write_text_atomic
+from bench.frontend import features, feedback, policies, signals, stage, views
 from bench.frontend.features import DetectorConfig
-from bench.frontend.policies import SIGNALS_USED, PolicyConfig, PolicyInput, select
+from bench.frontend.policies import (
+    SIGNALS_USED,
+    PolicyConfig,
+    PolicyInput,
+    select,
+    weights_file,
+)
 from bench.frontend.signals import SignalConfig
 from bench.frontend.stage import FrontEnd
+from bench.frontend.views import Source
+from bench.harness import plugins
 from bench.render.config import RenderConfig
 
 TASKS = ("tri", "sfm")
@@ -57,9 +64,12 @@ def code_hash() -> str:
     """Hash of the source of every stage that produces a row's numbers after the render
     (whose code is in the render key): front end, back end, evaluation and this module."""
     return source_hash(
+        views,
         features,
         signals,
         policies,
+        feedback,
+        plugins,
         stage,
         matching,
         reconstruction,
@@ -88,7 +98,16 @@ class RunConfig:
 
     @property
     def hash(self) -> str:
-        return content_key({"settings": self.as_dict(), "code": code_hash()})
+        """Of the settings, the code, the learned weights and any outside policy module."""
+        return content_key(
+            {
+                "settings": self.as_dict(),
+                "code": code_hash(),
+                "inputs": plugins.files_hash(
+                    [weights_file(self.policy.learned_weights), *self.policy.modules]
+                ),
+            }
+        )
 
 
 def policy_rng(seed: int, policy: str, budget: int, view: int) -> np.random.Generator:
@@ -98,13 +117,26 @@ def policy_rng(seed: int, policy: str, budget: int, view: int) -> np.random.Gene
 
 def select_features(
     fe: FrontEnd, truth: SceneTruth, policy: str, budget: int, seed: int, cfg: RunConfig
-) -> tuple[list[np.ndarray], float]:
-    """Every view's selection, and the seconds it took."""
+) -> tuple[list[np.ndarray], float, list[dict]]:
+    """Every view's selection, the seconds it took, and the feedback loop's rounds (none
+    for other policies)."""
     t = time.perf_counter()
+    rounds: list[dict] = []
     if policy == ORACLE:
         tracks = matchable_tracks(truth, fe.pools, cfg.backend.ratio)
         sel = oracle_select(tracks, [c.response for c in fe.pools], budget)
+    elif policy == feedback.NAME:
+        cams = [v.camera for v in fe.views]
+
+        def match(selection):
+            xy = [c.xy[s] for c, s in zip(fe.pools, selection)]
+            desc = [c.descriptors[s] for c, s in zip(fe.pools, selection)]
+            return match_and_verify(cams, xy, desc, cfg.backend)[0]
+
+        inputs = [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
+        sel, rounds = feedback.feedback_select(inputs, budget, cfg.policy, match)
     else:
+        plugins.load(cfg.policy.modules)
         sel = [
             select(
                 policy,
@@ -115,7 +147,12 @@ def select_features(
             )
             for v, c, s in zip(fe.views, fe.pools, fe.signals)
         ]
-    return sel, time.perf_counter() - t
+    return sel, time.perf_counter() - t, rounds
+
+
+def signals_used(policy: str) -> tuple[str, ...]:
+    """The signals a policy reads (for its front-end cost)."""
+    return feedback.SIGNALS_USED if policy == feedback.NAME else SIGNALS_USED.get(policy, ())
 
 
 def export_model(model, out: Path) -> None:
@@ -159,18 +196,22 @@ def run_unit(
 ) -> list[dict]:
     """One row per (task, protocol) in `jobs`: identification, every metric, stage timings
     (ms) and a failure reason if any."""
-    selections, select_s = select_features(fe, truth, policy, budget, seed, cfg)
+    selections, select_s, rounds = select_features(fe, truth, policy, budget, seed, cfg)
     cams = [v.camera for v in fe.views]
+    names = [v.name for v in fe.views]
+    image_dir = Source.of(entry).images
     xy = [c.xy[s] for c, s in zip(fe.pools, selections)]
     desc = [c.descriptors[s] for c, s in zip(fe.pools, selections)]
     pairs, match_s = match_and_verify(cams, xy, desc, cfg.backend)
-    n_signals = len(SIGNALS_USED.get(policy, ()))
+    used = signals_used(policy)
     t = time.perf_counter()
-    shared = match_metrics(truth, fe.pools, selections, pairs, n_signals)
+    earlier = [(r["selected"], r["pair_tentative"], r["pair_verified"]) for r in rounds]
+    shared = match_metrics(truth, fe.pools, selections, pairs, len(used), earlier)
+    shared["ground_truth"] = truth.kind
     shared_eval_s = time.perf_counter() - t
     seconds = {
         "detect": fe.seconds["detect"],
-        "signals": sum(fe.seconds[s] for s in SIGNALS_USED.get(policy, ())),
+        "signals": sum(fe.seconds[s] for s in used),
         "select": select_s,
         "match": match_s["match"],
         "verify": match_s["verify"],
@@ -180,27 +221,30 @@ def run_unit(
     for task, protocol in jobs:
         out = model_dir(results, scene, seed, policy, budget, task, protocol)
         if task == "tri":
-            rec = known_pose_task(entry, cams, xy, pairs, cfg.backend, protocol)
-            model = (
-                rec.model
-                if rec.model is not None
-                else known_pose_model(cams, image_names(len(cams)), xy)
-            )
+            rec = known_pose_task(image_dir, cams, names, xy, pairs, cfg.backend, protocol)
+            model = rec.model if rec.model is not None else known_pose_model(cams, names, xy)
             export_model(model, out)
         else:
-            rec = mapping_task(entry, cams, xy, pairs, cfg.backend, protocol)
+            rec = mapping_task(image_dir, cams, names, xy, pairs, cfg.backend, protocol)
             _export_or_clear(rec.model, out)
         t = time.perf_counter()
         if task == "tri":
             scores = evaluate_known_pose(truth, rec.model, PROTOCOLS[protocol])
         else:
-            scores = evaluate_mapping(truth, rec.model, _view_of_name(len(cams)))
+            scores = evaluate_mapping(truth, rec.model, _view_of_name(names))
         timing = seconds | {
             "task": rec.seconds,
             "evaluate": time.perf_counter() - t,
         }
         ident = (entry, scene, seed, policy, budget, task, protocol, cfg)
         rows.append(_row(ident, shared | scores, timing, rec.failure))
+    if rounds:
+        headline = model_dir(results, scene, seed, policy, budget, "tri", "multiview")
+        headline.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(
+            headline / "loop.json",
+            json.dumps(rounds, indent=1),
+        )
     return rows
 
 
@@ -217,30 +261,32 @@ def run_peer_unit(
     results: Path,
 ) -> list[dict]:
     """The rows (task `sfm`, one per protocol) of a stock-COLMAP peer (`bench.backend.peers`)."""
-    cam = fe.views[0].camera
-    names = image_names(len(fe.views))
-    run = run_peer(Path(entry), names, cam, budget, cfg.backend, [pr for _, pr in jobs])
+    names = [v.name for v in fe.views]
+    cams = [v.camera for v in fe.views]
+    image_dir = Source.of(entry).images
+    run = run_peer(image_dir, names, cams, budget, cfg.backend, [pr for _, pr in jobs])
     shared = {
         "tentative_matches": run.tentative,
         "verified_matches": run.verified,
         "inlier_pct": 100.0 * run.verified / run.tentative if run.tentative else math.nan,
-        "coverage_pct": coverage_pct(run.keypoints, cam.width, cam.height),
+        "coverage_pct": coverage_pct(run.keypoints, cams),
         "keypoints_per_view": float(np.mean([len(k) for k in run.keypoints])),
+        "ground_truth": truth.kind,
     }
     rows = []
     for task, protocol in jobs:
         rec = run.recs[protocol]
         _export_or_clear(rec.model, model_dir(results, scene, seed, peer, budget, task, protocol))
         t = time.perf_counter()
-        scores = evaluate_mapping(truth, rec.model, _view_of_name(len(names)))
+        scores = evaluate_mapping(truth, rec.model, _view_of_name(names))
         timing = run.seconds | {"task": rec.seconds, "evaluate": time.perf_counter() - t}
         ident = (entry, scene, seed, peer, budget, task, protocol, cfg)
         rows.append(_row(ident, shared | scores, timing, rec.failure))
     return rows
 
 
-def _view_of_name(n: int) -> dict[str, int]:
-    return {name: k for k, name in enumerate(image_names(n))}
+def _view_of_name(names: list[str]) -> dict[str, int]:
+    return {name: k for k, name in enumerate(names)}
 
 
 def _export_or_clear(model, out: Path) -> None:
@@ -268,11 +314,16 @@ def row_identity(ident: tuple) -> dict:
 
 
 def _row(ident: tuple, metrics: dict, timing: dict[str, float], failure: str | None) -> dict:
-    meta = json.loads((Path(ident[0]) / "meta.json").read_text())
+    meta = Path(ident[0]) / "meta.json"  # a render entry's; a dataset has none
+    render_s = (
+        float(np.mean(json.loads(meta.read_text())["seconds_per_view"]))
+        if meta.is_file()
+        else math.nan
+    )
     row = {
         **row_identity(ident),
         **metrics,
-        "render_s_per_view": float(np.mean(meta["seconds_per_view"])),
+        "render_s_per_view": render_s,
         **{f"{k}_ms": 1000 * v for k, v in timing.items()},
         "wall_ms": 1000 * sum(v for k, v in timing.items() if not k.startswith("evaluate")),
         "status": "ok" if failure is None else "failed",

@@ -2,7 +2,8 @@
 model and the cached render). Nothing here renders or reconstructs.
 
 Written files: `table1.csv` (headline task and protocol), `table1_twoview.csv`,
-`table2.csv`, `paired.csv` (`bench.harness.tables`), `figure3.png/.pdf`,
+`table2.csv`, `paired.csv`, `table_scenes.csv`, `frontend_cost.csv`
+(`bench.harness.tables`), `figure3.png/.pdf`,
 `figure_budget.png` (with several budgets) and `figure2.png` (`bench.harness.figures`).
 A figure that cannot be drawn from these rows is removed, never left stale.
 """
@@ -18,7 +19,15 @@ from bench.console import log
 from bench.files import write_text_atomic
 from bench.harness.figures import figure2, figure3, figure_budget
 from bench.harness.runs import read_runs
-from bench.harness.tables import headline_frame, paired, table1, table2, with_oracle_share
+from bench.harness.tables import (
+    frontend_cost,
+    headline_frame,
+    paired,
+    table1,
+    table2,
+    table_scenes,
+    with_oracle_share,
+)
 
 
 def _drop(*paths: Path) -> None:
@@ -37,6 +46,8 @@ def write_report(df: pd.DataFrame, results: Path, renders: Path) -> None:
         "table1_twoview.csv": table1(headline_frame(df, "twoview")),
         "table2.csv": table2(frame, pairs),
         "paired.csv": pairs,
+        "table_scenes.csv": table_scenes(frame) if len(frame) else pd.DataFrame(),
+        "frontend_cost.csv": frontend_cost(df),
     }
     for name, t in tables.items():
         if t.empty:
@@ -59,7 +70,14 @@ def write_report(df: pd.DataFrame, results: Path, renders: Path) -> None:
 
 
 PUBLISHED_FILES = ("runs.csv", "config.json", "manifest.json", "scenes.png")
-REPORT_FILES = ("table1.csv", "table1_twoview.csv", "table2.csv", "paired.csv")
+REPORT_FILES = (
+    "table1.csv",
+    "table1_twoview.csv",
+    "table2.csv",
+    "paired.csv",
+    "table_scenes.csv",
+    "frontend_cost.csv",
+)
 FIGURES = ("figure2.png", "figure3.png", "figure3.pdf", "figure_budget.png")
 
 

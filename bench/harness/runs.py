@@ -33,7 +33,7 @@ from bench.harness.pipeline import TASKS
 from bench.harness.tables import KEY
 
 TEXT_COLUMNS = ("scene", "policy", "task", "protocol", "render_key", "config_hash", "status")
-TEXT_COLUMNS += ("failure", "invocation")
+TEXT_COLUMNS += ("failure", "invocation", "ground_truth")
 REQUIRED = (*KEY, "render_key", "config_hash", "status", "failure", "invocation", "wall_ms")
 OK_NEEDS = {"tri": ("points", "acc_completeness_pct"), "sfm": ("maa", "registered_views")}
 """The metrics an `ok` row of each task must have."""
@@ -73,7 +73,10 @@ def _row_problem(row: dict[str, str]) -> str | None:
         return None if row["failure"] else "a failed row without a reason"
     if row["status"] != "ok":
         return f"status {row['status']!r} is neither ok nor failed"
-    for k in OK_NEEDS[row["task"]]:
+    needs = OK_NEEDS[row["task"]]
+    if row.get("ground_truth") in ("poses", "point cloud"):  # a dataset without pixel truth
+        needs = tuple(k for k in needs if k != "acc_completeness_pct")
+    for k in needs:
         if k not in row or not row[k] or not math.isfinite(float(row[k])):
             return f"an ok {row['task']} row without {k}"
     return None

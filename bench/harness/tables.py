@@ -10,9 +10,15 @@
   same scene, seed and budget (the oracle is the ground-truth selection under the same
   budget, `bench.evaluation.oracle`).
 * `table2.csv`: per scene (and all scenes pooled) and budget, adaptive against the best
-  baseline (random, texture, grid; never a reference) for each headline metric, with the
-  paired difference to that baseline. `paired.csv`: adaptive against every baseline, per
-  scene and pooled, for every headline metric.
+  baseline (random, texture, grid and the field's selectors response, ssc, quadtree; never
+  a reference) for each headline metric, with the paired difference to that baseline.
+  `paired.csv`: adaptive against every other policy that is not a reference, per scene
+  and pooled, for every headline metric.
+* `table_scenes.csv`: per scene, policy and budget, the mean over seeds of the headline
+  metrics and the sfm task's mAA and registered views.
+* `frontend_cost.csv`: per policy, the measured front-end time of a run (detection, the
+  signals the policy reads, and its selection, which for `adaptive-loop` includes its
+  matching rounds), in ms and relative to texture-only in the same units.
 
 A run that reconstructed nothing has no rmse (left out of that mean; `failed_runs` counts
 such runs) and zero completeness (kept in the completeness mean).
@@ -33,13 +39,20 @@ DISPLAY = {
     "random": "Random budget",
     "texture": "Texture-only",
     "grid": "Uniform grid",
+    "response": "Detector response (top-B)",
+    "ssc": "SSC (Bailo 2018)",
+    "quadtree": "Quadtree (ORB-SLAM)",
     "adaptive": "Adaptive optimized",
+    "adaptive-redetect": "Adaptive, re-detection repeatability",
+    "adaptive-loop": "Adaptive feedback loop",
+    "learned": "Learned weights",
+    "cross-view": "Adaptive + epipolar signal",
     "all": "All candidates (reference)",
     ORACLE: "Oracle (ground truth, reference)",
     "colmap": "COLMAP default SIFT (peer)",
     "colmap-b": "COLMAP SIFT capped at B (peer)",
 }
-BASELINES = ("random", "texture", "grid")
+BASELINES = ("random", "texture", "grid", "response", "ssc", "quadtree")
 CONTENDER = "adaptive"
 HEADLINE = ("tri", "multiview")
 """The headline task and track protocol."""
@@ -209,3 +222,35 @@ def table2(rows: pd.DataFrame, pairs: pd.DataFrame) -> pd.DataFrame:
             "best_baseline_acc_completeness_pct_policy": "best_baseline_acc_completeness_policy",
         }
     )
+
+
+SCENE_METRICS = ("acc_completeness_pct", "accuracy_pct", "rmse", "points", "coverage_pct")
+
+
+def table_scenes(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per scene, policy and budget: means over seeds (`rows`: `headline_frame`)."""
+    cols = [m for m in (*SCENE_METRICS, "sfm_maa", "sfm_registered_views") if m in rows]
+    t = rows.groupby(["scene", "policy", "budget"], sort=False)[cols].mean().reset_index()
+    t.insert(3, "seeds", rows.groupby(["scene", "policy", "budget"], sort=False).size().values)
+    order = t.apply(lambda r: (r["scene"], r["budget"], _policy_order(r["policy"])), axis=1)
+    return t.loc[order.sort_values().index].reset_index(drop=True)
+
+
+def frontend_cost(df: pd.DataFrame) -> pd.DataFrame:
+    """Per policy: mean front-end ms of a run (detect + its signals + select) and the mean
+    ratio to texture-only over the units both ran (headline task and protocol)."""
+    rows = df[(df["task"] == HEADLINE[0]) & (df["protocol"] == HEADLINE[1])]
+    rows = rows[~rows["policy"].isin([ORACLE, *REFERENCES])]
+    if rows.empty or not {"detect_ms", "signals_ms", "select_ms"} <= set(rows):
+        return pd.DataFrame()
+    front = rows.set_index(["scene", "seed", "budget", "policy"])[
+        ["detect_ms", "signals_ms", "select_ms"]
+    ].sum(axis=1)
+    out = []
+    for policy, g in front.groupby(level="policy", sort=False):
+        units = g.droplevel("policy")
+        tex = front.xs("texture", level="policy") if "texture" in set(rows["policy"]) else None
+        ratio = (units / tex.reindex(units.index)).mean() if tex is not None else math.nan
+        out.append({"policy": policy, "frontend_ms": units.mean(), "ratio_to_texture": ratio})
+    t = pd.DataFrame(out)
+    return t.iloc[t["policy"].map(_policy_order).argsort(kind="stable")].reset_index(drop=True)

@@ -1,0 +1,105 @@
+"""`bench select`: the front end in front of classical SfM, on the user's own photographs.
+
+images (+ optional COLMAP model) -> candidates and signals -> B per image by a policy ->
+OUT/database.db (cameras, images, selected keypoints, COLMAP-format SIFT descriptors;
+with `match`, also matches and verified two-view geometries) and, with `overlays`,
+OUT/overlays/<image>.png. The database is written under a temporary name, then renamed.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from bench import BenchError
+from bench.backend.matching import BackendConfig, match_and_verify
+from bench.backend.reconstruction import write_database
+from bench.console import log, progress
+from bench.frontend import feedback
+from bench.frontend.features import DetectorConfig, detect
+from bench.frontend.policies import PolicyConfig, PolicyInput, check_policies, select
+from bench.frontend.signals import SignalConfig, compute_signals
+from bench.frontend.views import load_image_folder
+from bench.harness import plugins
+from bench.harness.pipeline import policy_rng
+
+
+def select_to_database(
+    images: Path,
+    out: Path,
+    policy: str,
+    budget: int,
+    cameras: Path | None = None,
+    match: bool = False,
+    overlays: bool = False,
+    policy_modules: tuple[str, ...] = (),
+) -> Path:
+    """Write OUT/database.db (module docstring); returns its path."""
+    plugins.load(policy_modules)
+    check_policies([policy], extra=(feedback.NAME,))
+    det, cfg, backend = DetectorConfig(), PolicyConfig(), BackendConfig()
+    t = time.perf_counter()
+    views = load_image_folder(images, cameras)
+    if not all(v.posed for v in views):
+        log(
+            "no poses (no --cameras): the parallax, cross-view ambiguity and epipolar signals are off"
+        )
+    with progress("detect", len(views)) as bar:
+        pools = []
+        for v in views:
+            pools.append(detect(v, det))
+            bar.update()
+    sigs, _ = compute_signals(views, pools, det, SignalConfig())
+    inputs = [PolicyInput(v, c, s) for v, c, s in zip(views, pools, sigs)]
+    cams = [v.camera for v in views]
+
+    def matches(selection):
+        xy = [c.xy[s] for c, s in zip(pools, selection)]
+        return match_and_verify(
+            cams, xy, [c.descriptors[s] for c, s in zip(pools, selection)], backend
+        )[0]
+
+    if policy == feedback.NAME:
+        sel, _ = feedback.feedback_select(inputs, budget, cfg, matches)
+    else:
+        sel = [
+            select(policy, i, budget, policy_rng(0, policy, budget, k), cfg)
+            for k, i in enumerate(inputs)
+        ]
+    pairs = matches(sel) if match else []
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    db = out / "database.db"
+    tmp = out / f".database.{os.getpid()}.tmp.db"
+    try:
+        write_database(
+            tmp,
+            cams,
+            [v.name for v in views],
+            [c.xy[s] for c, s in zip(pools, sel)],
+            pairs,
+            [c.descriptors[s] for c, s in zip(pools, sel)],
+        )
+        tmp.replace(db)
+    except Exception as e:
+        raise BenchError(f"cannot write {db}: {e}") from e
+    finally:
+        tmp.unlink(missing_ok=True)
+    if overlays:
+        for v, c, s in zip(views, pools, sel):
+            path = out / "overlays" / f"{v.name}.png"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            img = np.ascontiguousarray(v.image[..., ::-1])
+            for x, y in c.xy[s] - 0.5:
+                cv2.circle(img, (int(round(x)), int(round(y))), 3, (0, 255, 0), 1, cv2.LINE_AA)
+            cv2.imwrite(str(path), img)
+    n = len(views)
+    log(
+        f"{policy}: {sum(len(s) for s in sel)} keypoints in {n} images "
+        f"({(time.perf_counter() - t) / n:.2f} s per image){', matched' if match else ''}"
+    )
+    return db

@@ -1,0 +1,177 @@
+"""Real photographs in, COLMAP databases out: image folders, datasets in the COLMAP layout,
+`bench export`, `bench run --dataset` and `bench select`."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pandas as pd
+import pycolmap
+import pytest
+
+from bench import BenchError
+from bench.frontend.views import load_image_folder, read_colmap_model
+from bench.harness.cli import main
+from bench.harness.export import export_dataset
+from bench.harness.grid import BenchConfig, run_benchmark
+from bench.harness.pipeline import RunConfig
+from bench.harness.select import select_to_database
+from bench.harness.tables import KEY
+from tests.conftest import MEDIUM
+
+GRID = dict(seeds=(0,), policies=("texture", "adaptive", "oracle", "colmap-b"), budgets=(64,))
+NOT_COMPARED = {"scene", "render_key", "render_s_per_view", "invocation", "ground_truth"}
+
+
+@pytest.fixture(scope="module")
+def dataset(medium_entry, tmp_path_factory):
+    return export_dataset(medium_entry("table"), tmp_path_factory.mktemp("ds") / "table-ds")
+
+
+def test_export_has_the_colmap_layout_and_reads_back(dataset, medium_entry):
+    assert sorted(p.name for p in (dataset / "images").iterdir()) == [
+        f"view_{k:02d}.png" for k in range(6)
+    ]
+    names = [n for n, _ in read_colmap_model(dataset / "sparse")]
+    assert names == [n for n, _ in read_colmap_model(medium_entry("table"))]
+    assert (dataset / "ground_truth" / "points.ply").is_file()
+    with pytest.raises(BenchError, match="not an earlier export"):
+        export_dataset(medium_entry("table"), dataset / "images")
+
+
+def test_dataset_run_gives_the_metrics_of_the_rendered_path(dataset, renders_dir, tmp_path):
+    run = RunConfig(render=MEDIUM)
+    rendered = run_benchmark(
+        BenchConfig(scenes=("table",), run=run, **GRID), tmp_path / "r", renders_dir, workers=1
+    )
+    data = run_benchmark(
+        BenchConfig(scenes=(dataset.name,), run=run, dataset=str(dataset), **GRID),
+        tmp_path / "d",
+        renders_dir,
+        workers=1,
+    )
+    assert len(rendered) == len(data) == 3 * 4 + 2
+    timing = {c for c in rendered if c.endswith("_ms")}
+    cols = [c for c in rendered.columns if c not in NOT_COMPARED | timing]
+    a = rendered[cols].sort_values(list(KEY[2:]), ignore_index=True)
+    b = data[cols].sort_values(list(KEY[2:]), ignore_index=True)
+    pd.testing.assert_frame_equal(a, b, check_exact=False, rtol=1e-6, check_dtype=False)
+    assert a["acc_completeness_pct"].notna().any() and a["maa"].notna().any()
+
+
+def test_dataset_without_pixel_truth_scores_poses_and_leaves_the_rest_nan(
+    dataset, renders_dir, tmp_path, capsys
+):
+    import shutil
+
+    bare = tmp_path / "bare"
+    shutil.copytree(dataset / "images", bare / "images")
+    shutil.copytree(dataset / "sparse", bare / "sparse")
+    code = main(
+        [
+            "run",
+            "--dataset",
+            str(bare),
+            "--policies",
+            "texture,oracle",
+            "--budget",
+            "64",
+            "--results",
+            str(tmp_path / "res"),
+            "--workers",
+            "1",
+            "--renders",
+            str(renders_dir),
+        ]
+    )
+    assert code == 0
+    assert "no per-pixel ground truth: the oracle is left out" in capsys.readouterr().err
+    runs = pd.read_csv(tmp_path / "res" / "runs.csv")
+    assert set(runs["policy"]) == {"texture"} and set(runs["scene"]) == {"bare"}
+    sfm = runs[runs["task"] == "sfm"]
+    assert sfm["maa"].notna().all() and runs["rmse"].isna().all()
+    assert runs["acc_completeness_pct"].isna().all()
+
+
+def test_select_writes_a_database_colmap_matches(dataset, tmp_path):
+    db_path = select_to_database(
+        dataset / "images",
+        tmp_path / "out",
+        "adaptive",
+        150,
+        cameras=dataset / "sparse",
+        overlays=True,
+    )
+    db = pycolmap.Database.open(str(db_path))
+    try:
+        images = db.read_all_images()
+        assert len(images) == 6
+        for img in images:
+            assert db.read_keypoints(img.image_id).shape[0] == 150
+            d = db.read_descriptors(img.image_id).data
+            assert d.shape == (150, 128) and d.dtype == np.uint8
+    finally:
+        db.close()
+    opts = pycolmap.FeatureMatchingOptions()
+    opts.num_threads = 1
+    pycolmap.match_exhaustive(db_path, matching_options=opts, device=pycolmap.Device.cpu)
+    db = pycolmap.Database.open(str(db_path))
+    try:
+        assert db.num_matches() > 0 and db.num_inlier_matches() > 0
+    finally:
+        db.close()
+    assert (tmp_path / "out" / "overlays" / "view_00.png.png").is_file()
+
+
+def test_select_with_matches_holds_verified_geometries_the_mapper_reads(dataset, tmp_path):
+    db_path = select_to_database(
+        dataset / "images", tmp_path / "o", "adaptive", 200, cameras=dataset / "sparse", match=True
+    )
+    db = pycolmap.Database.open(str(db_path))
+    try:
+        pair_ids, geometries = db.read_two_view_geometries()
+        assert len(pair_ids) >= 3
+        for pid, tvg in zip(pair_ids, geometries):
+            i, j = pycolmap.pair_id_to_image_pair(pid)
+            assert tvg.inlier_matches[:, 0].max() < len(db.read_keypoints(i))
+            assert tvg.inlier_matches[:, 1].max() < len(db.read_keypoints(j))
+    finally:
+        db.close()
+    opts = pycolmap.IncrementalPipelineOptions()
+    opts.num_threads = 1
+    pycolmap.incremental_mapping(db_path, dataset / "images", tmp_path / "m", opts)  # reads it
+
+
+def test_image_folders_of_several_sizes_and_a_bad_file(dataset, tmp_path, capsys):
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    for k, scale in enumerate((1.0, 0.75, 1.0)):
+        img = cv2.imread(str(dataset / "images" / f"view_{k:02d}.png"))
+        cv2.imwrite(str(folder / f"p{k}.jpg"), cv2.resize(img, None, fx=scale, fy=scale))
+    (folder / "broken.jpg").write_bytes(b"not an image")
+    assert (
+        main(["select", "--images", str(folder), "--budget", "40", "--out", str(tmp_path / "o")])
+        == 2
+    )
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "broken.jpg" in err
+    (folder / "broken.jpg").unlink()
+    views = load_image_folder(folder)
+    assert [v.image.shape[:2] for v in views] == [(240, 320), (180, 240), (240, 320)]
+    assert views[1].camera.fx == pytest.approx(1.2 * 240) and not views[0].posed
+    assert (
+        main(["select", "--images", str(folder), "--budget", "40", "--out", str(tmp_path / "o")])
+        == 0
+    )
+    db = pycolmap.Database.open(str(tmp_path / "o" / "database.db"))
+    try:
+        assert db.num_cameras() == 2 and db.num_keypoints() == 3 * 40
+    finally:
+        db.close()
+
+
+def test_distorted_camera_models_are_refused_in_one_line(tmp_path):
+    (tmp_path / "cameras.txt").write_text("1 OPENCV 640 480 500 500 320 240 0.1 0 0 0\n")
+    (tmp_path / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
+    with pytest.raises(BenchError, match="distortion is not supported; undistort"):
+        read_colmap_model(tmp_path)

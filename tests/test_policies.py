@@ -1,0 +1,133 @@
+"""The field's selectors, the feedback loop, learned weights and policies from outside."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from bench import ROOT, BenchError
+from bench.backend.matching import BackendConfig, match_and_verify
+from bench.frontend import feedback
+from bench.frontend.features import DetectorConfig
+from bench.frontend.policies import (
+    POLICIES,
+    SHIPPED_WEIGHTS,
+    PolicyConfig,
+    PolicyInput,
+    select,
+    tile_of,
+)
+from bench.frontend.signals import SignalConfig, depth_priors
+from bench.frontend.stage import front_end
+from bench.harness import plugins
+from bench.harness.grid import BenchConfig
+
+BUDGET = 64
+
+
+@pytest.fixture(scope="module")
+def fe(medium_entry, tmp_path_factory):
+    return front_end(
+        medium_entry("table"), DetectorConfig(), SignalConfig(), tmp_path_factory.mktemp("fe")
+    )
+
+
+def _inputs(fe):
+    return [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
+
+
+def _tiles_used(inp, idx, tiles=(8, 6)):
+    cam = inp.view.camera
+    return len(set(tile_of(inp.candidates.xy[idx], cam.width, cam.height, tiles)))
+
+
+@pytest.mark.parametrize("name", ["ssc", "quadtree"])
+def test_spreading_selectors_cover_more_of_the_image_than_top_response(fe, name):
+    for inp in _inputs(fe):
+        spread = select(name, inp, BUDGET, np.random.default_rng(0))
+        top = select("response", inp, BUDGET, np.random.default_rng(0))
+        assert _tiles_used(inp, spread) > _tiles_used(inp, top)
+
+
+def test_response_takes_the_strongest(fe):
+    inp = _inputs(fe)[0]
+    idx = select("response", inp, BUDGET, np.random.default_rng(0))
+    r = inp.candidates.response
+    assert r[idx].min() >= np.sort(r)[-BUDGET]
+
+
+def test_feedback_loop_meets_the_budget_logs_rounds_and_is_deterministic(fe):
+    cams = [v.camera for v in fe.views]
+
+    def match(sel):
+        xy = [c.xy[s] for c, s in zip(fe.pools, sel)]
+        return match_and_verify(
+            cams, xy, [c.descriptors[s] for c, s in zip(fe.pools, sel)], BackendConfig()
+        )[0]
+
+    cfg = PolicyConfig(loop_rounds=2)
+    sel, rounds = feedback.feedback_select(_inputs(fe), BUDGET, cfg, match)
+    again, _ = feedback.feedback_select(_inputs(fe), BUDGET, cfg, match)
+    assert all(np.array_equal(a, b) for a, b in zip(sel, again))
+    for s, c in zip(sel, fe.pools):
+        assert len(s) == BUDGET == len(set(s.tolist())) and s.max() < len(c)
+    assert [r["round"] for r in rounds] == [0, 1]
+    view = rounds[0]["views"][0]
+    assert len(view["quota"]) == 48 and view["kept"] + sum(view["quota"]) <= BUDGET
+    first = [select("adaptive", i, BUDGET, np.random.default_rng(0)) for i in _inputs(fe)]
+    assert any(not np.array_equal(np.sort(a), np.sort(b)) for a, b in zip(first, sel))
+
+
+def test_learned_weights_are_shipped_with_provenance_and_disjoint_seeds():
+    data = json.loads(SHIPPED_WEIGHTS.read_text())
+    assert {"weights", "seeds", "scenes", "code", "samples"} <= set(data)
+    assert not set(data["seeds"]) & set(BenchConfig().seeds)  # never evaluated on its seeds
+    BenchConfig(scenes=("table",)).validate()
+    with pytest.raises(BenchError, match="trained on seed"):
+        BenchConfig(scenes=("table",), seeds=(0, data["seeds"][0])).validate()
+
+
+def test_depth_prior_from_the_data_matches_the_rendered_depth(fe, medium_entry):
+    from bench.evaluation.groundtruth import load_ground_truth
+
+    depths = depth_priors(fe.views, fe.pools, SignalConfig())
+    for d, gt, c in zip(depths, load_ground_truth(medium_entry("table")), fe.pools):
+        col, row = (c.xy - 0.5).round().astype(int).T
+        true = np.nanmedian(gt.z[row.clip(0, 239), col.clip(0, 319)])  # under the candidates
+        assert 0.8 * true < d < 1.25 * true
+
+
+def test_a_policy_module_registers_and_its_broken_rules_are_named(fe, tmp_path):
+    added = plugins.load_module(str(ROOT / "examples" / "my_policy.py"))
+    assert added == ("center-texture",)
+    inp = _inputs(fe)[0]
+    assert len(select("center-texture", inp, BUDGET, np.random.default_rng(0))) == BUDGET
+    short = tmp_path / "short.py"
+    short.write_text(
+        "from bench.frontend.policies import policy\n"
+        "@policy('short')\n"
+        "def short(inp, budget, rng, cfg):\n"
+        "    return list(range(budget - 1)) + [0]\n"
+    )
+    plugins.load_module(str(short))
+    with pytest.raises(BenchError, match="'distinct indices"):
+        select("short", inp, BUDGET, np.random.default_rng(0))
+    with pytest.raises(BenchError, match="'exact budget"):
+        POLICIES["short2"] = lambda inp, b, rng, cfg: np.arange(b - 1)
+        try:
+            select("short2", inp, BUDGET, np.random.default_rng(0))
+        finally:
+            del POLICIES["short2"]
+    peek = tmp_path / "peek.py"
+    peek.write_text(
+        "from bench.evaluation.groundtruth import load_ground_truth\n"
+        "from bench.frontend.policies import policy\n"
+    )
+    with pytest.raises(BenchError, match="'no ground truth': it imports bench.evaluation"):
+        plugins.load_module(str(peek))
+    files = tmp_path / "files.py"
+    files.write_text("PATH = 'renders/x/gt_00.npz'\n")
+    with pytest.raises(BenchError, match="'no ground truth': it names ground truth"):
+        plugins.load_module(str(files))
