@@ -12,6 +12,7 @@ import argparse
 import time
 
 import numpy as np
+from scipy.stats import spearmanr
 
 from bench import ROOT
 from bench.frontend.features import DetectorConfig, detect
@@ -67,6 +68,8 @@ def main() -> None:
             + sel_ms[policy]
         )
 
+    rho = [spearmanr(s.repeatability, s.repeatability_redetect)[0] for s in sigs]
+    print(f"repeatability estimate vs re-detection: Spearman {np.mean(rho):.2f} (mean over views)")
     for policy in POLICIES:
         print(
             f"front end per view: {policy:<18} {front(policy):6.1f} ms, "

@@ -159,8 +159,24 @@ def test_image_folders_of_several_sizes_and_a_bad_file(dataset, tmp_path, capsys
     views = load_image_folder(folder)
     assert [v.image.shape[:2] for v in views] == [(240, 320), (180, 240), (240, 320)]
     assert views[1].camera.fx == pytest.approx(1.2 * 240) and not views[0].posed
+    small_pool = ["--max-candidates", "60", "--policy", "ssc"]
     assert (
         main(["select", "--images", str(folder), "--budget", "40", "--out", str(tmp_path / "o")])
+        == 0
+    )
+    assert (
+        main(
+            [
+                "select",
+                "--images",
+                str(folder),
+                "--budget",
+                "40",
+                "--out",
+                str(tmp_path / "s"),
+                *small_pool,
+            ]
+        )
         == 0
     )
     db = pycolmap.Database.open(str(tmp_path / "o" / "database.db"))

@@ -1,6 +1,7 @@
 """`adaptive-loop`: the paper's Figure 1 loop, selection revised from its own matches.
 
-Round 0 is the `adaptive` selection. After each round the caller's `match` (matching and
+Round 0 is the `adaptive-fast` selection (the paper's score with the cheap repeatability
+estimate). After each round the caller's `match` (matching and
 COLMAP verification of the selection, as the back end does it) reports every pair's
 tentative and verified matches; from them and the calibration, per selected keypoint:
 its verified track (connected components of the verified matches) and that track's

@@ -185,6 +185,8 @@ def grid_policy(inp, budget, rng, cfg):
 
 
 ADAPTIVE_SIGNALS = ("texture", "repeatability", "distinctiveness", "ambiguity", "parallax")
+"""The signals of `adaptive-fast`, `adaptive-loop`, `learned` and `cross-view`: the paper's
+five with the cheap repeatability estimate."""
 
 
 def capped_greedy(
@@ -213,19 +215,13 @@ def capped_greedy(
     return np.array(picked, dtype=np.int64)
 
 
-@policy("adaptive", ADAPTIVE_SIGNALS)
-def adaptive_policy(inp, budget, rng, cfg):
-    """The paper's score s (with the cheap repeatability estimate) under the soft tile cap
-    of `capped_greedy`."""
-    return capped_greedy(adaptive_score(inp.signals, cfg.weights), inp, budget, cfg)
-
-
 @policy(
-    "adaptive-redetect",
+    "adaptive",
     ("texture", "repeatability_redetect", "distinctiveness", "ambiguity", "parallax"),
 )
-def adaptive_redetect_policy(inp, budget, rng, cfg):
-    """`adaptive` with the paper's repeatability (four re-detections per view)."""
+def adaptive_policy(inp, budget, rng, cfg):
+    """The paper's score s (its repeatability: four re-detections per view) under the soft
+    tile cap of `capped_greedy`."""
     s = inp.signals
     wt, wr, wq, wp, wa = cfg.weights
     score = (
@@ -238,9 +234,15 @@ def adaptive_redetect_policy(inp, budget, rng, cfg):
     return capped_greedy(score, inp, budget, cfg)
 
 
+@policy("adaptive-fast", ADAPTIVE_SIGNALS)
+def adaptive_fast_policy(inp, budget, rng, cfg):
+    """`adaptive` with the cheap repeatability estimate (no re-detection)."""
+    return capped_greedy(adaptive_score(inp.signals, cfg.weights), inp, budget, cfg)
+
+
 @policy("cross-view", (*ADAPTIVE_SIGNALS, "epipolar"))
 def cross_view_policy(inp, budget, rng, cfg):
-    """`adaptive` plus epipolar_weight x the epipolar signal: candidates with a
+    """`adaptive-fast` plus epipolar_weight x the epipolar signal: candidates with a
     ratio-passing match on their epipolar lines in other views first (beyond the paper)."""
     score = adaptive_score(inp.signals, cfg.weights) + cfg.epipolar_weight * inp.signals.epipolar
     return capped_greedy(score, inp, budget, cfg)

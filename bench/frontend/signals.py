@@ -7,11 +7,13 @@ L2 distance of unit SIFT descriptors, or the Hamming fraction of binary ones):
 
 * texture t: minimum eigenvalue of the structure tensor of the image gradients summed
   over a box of radius clip(s/2, 2, 32) px around x; t = min-max of log(lambda_min + 1e-6).
-* repeatability r (the default, cheap estimate): sqrt(iso * c), with iso = lambda_min /
+* repeatability r (a cheap estimate, read by adaptive-fast and the policies built on it):
+  sqrt(iso * c), with iso = lambda_min /
   lambda_max of that structure tensor (1 for a corner, 0 for an edge) and c the min-max of
   log(detector response): a corner-like, high-contrast extremum is re-detected under
   perturbations, an edge-like or faint one is not. Costs no detection.
-* repeatability_redetect (the paper's definition, four detections per view): the fraction
+* repeatability_redetect (the paper's definition, read by `adaptive`; four detections per
+  view): the fraction
   of a fixed set of synthetic perturbations of the view (rotation+scale homography,
   perspective tilt, blur+noise, exposure change) under which the detector fires again
   within max(2, s/4) px of x's mapped position, over the perturbations that keep x inside.

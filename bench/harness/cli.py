@@ -255,8 +255,8 @@ def cmd_train_weights(args: argparse.Namespace) -> None:
 def cmd_select(args: argparse.Namespace) -> None:
     from bench.harness.select import select_to_database
 
-    if args.budget <= 0:
-        raise BenchError(f"--budget must be positive, got {args.budget}")
+    if args.budget <= 0 or args.max_candidates <= 0:
+        raise BenchError("--budget and --max-candidates must be positive")
     out = select_to_database(
         args.images,
         args.out,
@@ -266,6 +266,7 @@ def cmd_select(args: argparse.Namespace) -> None:
         match=args.match,
         overlays=args.overlays,
         policy_modules=tuple(args.policy_module),
+        max_candidates=args.max_candidates,
     )
     print(out)
 
@@ -523,6 +524,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     se.add_argument(
         "--overlays", action="store_true", help="write OUT/overlays/<image>.png of each selection"
+    )
+    se.add_argument(
+        "--max-candidates",
+        type=int,
+        default=8192,
+        help="candidate pool per image: the strongest detections (default: %(default)s)",
     )
     se.add_argument(
         "--policy-module", action="append", default=[], metavar="FILE", help="as for `bench run`"

@@ -45,7 +45,7 @@ DEFAULT_POLICIES = (
     "response",
     "ssc",
     "quadtree",
-    "adaptive-redetect",
+    "adaptive-fast",
     feedback.NAME,
     "learned",
     "cross-view",

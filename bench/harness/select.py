@@ -3,7 +3,10 @@
 images (+ optional COLMAP model) -> candidates and signals -> B per image by a policy ->
 OUT/database.db (cameras, images, selected keypoints, COLMAP-format SIFT descriptors;
 with `match`, also matches and verified two-view geometries) and, with `overlays`,
-OUT/overlays/<image>.png. The database is written under a temporary name, then renamed.
+OUT/overlays/<image>.png. The candidate pool of an image is its `max_candidates` strongest
+detections (COLMAP's default feature count; the signals compare candidates pairwise, so a
+12-megapixel pool must be bounded). The database is written under a temporary name, then
+renamed.
 """
 
 from __future__ import annotations
@@ -20,12 +23,27 @@ from bench.backend.matching import BackendConfig, match_and_verify
 from bench.backend.reconstruction import write_database
 from bench.console import log, progress
 from bench.frontend import feedback
-from bench.frontend.features import DetectorConfig, detect
+from bench.frontend.features import Candidates, DetectorConfig, detect
 from bench.frontend.policies import PolicyConfig, PolicyInput, check_policies, select
 from bench.frontend.signals import SignalConfig, compute_signals
 from bench.frontend.views import load_image_folder
 from bench.harness import plugins
 from bench.harness.pipeline import policy_rng
+
+
+def strongest(cand: Candidates, k: int) -> Candidates:
+    """The k candidates of highest detector response (all if there are fewer), in their
+    original order."""
+    if len(cand) <= k:
+        return cand
+    keep = np.sort(np.argsort(-cand.response, kind="stable")[:k])
+    return Candidates(
+        cand.xy[keep],
+        cand.size[keep],
+        cand.angle[keep],
+        cand.response[keep],
+        cand.descriptors[keep],
+    )
 
 
 def select_to_database(
@@ -37,6 +55,7 @@ def select_to_database(
     match: bool = False,
     overlays: bool = False,
     policy_modules: tuple[str, ...] = (),
+    max_candidates: int = 8192,
 ) -> Path:
     """Write OUT/database.db (module docstring); returns its path."""
     plugins.load(policy_modules)
@@ -51,7 +70,7 @@ def select_to_database(
     with progress("detect", len(views)) as bar:
         pools = []
         for v in views:
-            pools.append(detect(v, det))
+            pools.append(strongest(detect(v, det), max_candidates))
             bar.update()
     sigs, _ = compute_signals(views, pools, det, SignalConfig())
     inputs = [PolicyInput(v, c, s) for v, c, s in zip(views, pools, sigs)]

@@ -43,7 +43,7 @@ DISPLAY = {
     "ssc": "SSC (Bailo 2018)",
     "quadtree": "Quadtree (ORB-SLAM)",
     "adaptive": "Adaptive optimized",
-    "adaptive-redetect": "Adaptive, re-detection repeatability",
+    "adaptive-fast": "Adaptive, cheap repeatability",
     "adaptive-loop": "Adaptive feedback loop",
     "learned": "Learned weights",
     "cross-view": "Adaptive + epipolar signal",
