@@ -131,3 +131,14 @@ def test_a_policy_module_registers_and_its_broken_rules_are_named(fe, tmp_path):
     files.write_text("PATH = 'renders/x/gt_00.npz'\n")
     with pytest.raises(BenchError, match="'no ground truth': it names ground truth"):
         plugins.load_module(str(files))
+
+
+def test_an_installed_entry_point_registers_its_policies(monkeypatch):
+    from importlib.metadata import EntryPoint
+
+    ep = EntryPoint(name="first", value="tests.plugin_policy", group=plugins.ENTRY_POINT_GROUP)
+    monkeypatch.setattr(plugins, "entry_points", lambda group: [ep] if group == ep.group else [])
+    try:
+        assert plugins.load_entry_points.__wrapped__() == ("first-b",)
+    finally:
+        POLICIES.pop("first-b", None)
