@@ -150,6 +150,8 @@ def cmd_run(args: argparse.Namespace) -> None:
     policies = parse_list("--policies", args.policies, str, "texture,adaptive")
     if args.dataset is not None:
         dataset = dataset_arg(args.dataset)
+        if args.seeds is not None:
+            log("--seeds is ignored with --dataset: a dataset is one scene, recorded as seed 0")
         scenes, seeds = (dataset.name,), (0,)
         policies = tuple(p for p in policies if p != "oracle" or has_pixel_truth(dataset))
     else:
