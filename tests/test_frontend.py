@@ -219,3 +219,14 @@ def test_policy_input_has_no_ground_truth_fields():
         "response",
         "descriptors",
     ]
+
+
+def test_only_the_wanted_costly_signals_are_computed(table_front):
+    wanted = ("texture", "repeatability", "distinctiveness", "ambiguity", "parallax")
+    views, pools = table_front.views, table_front.pools
+    sigs, seconds = compute_signals(views, pools, DetectorConfig(), SignalConfig(), wanted)
+    assert seconds["repeatability_redetect"] == seconds["epipolar"] == 0
+    for part, full in zip(sigs, table_front.signals):
+        assert not part.repeatability_redetect.any() and not part.epipolar.any()
+        for name in wanted:
+            assert np.array_equal(getattr(part, name), getattr(full, name)), name

@@ -335,9 +335,16 @@ class _Clock:
 
 
 def compute_signals(
-    views: list[View], pools: list[Candidates], det: DetectorConfig, cfg: SignalConfig
+    views: list[View],
+    pools: list[Candidates],
+    det: DetectorConfig,
+    cfg: SignalConfig,
+    wanted: tuple[str, ...] = SIGNALS,
 ) -> tuple[list[Signals], dict[str, float]]:
-    """Signals of every view, and the seconds spent on each signal (summed over views)."""
+    """Signals of every view, and the seconds spent on each signal (summed over views). The
+    two costly signals, repeatability_redetect and epipolar, are computed only when
+    `wanted` (else 0 for every candidate): a caller that selects with one policy asks for
+    what it reads."""
     n, clock = len(views), _Clock()
     cams = [v.camera for v in views]
     posed = all(v.posed for v in views)
@@ -350,8 +357,10 @@ def compute_signals(
         lam = clock.time("texture", structure_tensor, gray, cand)
         values[i]["texture"] = clock.time("texture", texture, lam[0])
         values[i]["repeatability"] = clock.time("repeatability", repeatability, *lam, cand)
-        values[i]["repeatability_redetect"] = clock.time(
-            "repeatability_redetect", repeatability_redetect, gray, cand, det
+        values[i]["repeatability_redetect"] = (
+            clock.time("repeatability_redetect", repeatability_redetect, gray, cand, det)
+            if "repeatability_redetect" in wanted
+            else np.zeros(len(cand))
         )
         D = clock.time("distinctiveness", _same_view_distances, cand)
         values[i]["distinctiveness"] = clock.time("distinctiveness", distinctiveness, D)
@@ -371,24 +380,27 @@ def compute_signals(
         ]
         for i in range(n):  # one descriptor distance matrix per overlapping pair
             for j in overlap[i]:
-                if j < i or not (len(pools[i]) and len(pools[j])):
+                shared = (j in nearest[i]) + (i in nearest[j])
+                epi = "epipolar" in wanted
+                if j < i or not (len(pools[i]) and len(pools[j])) or not (shared or epi):
                     continue
                 t0 = time.perf_counter()
                 D2 = descriptor_distances(pools[i].descriptors, pools[j].descriptors, squared=True)
                 t1 = time.perf_counter()
-                shared = (j in nearest[i]) + (i in nearest[j])
                 if j in nearest[i]:
                     near_dupes[i] += np.maximum((D2 < tau2).sum(1) - 1, 0)
                 if i in nearest[j]:
                     near_dupes[j] += np.maximum((D2 < tau2).sum(0) - 1, 0)
                 t2 = time.perf_counter()
-                F = fundamental(cams[i], cams[j])
-                pa, _, pb, _ = epipolar_matches(D2, epipolar_distances(F, pools[i].xy, pools[j].xy))
                 # each signal is charged the whole distance matrix it reads: its cost alone
                 clock.seconds["ambiguity"] += ((t1 - t0) if shared else 0.0) + (t2 - t1)
-                clock.seconds["epipolar"] += (t1 - t0) + time.perf_counter() - t2
-                epi_views[i] += pa
-                epi_views[j] += pb
+                if epi:
+                    F = fundamental(cams[i], cams[j])
+                    xy_i, xy_j = pools[i].xy, pools[j].xy
+                    pa, _, pb, _ = epipolar_matches(D2, epipolar_distances(F, xy_i, xy_j))
+                    clock.seconds["epipolar"] += (t1 - t0) + time.perf_counter() - t2
+                    epi_views[i] += pa
+                    epi_views[j] += pb
     for i in range(n):
         values[i]["ambiguity"] = _log_scaled(near_dupes[i])
         if posed:

@@ -1,7 +1,8 @@
 """`bench select`: the front end in front of classical SfM, on the user's own photographs.
 
-images (+ optional COLMAP model) -> candidates and signals -> B per image by a policy ->
-OUT/database.db (cameras, images, selected keypoints, COLMAP-format SIFT descriptors;
+images (+ optional COLMAP model) -> candidates and the signals the policy reads -> B per
+image by a policy -> OUT/database.db (cameras, images, selected keypoints, COLMAP-format
+SIFT descriptors;
 with `match`, also matches and verified two-view geometries) and, with `overlays`,
 OUT/overlays/<image>.png. The candidate pool of an image is its `max_candidates` strongest
 detections (COLMAP's default feature count; the signals compare candidates pairwise, so a
@@ -24,7 +25,13 @@ from bench.backend.reconstruction import write_database
 from bench.console import log, progress
 from bench.frontend import feedback
 from bench.frontend.features import Candidates, DetectorConfig, detect
-from bench.frontend.policies import PolicyConfig, PolicyInput, check_policies, select
+from bench.frontend.policies import (
+    SIGNALS_USED,
+    PolicyConfig,
+    PolicyInput,
+    check_policies,
+    select,
+)
 from bench.frontend.signals import SignalConfig, compute_signals
 from bench.frontend.views import load_image_folder
 from bench.harness import plugins
@@ -72,7 +79,8 @@ def select_to_database(
         for v in views:
             pools.append(strongest(detect(v, det), max_candidates))
             bar.update()
-    sigs, _ = compute_signals(views, pools, det, SignalConfig())
+    reads = feedback.SIGNALS_USED if policy == feedback.NAME else SIGNALS_USED[policy]
+    sigs, _ = compute_signals(views, pools, det, SignalConfig(), reads)
     inputs = [PolicyInput(v, c, s) for v, c, s in zip(views, pools, sigs)]
     cams = [v.camera for v in views]
 
