@@ -120,6 +120,11 @@ def write_ply_points(path: Path, X: np.ndarray) -> None:
     Path(path).write_bytes(header.encode() + np.asarray(X, "<f4").tobytes())
 
 
+def has_pixel_truth(root: Path, names: list[str]) -> bool:
+    """Whether every image of a dataset has its per-pixel truth file."""
+    return all((Path(root) / TRUTH_DIR / f"{n}.npz").is_file() for n in names)
+
+
 def load_dataset_truth(
     root: Path, names: list[str], cams: list[Camera]
 ) -> tuple[np.ndarray | None, list[GroundTruth] | None]:
@@ -127,9 +132,9 @@ def load_dataset_truth(
     (per-pixel truth counts only when every image has it)."""
     folder = Path(root) / TRUTH_DIR
     cloud = read_ply_points(folder / CLOUD) if (folder / CLOUD).is_file() else None
-    files = [folder / f"{n}.npz" for n in names]
-    if not all(f.is_file() for f in files):
+    if not has_pixel_truth(root, names):
         return cloud, None
+    files = [folder / f"{n}.npz" for n in names]
     gts = []
     for f, cam in zip(files, cams):
         try:

@@ -141,15 +141,12 @@ def tile_of(xy: np.ndarray, width: int, height: int, tiles: tuple[int, int]) -> 
     return cy * tiles[0] + cx
 
 
-def adaptive_score(s: Signals, w) -> np.ndarray:
+def adaptive_score(s: Signals, w, repeatability: np.ndarray | None = None) -> np.ndarray:
+    """The paper's score s; `repeatability` replaces the cheap estimate (`adaptive` passes
+    the re-detection signal)."""
     wt, wr, wq, wp, wa = w
-    return (
-        wt * s.texture
-        + wr * s.repeatability
-        + wq * s.distinctiveness
-        + wp * s.parallax
-        - wa * s.ambiguity
-    )
+    r = s.repeatability if repeatability is None else repeatability
+    return wt * s.texture + wr * r + wq * s.distinctiveness + wp * s.parallax - wa * s.ambiguity
 
 
 def _order(score: np.ndarray) -> np.ndarray:
@@ -223,15 +220,7 @@ def adaptive_policy(inp, budget, rng, cfg):
     """The paper's score s (its repeatability: four re-detections per view) under the soft
     tile cap of `capped_greedy`."""
     s = inp.signals
-    wt, wr, wq, wp, wa = cfg.weights
-    score = (
-        wt * s.texture
-        + wr * s.repeatability_redetect
-        + wq * s.distinctiveness
-        + wp * s.parallax
-        - wa * s.ambiguity
-    )
-    return capped_greedy(score, inp, budget, cfg)
+    return capped_greedy(adaptive_score(s, cfg.weights, s.repeatability_redetect), inp, budget, cfg)
 
 
 @policy("adaptive-fast", ADAPTIVE_SIGNALS)

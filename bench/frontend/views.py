@@ -90,11 +90,9 @@ def _intrinsics(model: str, w: int, h: int, p: list[float], where: Path) -> tupl
             f"{where}: camera model {model} with distortion is not supported; undistort the "
             "images first (colmap image_undistorter)"
         )
-    if model == "PINHOLE":
+    if model in ("PINHOLE", "OPENCV"):  # fx, fy, cx, cy
         return w, h, *p[:4]
-    if model == "OPENCV":
-        return w, h, *p[:4]
-    return w, h, p[0], p[0], p[1], p[2]
+    return w, h, p[0], p[0], p[1], p[2]  # f, cx, cy
 
 
 def read_colmap_model(model: Path) -> list[tuple[str, Camera]]:

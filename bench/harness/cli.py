@@ -228,13 +228,11 @@ def dataset_arg(path: Path) -> Path:
 
 def has_pixel_truth(dataset: Path) -> bool:
     """Whether a dataset has per-pixel ground truth (which the oracle needs)."""
-    from bench.evaluation.groundtruth import TRUTH_DIR
+    from bench.evaluation import groundtruth
     from bench.frontend.views import read_colmap_model
 
-    ok = all(
-        (dataset / TRUTH_DIR / f"{n}.npz").is_file()
-        for n, _ in read_colmap_model(dataset / "sparse")
-    )
+    names = [n for n, _ in read_colmap_model(dataset / "sparse")]
+    ok = groundtruth.has_pixel_truth(dataset, names)
     if not ok:
         log(f"{dataset} has no per-pixel ground truth: the oracle is left out")
     return ok

@@ -30,13 +30,14 @@ from bench.backend.reconstruction import (
     known_pose_task,
     mapping_task,
 )
+from bench.camera import Camera
 from bench.evaluation import groundtruth, metrics, oracle, poses
 from bench.evaluation.metrics import SceneTruth, coverage_pct, evaluate_known_pose, match_metrics
 from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.evaluation.poses import evaluate_mapping
 from bench.files import content_key, source_hash, temp_dir_beside, write_text_atomic
 from bench.frontend import features, feedback, policies, signals, stage, views
-from bench.frontend.features import DetectorConfig
+from bench.frontend.features import Candidates, DetectorConfig
 from bench.frontend.policies import (
     SIGNALS_USED,
     PolicyConfig,
@@ -44,9 +45,9 @@ from bench.frontend.policies import (
     select,
     weights_file,
 )
-from bench.frontend.signals import SignalConfig
+from bench.frontend.signals import SignalConfig, Signals
 from bench.frontend.stage import FrontEnd
-from bench.frontend.views import Source
+from bench.frontend.views import Source, View
 from bench.harness import plugins
 from bench.render.config import RenderConfig
 
@@ -121,33 +122,43 @@ def select_features(
     """Every view's selection, the seconds it took, and the feedback loop's rounds (none
     for other policies)."""
     t = time.perf_counter()
-    rounds: list[dict] = []
     if policy == ORACLE:
         tracks = matchable_tracks(truth, fe.pools, cfg.backend.ratio)
-        sel = oracle_select(tracks, [c.response for c in fe.pools], budget)
-    elif policy == feedback.NAME:
-        cams = [v.camera for v in fe.views]
-
-        def match(selection):
-            xy = [c.xy[s] for c, s in zip(fe.pools, selection)]
-            desc = [c.descriptors[s] for c, s in zip(fe.pools, selection)]
-            return match_and_verify(cams, xy, desc, cfg.backend)[0]
-
-        inputs = [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
-        sel, rounds = feedback.feedback_select(inputs, budget, cfg.policy, match)
+        sel, rounds = oracle_select(tracks, [c.response for c in fe.pools], budget), []
     else:
-        plugins.load(cfg.policy.modules)
-        sel = [
-            select(
-                policy,
-                PolicyInput(v, c, s),
-                budget,
-                policy_rng(seed, policy, budget, v.index),
-                cfg.policy,
-            )
-            for v, c, s in zip(fe.views, fe.pools, fe.signals)
-        ]
+        sel, rounds = policy_selection(policy, fe.views, fe.pools, fe.signals, budget, seed, cfg)
     return sel, time.perf_counter() - t, rounds
+
+
+def matcher(cams: list[Camera], pools: list[Candidates], backend: BackendConfig):
+    """Selections per view -> the back end's verified pairs of those keypoints."""
+
+    def match(selection: list[np.ndarray]) -> list:
+        xy = [c.xy[s] for c, s in zip(pools, selection)]
+        desc = [c.descriptors[s] for c, s in zip(pools, selection)]
+        return match_and_verify(cams, xy, desc, backend)[0]
+
+    return match
+
+
+def policy_selection(
+    policy: str,
+    views: list[View],
+    pools: list[Candidates],
+    sigs: list[Signals],
+    budget: int,
+    seed: int,
+    cfg: RunConfig,
+) -> tuple[list[np.ndarray], list[dict]]:
+    """A policy's selection in every view (outside policies registered first), and the
+    feedback loop's rounds (none for other policies)."""
+    inputs = [PolicyInput(v, c, s) for v, c, s in zip(views, pools, sigs)]
+    if policy == feedback.NAME:
+        match = matcher([v.camera for v in views], pools, cfg.backend)
+        return feedback.feedback_select(inputs, budget, cfg.policy, match)
+    plugins.load(cfg.policy.modules)
+    rngs = [policy_rng(seed, policy, budget, v.index) for v in views]
+    return [select(policy, i, budget, r, cfg.policy) for i, r in zip(inputs, rngs)], []
 
 
 def signals_used(policy: str) -> tuple[str, ...]:

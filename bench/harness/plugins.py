@@ -11,7 +11,6 @@ checked on every selection (`bench.frontend.policies.select`).
 from __future__ import annotations
 
 import ast
-import hashlib
 import importlib.util
 import re
 import sys
@@ -20,6 +19,7 @@ from importlib.metadata import entry_points
 from pathlib import Path
 
 from bench import BenchError
+from bench.files import checksum, content_key
 from bench.frontend.policies import POLICIES
 
 FORBIDDEN_IMPORTS = ("bench.scenes", "bench.render", "bench.evaluation", "bench.harness")
@@ -62,7 +62,7 @@ def load_module(path: str) -> tuple[str, ...]:
         raise BenchError(f"policy module {path} does not exist")
     _check(file.read_text(), path)
     before = set(POLICIES)
-    name = f"bench_policy_module_{hashlib.sha256(str(file.resolve()).encode()).hexdigest()[:8]}"
+    name = f"bench_policy_module_{content_key(str(file.resolve()), 8)}"
     spec = importlib.util.spec_from_file_location(name, file)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
@@ -104,8 +104,4 @@ def load(modules=()) -> None:
 
 def files_hash(paths) -> str:
     """Hash of the contents of files (a missing one hashes as missing)."""
-    h = hashlib.sha256()
-    for p in paths:
-        f = Path(p)
-        h.update(f.read_bytes() if f.is_file() else b"<missing>")
-    return h.hexdigest()[:12]
+    return content_key([checksum(p) if Path(p).is_file() else "missing" for p in paths])

@@ -20,22 +20,15 @@ import cv2
 import numpy as np
 
 from bench import BenchError
-from bench.backend.matching import BackendConfig, match_and_verify
 from bench.backend.reconstruction import write_database
 from bench.console import log, progress
 from bench.frontend import feedback
 from bench.frontend.features import Candidates, DetectorConfig, detect
-from bench.frontend.policies import (
-    SIGNALS_USED,
-    PolicyConfig,
-    PolicyInput,
-    check_policies,
-    select,
-)
+from bench.frontend.policies import PolicyConfig, check_policies
 from bench.frontend.signals import SignalConfig, compute_signals
 from bench.frontend.views import load_image_folder
 from bench.harness import plugins
-from bench.harness.pipeline import policy_rng
+from bench.harness.pipeline import RunConfig, matcher, policy_selection, signals_used
 
 
 def strongest(cand: Candidates, k: int) -> Candidates:
@@ -67,7 +60,7 @@ def select_to_database(
     """Write OUT/database.db (module docstring); returns its path."""
     plugins.load(policy_modules)
     check_policies([policy], extra=(feedback.NAME,))
-    det, cfg, backend = DetectorConfig(), PolicyConfig(), BackendConfig()
+    det, cfg = DetectorConfig(), RunConfig(policy=PolicyConfig(modules=tuple(policy_modules)))
     t = time.perf_counter()
     views = load_image_folder(images, cameras)
     if not all(v.posed for v in views):
@@ -79,25 +72,10 @@ def select_to_database(
         for v in views:
             pools.append(strongest(detect(v, det), max_candidates))
             bar.update()
-    reads = feedback.SIGNALS_USED if policy == feedback.NAME else SIGNALS_USED[policy]
-    sigs, _ = compute_signals(views, pools, det, SignalConfig(), reads)
-    inputs = [PolicyInput(v, c, s) for v, c, s in zip(views, pools, sigs)]
+    sigs, _ = compute_signals(views, pools, det, SignalConfig(), signals_used(policy))
+    sel, _ = policy_selection(policy, views, pools, sigs, budget, 0, cfg)
     cams = [v.camera for v in views]
-
-    def matches(selection):
-        xy = [c.xy[s] for c, s in zip(pools, selection)]
-        return match_and_verify(
-            cams, xy, [c.descriptors[s] for c, s in zip(pools, selection)], backend
-        )[0]
-
-    if policy == feedback.NAME:
-        sel, _ = feedback.feedback_select(inputs, budget, cfg, matches)
-    else:
-        sel = [
-            select(policy, i, budget, policy_rng(0, policy, budget, k), cfg)
-            for k, i in enumerate(inputs)
-        ]
-    pairs = matches(sel) if match else []
+    pairs = matcher(cams, pools, cfg.backend)(sel) if match else []
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     db = out / "database.db"
