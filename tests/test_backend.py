@@ -12,11 +12,11 @@ from bench.backend.matching import (
     BackendConfig,
     PairMatches,
     expected_ransac_iterations,
-    tentative_matches,
     verify,
 )
 from bench.backend.reconstruction import mapping_task, triangulate
 from bench.evaluation.poses import pose_metrics, registered_poses
+from bench.frontend.features import tentative_matches
 from tests.conftest import synthetic_rig
 
 
@@ -35,7 +35,7 @@ def test_verification_removes_planted_outliers():
     xb = np.concatenate([xb, planted])
     xa = np.concatenate([xa, rng.uniform(0, 480, (40, 2))])
     matches = np.c_[np.arange(190), np.arange(190)]
-    inliers, config = verify(cams[0], xa, cams[2], xb, matches, BackendConfig())
+    inliers, config, _ = verify(cams[0], xa, cams[2], xb, matches, BackendConfig())
     kept = set(inliers[:, 0].tolist())
     assert config == "CALIBRATED"
     assert len(kept & set(range(150))) >= 145
@@ -171,3 +171,16 @@ def test_a_mapping_without_matches_is_a_recorded_failure(tmp_path):
     assert rec.model is None and "no pair of views has verified matches" in rec.failure
     row, _ = pose_metrics(registered_poses(rec.model, {}), cams)
     assert row["maa"] == 0.0
+
+
+def test_the_hard_cap_keeps_the_largest_scales_ties_by_index_in_colmaps_order():
+    from bench.backend.peers import hard_cap, keypoint_scales
+
+    # COLMAP affine keypoints (x, y, a11, a12, a21, a22): scale s rotated by 30 degrees
+    c, s_ = math.cos(math.pi / 6), math.sin(math.pi / 6)
+    scales = np.array([1.0, 4.0, 2.0, 4.0, 0.5, 2.0, 8.0])
+    kps = np.array([[k, k, s * c, -s * s_, s * s_, s * c] for k, s in enumerate(scales)])
+    np.testing.assert_allclose(keypoint_scales(kps), scales)
+    assert hard_cap(kps, 3).tolist() == [1, 3, 6]
+    assert hard_cap(kps, 4).tolist() == [1, 2, 3, 6]  # the tie at scale 2: the lower index
+    assert hard_cap(kps, 100).tolist() == list(range(7))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -9,13 +11,13 @@ import pytest
 from bench import BenchError
 from bench.camera import look_at
 from bench.frontend.features import DetectorConfig, detect
+from bench.frontend.geometry import epipolar_distances, parallax
 from bench.frontend.policies import POLICIES, PolicyConfig, PolicyInput, select, tile_of
 from bench.frontend.signals import (
     SIGNALS,
     SignalConfig,
     Signals,
     compute_signals,
-    parallax,
 )
 from bench.frontend.stage import front_end
 from bench.frontend.views import View
@@ -156,7 +158,7 @@ def test_repeated_motif_is_ambiguous_unique_motif_is_distinctive():
     det = DetectorConfig(sift_contrast=0.02)
     (sig,), _ = compute_signals([view], [cand], det, SignalConfig())
     a, q = sig.ambiguity, sig.distinctiveness
-    assert not sig.parallax.any() and not sig.epipolar.any()  # no poses: off
+    assert not sig.parallax.any() and not sig.epipolar.any()  # one view: nothing overlaps
     assert a[repeated].mean() > a[unique].mean() + 0.2
     assert q[repeated].mean() < q[unique].mean() - 0.2
     n = len(cand)
@@ -230,3 +232,68 @@ def test_only_the_wanted_costly_signals_are_computed(table_front):
         assert not part.repeatability_redetect.any() and not part.epipolar.any()
         for name in wanted:
             assert np.array_equal(getattr(part, name), getattr(full, name)), name
+
+
+def _synthetic_views(cams, X, seed: int = 0):
+    """Views of the points X, each point with one random unit descriptor (a little noise
+    per view), without their poses, and a last view of unrelated descriptors."""
+    from bench.frontend.features import Candidates
+
+    rng = np.random.default_rng(seed)
+    desc = rng.normal(size=(len(X), 128))
+    views, pools = [], []
+    for k, cam in enumerate([*cams, cams[0]]):
+        last = k == len(cams)
+        uv = rng.uniform(0, 480, (len(X), 2)) if last else cam.project(X)[0]
+        d = (rng.normal(size=desc.shape) if last else desc) + rng.normal(0, 0.05, desc.shape)
+        d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
+        n = len(uv)
+        pools.append(Candidates(uv, np.full(n, 4.0), np.zeros(n), rng.random(n) + 1, d))
+        image = np.zeros((cam.height, cam.width, 3), np.uint8)
+        views.append(View(k, f"v{k}.png", image, cam).without_pose())
+    return views, pools
+
+
+def test_geometry_from_the_images_recovers_the_rig_without_reading_it(capsys):
+    from bench.frontend.geometry import image_geometry
+    from tests.conftest import synthetic_rig
+
+    cams, X = synthetic_rig()
+    views, pools = _synthetic_views(cams, X)
+    assert not any(v.posed for v in views) and all(
+        np.array_equal(v.camera.R, np.eye(3)) for v in views
+    )
+    geo = image_geometry(views, pools, SignalConfig())
+    assert geo.overlap[:4] == [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]] and geo.overlap[4] == []
+    for (i, j), (_, b) in geo.pair_frame.items():
+        R = cams[j].R @ cams[i].R.T
+        t = cams[j].t - R @ cams[i].t
+        np.testing.assert_allclose(b.R, R, atol=1e-6)
+        np.testing.assert_allclose(b.t, t / np.linalg.norm(t), atol=1e-6)
+        F = geo.fundamental(i, j)  # true correspondences lie on their epipolar lines
+        xi, xj = cams[i].project(X)[0], cams[j].project(X)[0]
+        assert np.diag(epipolar_distances(F, xi, xj)).max() < 1e-3
+    assert geo.nearest[0] <= {1, 2, 3} and len(geo.nearest[0]) == 2
+    sigs, _ = compute_signals(views, pools, DetectorConfig(), SignalConfig())
+    assert sigs[0].parallax.min() > 0 and sigs[0].epipolar.mean() > 0.9
+    assert not sigs[4].parallax.any() and not sigs[4].epipolar.any()  # overlaps nothing
+    assert "v4.png overlap(s) no other view" in capsys.readouterr().err
+
+
+def test_parallax_from_the_images_follows_the_parallax_from_the_poses():
+    """Forward motion: both are low near the epipole (the image centre) and rise outward."""
+    from scipy.stats import spearmanr
+
+    from bench.frontend.geometry import image_geometry, rig_geometry
+
+    cams = [look_at((0, y, 0), (0, y + 10, 0), width=400, height=300) for y in (0.0, 1.0)]
+    rng = np.random.default_rng(1)
+    X = np.c_[rng.uniform(-5, 5, 200), rng.uniform(8, 12, 200), rng.uniform(-3.5, 3.5, 200)]
+    views, pools = _synthetic_views(cams, X)
+    posed = [replace(v, camera=c, posed=True) for v, c in zip(views, cams)]
+    rig = rig_geometry(posed, pools[:2], SignalConfig(depth_prior=10.0))
+    est = image_geometry(views[:2], pools[:2], SignalConfig())
+    p_rig, p_img = rig.parallax(0, pools[0]), est.parallax(0, pools[0])
+    assert p_rig.max() < 1 and spearmanr(p_rig, p_img).statistic > 0.95
+    centre = np.linalg.norm(pools[0].xy - [200, 150], axis=1) < 40
+    assert p_img[centre].mean() < 0.5 * p_img[~centre].mean()

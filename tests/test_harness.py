@@ -19,6 +19,7 @@ from bench import BenchError
 from bench.backend.reconstruction import known_pose_model
 from bench.evaluation.groundtruth import load_ground_truth
 from bench.evaluation.metrics import SceneTruth
+from bench.frontend.geometry import RIG
 from bench.frontend.stage import front_end
 from bench.harness import execute, figures, pipeline
 from bench.harness import grid as harness
@@ -73,7 +74,7 @@ def table_run(medium_entry, tmp_path_factory):
 
     def run(policy: str, budget: int = 128):
         (row,) = run_unit(
-            entry, fe, truth, "table", 0, policy, budget, [("tri", "multiview")], cfg, out
+            entry, {RIG: fe}, truth, "table", 0, policy, budget, [("tri", "multiview")], cfg, out
         )
         return row, out / "models" / "table-s0" / f"{policy}-b{budget}"
 
@@ -164,6 +165,8 @@ def test_quick_run_writes_every_file_with_documented_columns(quick_results):
         (t, p) for t in ("tri", "sfm") for p in ("multiview", "twoview")
     }
     assert set(runs.loc[runs["policy"].str.startswith("colmap"), "task"]) == {"sfm"}
+    capped = runs.loc[runs["policy"] == "colmap-b", "keypoints_per_view"]
+    assert len(capped) and (capped == 64).all()  # a hard cap: exactly B per view
     assert runs["maa"].notna().sum() == runs["task"].eq("sfm").sum()  # never NaN, failed or not
     assert {"render_key", "config_hash", "status", "failure", *TIMING} <= set(runs.columns)
     t1 = pd.read_csv(quick_results / "table1.csv")

@@ -9,8 +9,10 @@ import pytest
 
 from bench import ROOT, BenchError
 from bench.backend.matching import BackendConfig, match_and_verify
+from bench.backend.peers import PEERS
 from bench.frontend import feedback
 from bench.frontend.features import DetectorConfig
+from bench.frontend.geometry import SignalConfig, depth_priors
 from bench.frontend.policies import (
     POLICIES,
     SHIPPED_WEIGHTS,
@@ -19,7 +21,6 @@ from bench.frontend.policies import (
     select,
     tile_of,
 )
-from bench.frontend.signals import SignalConfig, depth_priors
 from bench.frontend.stage import front_end
 from bench.harness import plugins
 from bench.harness.grid import BenchConfig
@@ -142,3 +143,51 @@ def test_an_installed_entry_point_registers_its_policies(monkeypatch):
         assert plugins.load_entry_points.__wrapped__() == ("first-b",)
     finally:
         POLICIES.pop("first-b", None)
+
+
+def _dataset(entry, out, rng=None):
+    """A dataset folder of a render entry's images and rig, with random poses if `rng`."""
+    import shutil
+
+    from scipy.spatial.transform import Rotation
+
+    from bench.camera import Camera, write_colmap_rig
+    from bench.frontend.views import load_views
+
+    views = load_views(entry)
+    (out / "images").mkdir(parents=True)
+    (out / "sparse").mkdir()
+    for v in views:
+        shutil.copy(entry / v.name, out / "images" / v.name)
+    cams = [v.camera for v in views]
+    if rng is not None:
+        cams = [
+            Camera(c.width, c.height, c.fx, c.fy, c.cx, c.cy, R, rng.normal(0, 5, 3))
+            for c, R in zip(cams, Rotation.random(len(cams), rng).as_matrix())
+        ]
+    write_colmap_rig(cams, out / "sparse", [v.name for v in views])
+    return out
+
+
+def test_sfm_selections_are_blind_to_the_poses_and_tri_selections_are_not(medium_entry, tmp_path):
+    """Every policy's sfm selection is array-equal with the rig's poses replaced by random
+    ones (the task grants no poses: `GRANTS`); cross-view's tri selection, which reads the
+    epipolar geometry of the poses, changes."""
+    from bench.harness.pipeline import GRANTS, RunConfig, policy_selection
+
+    entry = medium_entry("table")
+    true = _dataset(entry, tmp_path / "true")
+    wrong = _dataset(entry, tmp_path / "random", np.random.default_rng(0))
+    cfg = RunConfig()
+
+    def selections(dataset, task, policy):
+        fe = front_end(dataset, cfg.detector, cfg.signals, tmp_path / "fe", GRANTS[task])
+        return policy_selection(policy, fe.views, fe.pools, fe.signals, BUDGET, 0, cfg)[0]
+
+    from bench.harness.grid import DEFAULT_POLICIES
+
+    for policy in [p for p in DEFAULT_POLICIES if p not in ("all", "oracle", *PEERS)]:
+        a, b = selections(true, "sfm", policy), selections(wrong, "sfm", policy)
+        assert all(np.array_equal(x, y) for x, y in zip(a, b)), policy
+    a, b = selections(true, "tri", "cross-view"), selections(wrong, "tri", "cross-view")
+    assert not all(np.array_equal(x, y) for x, y in zip(a, b))

@@ -15,10 +15,10 @@ from dataclasses import dataclass
 from itertools import combinations
 
 import numpy as np
-import pycolmap
 
 from bench.camera import Camera
-from bench.frontend.features import descriptor_distances
+from bench.frontend.features import tentative_matches
+from bench.frontend.geometry import configuration, two_view_geometry
 
 
 @dataclass(frozen=True)
@@ -45,30 +45,8 @@ class PairMatches:
     verified: np.ndarray
     config: str
     """COLMAP's two-view configuration (e.g. CALIBRATED, PLANAR, DEGENERATE)."""
-
-
-def tentative_matches(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float) -> np.ndarray:
-    """(M, 2) index pairs: mutual nearest neighbours that pass the ratio test."""
-    if len(desc_a) < 2 or len(desc_b) < 2:
-        return np.zeros((0, 2), np.int64)
-    D = descriptor_distances(desc_a, desc_b)
-    two = np.partition(D, 1, axis=1)[:, :2]
-    nn_ab, nn_ba = D.argmin(1), D.argmin(0)
-    a = np.arange(len(desc_a))
-    keep = (nn_ba[nn_ab] == a) & (two[:, 0] < ratio * two[:, 1])
-    return np.stack([a[keep], nn_ab[keep]], 1)
-
-
-def colmap_camera(cam: Camera, camera_id: int = 1) -> pycolmap.Camera:
-    c = pycolmap.Camera(
-        model="PINHOLE",
-        width=cam.width,
-        height=cam.height,
-        params=[cam.fx, cam.fy, cam.cx, cam.cy],
-        camera_id=camera_id,
-    )
-    c.has_prior_focal_length = True  # otherwise COLMAP does not estimate a calibrated geometry
-    return c
+    rotation: np.ndarray | None = None
+    """Rotation of view j's camera from view i's, as COLMAP's verification estimated it."""
 
 
 def verify(
@@ -78,23 +56,15 @@ def verify(
     xy_b: np.ndarray,
     matches: np.ndarray,
     cfg: BackendConfig,
-) -> tuple[np.ndarray, str]:
-    """COLMAP's calibrated two-view geometry on the tentative matches: (inliers, configuration)."""
+) -> tuple[np.ndarray, str, np.ndarray | None]:
+    """COLMAP's calibrated two-view geometry on the tentative matches: (inliers,
+    configuration, rotation of b from a where COLMAP estimated the relative pose)."""
     if len(matches) < 5:
-        return np.zeros((0, 2), np.int64), "TOO_FEW_MATCHES"
-    opts = pycolmap.TwoViewGeometryOptions()
-    opts.ransac.max_error = cfg.ransac_max_error
-    opts.ransac.random_seed = cfg.seed
-    tvg = pycolmap.estimate_calibrated_two_view_geometry(
-        colmap_camera(cam_a),
-        xy_a.astype(np.float64),
-        colmap_camera(cam_b),
-        xy_b.astype(np.float64),
-        matches.astype(np.uint32),
-        opts,
-    )
-    config = pycolmap.TwoViewGeometryConfiguration(int(tvg.config)).name
-    return np.asarray(tvg.inlier_matches, np.int64).reshape(-1, 2), config
+        return np.zeros((0, 2), np.int64), "TOO_FEW_MATCHES", None
+    tvg = two_view_geometry(cam_a, xy_a, cam_b, xy_b, matches, cfg.ransac_max_error, cfg.seed)
+    inliers = np.asarray(tvg.inlier_matches, np.int64).reshape(-1, 2)
+    R = np.asarray(tvg.cam2_from_cam1.rotation.matrix()) if len(inliers) else None
+    return inliers, configuration(tvg), R
 
 
 def match_and_verify(
@@ -106,9 +76,9 @@ def match_and_verify(
         m = tentative_matches(desc[i], desc[j], cfg.ratio)
         seconds["match"] += time.perf_counter() - t
         t = time.perf_counter()
-        inliers, config = verify(cams[i], xy[i], cams[j], xy[j], m, cfg)
+        inliers, config, R = verify(cams[i], xy[i], cams[j], xy[j], m, cfg)
         seconds["verify"] += time.perf_counter() - t
-        pairs.append(PairMatches(i, j, m, inliers, config))
+        pairs.append(PairMatches(i, j, m, inliers, config, R))
     return pairs, seconds
 
 

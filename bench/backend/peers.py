@@ -4,9 +4,12 @@ policy, on the same images, scored the same way.
 * `colmap`: pycolmap's own SIFT extraction at its default settings (8192 features at most),
   exhaustive matching with COLMAP's own verification, incremental mapping with the same
   known, fixed intrinsics (`bench.backend.reconstruction.map_database`).
-* `colmap-b`: the same with SIFT's maximum number of features set to the budget. COLMAP's
-  limit is soft: it keeps whole scale levels (octaves) of the detector until the limit is
-  reached, so a view may hold somewhat more or fewer features than B.
+* `colmap-b`: the same extraction, then exactly B keypoints per view (all of them where
+  COLMAP found fewer) in COLMAP's own priority, largest scale first, ties by COLMAP's
+  order (`hard_cap`); what the Image Matching Benchmark's restricted-keypoint track does.
+* `colmap-soft-b`: SIFT's maximum number of features set to B. COLMAP's limit is soft: it
+  keeps whole scale levels (octaves) until the limit is reached, so a view holds more (up
+  to about twice) or fewer features than B; its rows record how many.
 
 The peers read the images and the intrinsics only, like every back end.
 """
@@ -26,8 +29,9 @@ from bench.backend.matching import BackendConfig
 from bench.backend.reconstruction import Reconstruction, map_database, quiet_colmap, write_images
 from bench.camera import Camera
 
-PEERS = ("colmap", "colmap-b")
-"""Peer rows: `colmap` (budget 0: COLMAP's default) and `colmap-b` (one per budget)."""
+PEERS = ("colmap", "colmap-b", "colmap-soft-b")
+"""Peer rows: `colmap` (budget 0: COLMAP's default), `colmap-b` and `colmap-soft-b` (one per
+budget)."""
 
 
 @dataclass
@@ -43,16 +47,49 @@ class PeerRun:
     seconds: dict[str, float]
 
 
+def keypoint_scales(keypoints: np.ndarray) -> np.ndarray:
+    """The scale of COLMAP's affine keypoints (x, y, a11, a12, a21, a22): the mean length
+    of the two columns of the affine shape (COLMAP's `FeatureKeypoint::ComputeScale`)."""
+    a = np.asarray(keypoints, np.float64)
+    return (np.hypot(a[:, 2], a[:, 4]) + np.hypot(a[:, 3], a[:, 5])) / 2
+
+
+def hard_cap(keypoints: np.ndarray, budget: int) -> np.ndarray:
+    """Indices of the `budget` largest-scale keypoints, ties by index, in COLMAP's order."""
+    order = np.lexsort((np.arange(len(keypoints)), -keypoint_scales(keypoints)))
+    return np.sort(order[:budget])
+
+
+def _cap_database(db_path: Path, names: list[str], budget: int) -> None:
+    """Keep exactly min(budget, N) keypoints (and their descriptors) of every image."""
+    db = pycolmap.Database.open(str(db_path))
+    try:
+        ids = {img.name: img.image_id for img in db.read_all_images()}
+        kept = {}
+        for name in names:
+            kps, desc = db.read_keypoints(ids[name]), db.read_descriptors(ids[name])
+            keep = hard_cap(kps, budget)
+            kept[ids[name]] = kps[keep], pycolmap.FeatureDescriptors(desc.type, desc.data[keep])
+        db.clear_keypoints()
+        db.clear_descriptors()
+        for image_id, (kps, desc) in kept.items():
+            db.write_keypoints(image_id, kps)
+            db.write_descriptors(image_id, desc)
+    finally:
+        db.close()
+
+
 def run_peer(
     image_dir: Path,
     names: list[str],
     cams: list[Camera],
-    max_features: int,
+    peer: str,
+    budget: int,
     cfg: BackendConfig,
     protocols: list[str],
 ) -> PeerRun:
-    """Extract and match once with stock COLMAP, then map under each track protocol (see
-    the module docstring)."""
+    """Extract (and cap) and match once with stock COLMAP, then map under each track
+    protocol (see the module docstring)."""
     work = Path(tempfile.mkdtemp(prefix="bench-peer-"))
     db_path = work / "database.db"
     db = pycolmap.Database.open(str(db_path))
@@ -62,8 +99,8 @@ def run_peer(
         db.close()
     extraction = pycolmap.FeatureExtractionOptions()
     extraction.num_threads = 1
-    if max_features:
-        extraction.sift.max_num_features = max_features
+    if peer == "colmap-soft-b":
+        extraction.sift.max_num_features = budget
     matching = pycolmap.FeatureMatchingOptions()
     matching.num_threads = 1
     verification = pycolmap.TwoViewGeometryOptions()
@@ -78,6 +115,8 @@ def run_peer(
                 extraction_options=extraction,
                 device=pycolmap.Device.cpu,
             )
+            if peer == "colmap-b":
+                _cap_database(db_path, names, budget)
             detect_s = time.perf_counter() - t
             t = time.perf_counter()
             pycolmap.match_exhaustive(

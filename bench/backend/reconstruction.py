@@ -40,8 +40,9 @@ import numpy as np
 import pycolmap
 
 from bench import BenchError
-from bench.backend.matching import BackendConfig, PairMatches, colmap_camera
+from bench.backend.matching import BackendConfig, PairMatches
 from bench.camera import Camera
+from bench.frontend.geometry import colmap_camera
 
 
 @contextmanager

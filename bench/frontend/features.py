@@ -115,3 +115,15 @@ def descriptor_distances(a: np.ndarray, b: np.ndarray, squared: bool = False) ->
         d2 += nb[None]
     np.maximum(d2, 0, out=d2)
     return d2 if squared else np.sqrt(d2, out=d2)
+
+
+def tentative_matches(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float) -> np.ndarray:
+    """(M, 2) index pairs: mutual nearest neighbours that pass the ratio test."""
+    if len(desc_a) < 2 or len(desc_b) < 2:
+        return np.zeros((0, 2), np.int64)
+    D = descriptor_distances(desc_a, desc_b)
+    two = np.partition(D, 1, axis=1)[:, :2]
+    nn_ab, nn_ba = D.argmin(1), D.argmin(0)
+    a = np.arange(len(desc_a))
+    keep = (nn_ba[nn_ab] == a) & (two[:, 0] < ratio * two[:, 1])
+    return np.stack([a[keep], nn_ab[keep]], 1)

@@ -5,7 +5,8 @@ estimate). After each round the caller's `match` (matching and
 COLMAP verification of the selection, as the back end does it) reports every pair's
 tentative and verified matches; from them and the calibration, per selected keypoint:
 its verified track (connected components of the verified matches) and that track's
-largest angle between viewing rays. A keypoint is *useful* when its track spans at least
+largest angle between viewing rays (with the poses, or, for views without them, the
+relative rotation that the verification of each pair estimated). A keypoint is *useful* when its track spans at least
 three views at an angle of at least 1.5 degrees (what the headline protocol triangulates).
 Then, per view and tile:
 
@@ -67,6 +68,8 @@ def keypoint_diagnostics(inputs: list[PolicyInput], sel: list[np.ndarray], pairs
         ver[a + ia] = ver[b + jb] = True
         ra = inputs[p.i].view.camera.rays(inputs[p.i].candidates.xy[sel[p.i][ia]])
         rb = inputs[p.j].view.camera.rays(inputs[p.j].candidates.xy[sel[p.j][jb]])
+        if not inputs[p.i].view.posed:  # camera-frame rays: a into b's frame
+            ra = ra @ p.rotation.T
         rows.append(a + ia)
         cols.append(b + jb)
         angles.append(np.degrees(np.arccos(np.clip((ra * rb).sum(1), -1, 1))))

@@ -1,8 +1,9 @@
 """The front-end stage: the views of a render entry or dataset to candidate pools with
-their signals.
+their signals, under the geometry a task grants (RIG: the views with their poses; IMAGES:
+the views without them, the geometry estimated from the images).
 
-Cached (npz beside the render cache) by the render entry, the detector and signal settings
-and the code that computes them; the seconds measured when it was computed are stored with
+Cached (npz beside the render cache) by the render entry, the geometry granted, the
+detector and signal settings and the code that computes them; the seconds measured when it was computed are stored with
 it, so reported front-end times do not depend on whether the cache was warm.
 """
 
@@ -19,9 +20,10 @@ import numpy as np
 from bench import BenchError
 from bench.console import log
 from bench.files import content_key, source_hash
-from bench.frontend import features, signals
+from bench.frontend import features, geometry, signals
 from bench.frontend.features import Candidates, DetectorConfig
-from bench.frontend.signals import SIGNALS, SignalConfig, Signals, compute_signals
+from bench.frontend.geometry import IMAGES, RIG
+from bench.frontend.signals import SIGNALS, TIMED, SignalConfig, Signals, compute_signals
 from bench.frontend.views import Source, View, load_views
 
 _CAND = [f.name for f in fields(Candidates)]
@@ -35,7 +37,7 @@ class FrontEnd:
     pools: list[Candidates]
     signals: list[Signals]
     seconds: dict[str, float]
-    """Measured seconds over all views: 'detect' and one per signal."""
+    """Measured seconds over all views: 'detect', 'geometry' and one per signal."""
     cached: bool
 
 
@@ -47,27 +49,34 @@ def _dataset_identity(root: Path) -> list:
     return [str(root.resolve())] + [(p.name, p.stat().st_size, p.stat().st_mtime_ns) for p in files]
 
 
-def front_end(entry: Path, det: DetectorConfig, sig: SignalConfig, cache_dir: Path) -> FrontEnd:
-    """Candidates and signals of every view of `entry` (a render entry or a dataset),
-    computed or read from the cache."""
+def front_end(
+    entry: Path, det: DetectorConfig, sig: SignalConfig, cache_dir: Path, grant: str = RIG
+) -> FrontEnd:
+    """Candidates and signals of every view of `entry` (a render entry or a dataset) under
+    the geometry granted (RIG or IMAGES), computed or read from the cache."""
     entry = Path(entry)
+    if grant not in (RIG, IMAGES):
+        raise BenchError(f"unknown geometry {grant!r}; valid: {RIG}, {IMAGES}")
     views = load_views(entry)
+    if grant == IMAGES:
+        views = [v.without_pose() for v in views]
     key = content_key(
         {
             "entry": entry.name if (entry / "meta.json").is_file() else _dataset_identity(entry),
+            "geometry": grant,
             "detector": asdict(det),
             "signals": asdict(sig),
             "opencv": cv2.__version__,
-            "code": source_hash(features, signals),
+            "code": source_hash(features, geometry, signals),
         }
     )
-    path = Path(cache_dir) / f"{entry.name}-{det.detector}-{key}.npz"
+    path = Path(cache_dir) / f"{entry.name}-{det.detector}-{grant}-{key}.npz"
     if path.is_file():
         try:
             with np.load(path) as z:
                 pools = [Candidates(*(z[f"{f}_{v}"] for f in _CAND)) for v in range(len(views))]
                 sigs = [Signals(*(z[f"{s}_{v}"] for s in SIGNALS)) for v in range(len(views))]
-                seconds = {k: float(z[f"seconds_{k}"]) for k in ("detect", *SIGNALS)}
+                seconds = {k: float(z[f"seconds_{k}"]) for k in ("detect", *TIMED)}
             return FrontEnd(views, pools, sigs, seconds, cached=True)
         except (OSError, ValueError, KeyError):
             log(f"damaged front-end cache {path.name}; computing it again")

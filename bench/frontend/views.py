@@ -15,7 +15,7 @@ ground-truth files.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -47,6 +47,13 @@ class View:
     @property
     def gray(self) -> np.ndarray:
         return cv2.cvtColor(self.image, cv2.COLOR_RGB2GRAY)
+
+    def without_pose(self) -> View:
+        """The same image and intrinsics with the pose removed (identity, `posed` False):
+        what a task that grants no poses hands to the front end."""
+        c = self.camera
+        cam = Camera(c.width, c.height, c.fx, c.fy, c.cx, c.cy, np.eye(3), np.zeros(3))
+        return replace(self, camera=cam, posed=False)
 
 
 @dataclass(frozen=True)

@@ -2,8 +2,8 @@
 cluster of N single-threaded worker processes, or an existing cluster by address).
 
 Units of work, with their dependencies: the front end of each (scene, seed), after its
-render; then each (scene, seed, policy, budget) unit, which waits for its scene's front
-end. Renders stay in the main process, so one process renders per machine (Mitsuba's LLVM
+render (one per geometry its tasks grant); then each (scene, seed, policy, budget) unit,
+which waits for its scene's front end. Renders stay in the main process, so one process renders per machine (Mitsuba's LLVM
 and CUDA variants use every core, or the GPU, on their own). A worker holds one scene's
 front end and ground truth at a time (`_scene`). Rows come back to the main process,
 which alone writes `runs.csv`. A unit whose worker dies is retried once, then recorded as
@@ -26,30 +26,38 @@ from pathlib import Path
 from bench import BenchError
 from bench.backend.peers import PEERS
 from bench.evaluation.metrics import load_truth
-from bench.frontend.stage import front_end
-from bench.harness.pipeline import RunConfig, row_identity, run_peer_unit, run_unit
+from bench.frontend.stage import FrontEnd, front_end
+from bench.frontend.views import load_views
+from bench.harness.pipeline import GRANTS, RunConfig, row_identity, run_peer_unit, run_unit
 
 _HELD: dict = {}
 """The one scene (front end and ground truth) this process holds."""
 
 
-def _scene(entry: Path, cfg: RunConfig, renders: Path):
-    key = (str(entry), cfg.hash)
+def _front_ends(entry: Path, cfg: RunConfig, renders: Path, grants) -> dict[str, FrontEnd]:
+    """The front end of an entry under each geometry granted, computed or read from its cache."""
+    return {g: front_end(entry, cfg.detector, cfg.signals, renders / "frontend", g) for g in grants}
+
+
+def _scene(entry: Path, cfg: RunConfig, renders: Path, grants):
+    key = (str(entry), cfg.hash, tuple(grants))
     if _HELD.get("key") != key:
         _HELD.clear()  # let the previous scene go before loading the next
-        fe = front_end(entry, cfg.detector, cfg.signals, renders / "frontend")
-        cams, names = [v.camera for v in fe.views], [v.name for v in fe.views]
-        truth = load_truth(entry, cams, names, fe.pools)
-        _HELD.update(key=key, fe=fe, truth=truth)
-    return _HELD["fe"], _HELD["truth"]
+        fronts = _front_ends(entry, cfg, renders, grants)
+        posed = load_views(entry)  # the evaluation side may read the poses
+        cams, names = [v.camera for v in posed], [v.name for v in posed]
+        truth = load_truth(entry, cams, names, next(iter(fronts.values())).pools)
+        _HELD.update(key=key, fronts=fronts, truth=truth)
+    return _HELD["fronts"], _HELD["truth"]
 
 
-def scene_task(group: tuple, entry: Path, cfg: RunConfig, renders: Path, budgets) -> dict:
-    """The front end of the render entry of `group` (scene, seed), computed or read from
-    its cache, checked against the budgets; returns its seconds and largest pool."""
+def scene_task(group: tuple, entry: Path, cfg: RunConfig, renders: Path, budgets, grants) -> dict:
+    """The front ends of the render entry of `group` (scene, seed) under each geometry
+    granted, computed or read from their cache, checked against the budgets; returns their
+    seconds and the largest pool."""
     t = time.perf_counter()
-    fe = front_end(entry, cfg.detector, cfg.signals, renders / "frontend")
-    largest = max(len(p) for p in fe.pools)
+    fronts = _front_ends(entry, cfg, renders, grants)
+    largest = max(len(p) for p in next(iter(fronts.values())).pools)
     too_big = [b for b in budgets if b > largest]
     if too_big:
         raise BenchError(
@@ -61,12 +69,19 @@ def scene_task(group: tuple, entry: Path, cfg: RunConfig, renders: Path, budgets
 
 
 def unit_task(
-    entry: Path, unit: tuple, jobs: list, cfg: RunConfig, results: Path, renders: Path, *_after
+    entry: Path,
+    unit: tuple,
+    jobs: list,
+    cfg: RunConfig,
+    results: Path,
+    renders: Path,
+    grants,
+    *_after,
 ) -> list[dict]:
     """The rows of one (scene, seed, policy, budget) unit (`_after`: what it waits for)."""
     scene, seed, policy, budget = unit
-    fe, truth = _scene(entry, cfg, renders)
-    args = (entry, fe, truth, scene, seed, policy, budget, jobs, cfg, results)
+    fronts, truth = _scene(entry, cfg, renders, grants)
+    args = (entry, fronts, truth, scene, seed, policy, budget, jobs, cfg, results)
     return run_peer_unit(*args) if policy in PEERS else run_unit(*args)
 
 
@@ -93,17 +108,20 @@ def execute(
     """Yield the rows of each unit as it finishes. `scenes`: render entry per (scene,
     seed); `units`: jobs per unit; `on_scene(group, info)` is told when a front end is ready."""
     results, renders = Path(results).resolve(), Path(renders).resolve()
+    grants = tuple(sorted({GRANTS[task] for jobs in units.values() for task, _ in jobs}))
     if workers == 1 and scheduler is None:
         for group, entry in scenes.items():
-            on_scene(group, scene_task(group, entry, cfg, renders, budgets))
+            on_scene(group, scene_task(group, entry, cfg, renders, budgets, grants))
             for unit, jobs in ((u, j) for u, j in units.items() if u[:2] == group):
-                yield unit_task(entry, unit, jobs, cfg, results, renders)
+                yield unit_task(entry, unit, jobs, cfg, results, renders, grants)
         _HELD.clear()
         return
-    yield from _on_dask(scenes, units, cfg, budgets, results, renders, workers, scheduler, on_scene)
+    yield from _on_dask(
+        scenes, units, cfg, budgets, results, renders, workers, scheduler, on_scene, grants
+    )
 
 
-def _on_dask(scenes, units, cfg, budgets, results, renders, workers, scheduler, on_scene):
+def _on_dask(scenes, units, cfg, budgets, results, renders, workers, scheduler, on_scene, grants):
     from distributed import Client, LocalCluster, as_completed
 
     cluster = None
@@ -114,7 +132,9 @@ def _on_dask(scenes, units, cfg, budgets, results, renders, workers, scheduler, 
     client = Client(scheduler or cluster)
     try:
         fronts = {
-            client.submit(scene_task, group, entry, cfg, renders, budgets, pure=False): group
+            client.submit(
+                scene_task, group, entry, cfg, renders, budgets, grants, pure=False
+            ): group
             for group, entry in scenes.items()
         }
         by_group = {g: f for f, g in fronts.items()}
@@ -127,6 +147,7 @@ def _on_dask(scenes, units, cfg, budgets, results, renders, workers, scheduler, 
                 cfg,
                 results,
                 renders,
+                grants,
                 by_group[u[:2]],
                 retries=1,
                 pure=False,

@@ -1,10 +1,12 @@
 """One unit of work, end to end: (render entry, policy, budget) -> one row per task and
 track protocol.
 
-render entry -> front end (cached) -> selection of B per view (a policy, or the oracle on
-the evaluation side) -> match -> verify -> for each task: reconstruct (COLMAP) -> export
-the model -> evaluate against ground truth. Matching and verification are shared by the
-tasks and protocols of a unit, so they see exactly the same matches.
+render entry -> front end (cached) under the geometry the task grants (`GRANTS`) ->
+selection of B per view (a policy, or the oracle on the evaluation side) -> match ->
+verify -> for each task: reconstruct (COLMAP) -> export the model -> evaluate against
+ground truth. The tasks and protocols of one grant share the selection, matching and
+verification, so they see exactly the same matches; a selection that does not depend on
+the grant (it reads no geometry) is matched once for both.
 """
 
 from __future__ import annotations
@@ -36,8 +38,9 @@ from bench.evaluation.metrics import SceneTruth, coverage_pct, evaluate_known_po
 from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.evaluation.poses import evaluate_mapping
 from bench.files import content_key, source_hash, temp_dir_beside, write_text_atomic
-from bench.frontend import features, feedback, policies, signals, stage, views
+from bench.frontend import features, feedback, geometry, policies, signals, stage, views
 from bench.frontend.features import Candidates, DetectorConfig
+from bench.frontend.geometry import IMAGES, RIG
 from bench.frontend.policies import (
     SIGNALS_USED,
     PolicyConfig,
@@ -45,7 +48,7 @@ from bench.frontend.policies import (
     select,
     weights_file,
 )
-from bench.frontend.signals import SignalConfig, Signals
+from bench.frontend.signals import SignalConfig, Signals, seconds_of
 from bench.frontend.stage import FrontEnd
 from bench.frontend.views import Source, View
 from bench.harness import plugins
@@ -54,6 +57,10 @@ from bench.render.config import RenderConfig
 TASKS = ("tri", "sfm")
 """Reconstruction tasks: `tri` triangulates with the known poses; `sfm` maps with unknown
 poses and is scored by pose accuracy."""
+GRANTS = {"tri": RIG, "sfm": IMAGES}
+"""What a task's selection may see of the views' geometry, the one switch: `tri` the rig's
+poses (its premise); `sfm` the images and intrinsics only, like its mapper and the COLMAP
+peers it is compared with (`bench.frontend.geometry`)."""
 ORACLE = "oracle"
 """The ground-truth selection of `bench.evaluation.oracle`: a reference, never a policy."""
 REFERENCES = ("all", ORACLE, *PEERS)
@@ -67,6 +74,7 @@ def code_hash() -> str:
     return source_hash(
         views,
         features,
+        geometry,
         signals,
         policies,
         feedback,
@@ -195,7 +203,7 @@ def model_dir(
 
 def run_unit(
     entry: Path,
-    fe: FrontEnd,
+    fronts: dict[str, FrontEnd],
     truth: SceneTruth,
     scene: str,
     seed: int,
@@ -206,62 +214,78 @@ def run_unit(
     results: Path,
 ) -> list[dict]:
     """One row per (task, protocol) in `jobs`: identification, every metric, stage timings
-    (ms) and a failure reason if any."""
-    selections, select_s, rounds = select_features(fe, truth, policy, budget, seed, cfg)
-    cams = [v.camera for v in fe.views]
-    names = [v.name for v in fe.views]
-    image_dir = Source.of(entry).images
+    (ms) and a failure reason if any. Each task selects from the front end of the geometry
+    it grants (`fronts`, by grant)."""
+    rows, matched = [], {}
+    for grant in dict.fromkeys(GRANTS[task] for task, _ in jobs):
+        fe = fronts[grant]
+        selections, select_s, rounds = select_features(fe, truth, policy, budget, seed, cfg)
+        key = repr(([s.tolist() for s in selections], rounds))
+        if key not in matched:
+            matched[key] = _matched(fe, truth, policy, selections, rounds, cfg)
+        xy, pairs, shared, match_s = matched[key]
+        used = signals_used(policy)
+        seconds = {
+            "detect": fe.seconds["detect"],
+            "signals": seconds_of(fe.seconds, used),
+            "select": select_s,
+            **match_s,
+        }
+        cams = [v.camera for v in fe.views]
+        names = [v.name for v in fe.views]
+        image_dir = Source.of(entry).images
+        for task, protocol in [j for j in jobs if GRANTS[j[0]] == grant]:
+            out = model_dir(results, scene, seed, policy, budget, task, protocol)
+            if task == "tri":
+                rec = known_pose_task(image_dir, cams, names, xy, pairs, cfg.backend, protocol)
+                model = rec.model if rec.model is not None else known_pose_model(cams, names, xy)
+                export_model(model, out)
+            else:
+                rec = mapping_task(image_dir, cams, names, xy, pairs, cfg.backend, protocol)
+                _export_or_clear(rec.model, out)
+            t = time.perf_counter()
+            if task == "tri":
+                scores = evaluate_known_pose(truth, rec.model, PROTOCOLS[protocol])
+            else:
+                scores = evaluate_mapping(truth, rec.model, _view_of_name(names))
+            timing = seconds | {
+                "task": rec.seconds,
+                "evaluate": time.perf_counter() - t,
+            }
+            ident = (entry, scene, seed, policy, budget, task, protocol, cfg)
+            rows.append(_row(ident, shared | scores, timing, rec.failure))
+        if rounds:
+            first = next(j for j in jobs if GRANTS[j[0]] == grant)
+            folder = model_dir(results, scene, seed, policy, budget, *first)
+            folder.mkdir(parents=True, exist_ok=True)
+            write_text_atomic(folder / "loop.json", json.dumps(rounds, indent=1))
+    return rows
+
+
+def _matched(
+    fe: FrontEnd,
+    truth: SceneTruth,
+    policy: str,
+    selections: list[np.ndarray],
+    rounds: list[dict],
+    cfg: RunConfig,
+) -> tuple[list[np.ndarray], list, dict, dict[str, float]]:
+    """A selection's keypoints, verified pairs, the metrics of its matches, and the seconds
+    of matching, verification and the match metrics."""
     xy = [c.xy[s] for c, s in zip(fe.pools, selections)]
     desc = [c.descriptors[s] for c, s in zip(fe.pools, selections)]
-    pairs, match_s = match_and_verify(cams, xy, desc, cfg.backend)
-    used = signals_used(policy)
+    pairs, seconds = match_and_verify([v.camera for v in fe.views], xy, desc, cfg.backend)
     t = time.perf_counter()
     earlier = [(r["selected"], r["pair_tentative"], r["pair_verified"]) for r in rounds]
-    shared = match_metrics(truth, fe.pools, selections, pairs, len(used), earlier)
+    shared = match_metrics(truth, fe.pools, selections, pairs, len(signals_used(policy)), earlier)
     shared["ground_truth"] = truth.kind
-    shared_eval_s = time.perf_counter() - t
-    seconds = {
-        "detect": fe.seconds["detect"],
-        "signals": sum(fe.seconds[s] for s in used),
-        "select": select_s,
-        "match": match_s["match"],
-        "verify": match_s["verify"],
-        "evaluate_matches": shared_eval_s,
-    }
-    rows = []
-    for task, protocol in jobs:
-        out = model_dir(results, scene, seed, policy, budget, task, protocol)
-        if task == "tri":
-            rec = known_pose_task(image_dir, cams, names, xy, pairs, cfg.backend, protocol)
-            model = rec.model if rec.model is not None else known_pose_model(cams, names, xy)
-            export_model(model, out)
-        else:
-            rec = mapping_task(image_dir, cams, names, xy, pairs, cfg.backend, protocol)
-            _export_or_clear(rec.model, out)
-        t = time.perf_counter()
-        if task == "tri":
-            scores = evaluate_known_pose(truth, rec.model, PROTOCOLS[protocol])
-        else:
-            scores = evaluate_mapping(truth, rec.model, _view_of_name(names))
-        timing = seconds | {
-            "task": rec.seconds,
-            "evaluate": time.perf_counter() - t,
-        }
-        ident = (entry, scene, seed, policy, budget, task, protocol, cfg)
-        rows.append(_row(ident, shared | scores, timing, rec.failure))
-    if rounds:
-        headline = model_dir(results, scene, seed, policy, budget, "tri", "multiview")
-        headline.mkdir(parents=True, exist_ok=True)
-        write_text_atomic(
-            headline / "loop.json",
-            json.dumps(rounds, indent=1),
-        )
-    return rows
+    seconds["evaluate_matches"] = time.perf_counter() - t
+    return xy, pairs, shared, seconds
 
 
 def run_peer_unit(
     entry: Path,
-    fe: FrontEnd,
+    fronts: dict[str, FrontEnd],
     truth: SceneTruth,
     scene: str,
     seed: int,
@@ -272,10 +296,11 @@ def run_peer_unit(
     results: Path,
 ) -> list[dict]:
     """The rows (task `sfm`, one per protocol) of a stock-COLMAP peer (`bench.backend.peers`)."""
+    fe = fronts[GRANTS["sfm"]]
     names = [v.name for v in fe.views]
     cams = [v.camera for v in fe.views]
     image_dir = Source.of(entry).images
-    run = run_peer(image_dir, names, cams, budget, cfg.backend, [pr for _, pr in jobs])
+    run = run_peer(image_dir, names, cams, peer, budget, cfg.backend, [pr for _, pr in jobs])
     shared = {
         "tentative_matches": run.tentative,
         "verified_matches": run.verified,

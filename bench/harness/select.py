@@ -64,9 +64,7 @@ def select_to_database(
     t = time.perf_counter()
     views = load_image_folder(images, cameras)
     if not all(v.posed for v in views):
-        log(
-            "no poses (no --cameras): the parallax, cross-view ambiguity and epipolar signals are off"
-        )
+        log("no poses (no --cameras): the geometry of the signals is estimated from the images")
     with progress("detect", len(views)) as bar:
         pools = []
         for v in views:

@@ -17,8 +17,10 @@
 * `table_scenes.csv`: per scene, policy and budget, the mean over seeds of the headline
   metrics and the sfm task's mAA and registered views.
 * `frontend_cost.csv`: per policy, the measured front-end time of a run (detection, the
-  signals the policy reads, and its selection, which for `adaptive-loop` includes its
-  matching rounds), in ms and relative to texture-only in the same units.
+  signals the policy reads with the geometry they need, and its selection, which for
+  `adaptive-loop` includes its matching rounds), in ms and relative to texture-only in the
+  same units: with the rig's poses (`tri`) and with the geometry from the images (`sfm`,
+  `_posefree`), and the ratio of the two (`posefree_to_posed`).
 
 A run that reconstructed nothing has no rmse (left out of that mean; `failed_runs` counts
 such runs) and zero completeness (kept in the completeness mean).
@@ -31,7 +33,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from bench.harness.pipeline import ORACLE, REFERENCES
+from bench.harness.pipeline import ORACLE, REFERENCES, TASKS
 from bench.harness.stats import LOWER_IS_BETTER, bootstrap_mean, paired_difference
 
 KEY = ("scene", "seed", "policy", "budget", "task", "protocol")
@@ -50,7 +52,8 @@ DISPLAY = {
     "all": "All candidates (reference)",
     ORACLE: "Oracle (ground truth, reference)",
     "colmap": "COLMAP default SIFT (peer)",
-    "colmap-b": "COLMAP SIFT capped at B (peer)",
+    "colmap-b": "COLMAP SIFT, B largest-scale (peer)",
+    "colmap-soft-b": "COLMAP SIFT soft limit B (peer)",
 }
 BASELINES = ("random", "texture", "grid", "response", "ssc", "quadtree")
 CONTENDER = "adaptive"
@@ -85,6 +88,7 @@ TABLE1_METRICS = (
 )
 SFM_METRICS = (
     "maa",
+    "keypoints_per_view",
     "registered_views",
     "median_pose_err_deg",
     "cam_center_err",
@@ -237,20 +241,31 @@ def table_scenes(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def frontend_cost(df: pd.DataFrame) -> pd.DataFrame:
-    """Per policy: mean front-end ms of a run (detect + its signals + select) and the mean
-    ratio to texture-only over the units both ran (headline task and protocol)."""
-    rows = df[(df["task"] == HEADLINE[0]) & (df["protocol"] == HEADLINE[1])]
-    rows = rows[~rows["policy"].isin([ORACLE, *REFERENCES])]
-    if rows.empty or not {"detect_ms", "signals_ms", "select_ms"} <= set(rows):
+    """Per policy: mean front-end ms of a run (detect + its signals + select) with the
+    rig's poses (the `tri` task) and the mean ratio to texture-only over the units both
+    ran; the same with the geometry from the images (the `sfm` task, `_posefree`) and the
+    mean ratio of the pose-free to the posed front end over the units both ran."""
+    parts = ["detect_ms", "signals_ms", "select_ms"]
+    rows = df[(df["protocol"] == HEADLINE[1]) & ~df["policy"].isin([ORACLE, *REFERENCES])]
+    if rows.empty or not set(parts) <= set(rows):
         return pd.DataFrame()
-    front = rows.set_index(["scene", "seed", "budget", "policy"])[
-        ["detect_ms", "signals_ms", "select_ms"]
-    ].sum(axis=1)
+    unit = ["scene", "seed", "budget", "policy"]
+    front = {task: rows[rows["task"] == task].set_index(unit)[parts].sum(axis=1) for task in TASKS}
     out = []
-    for policy, g in front.groupby(level="policy", sort=False):
-        units = g.droplevel("policy")
-        tex = front.xs("texture", level="policy") if "texture" in set(rows["policy"]) else None
-        ratio = (units / tex.reindex(units.index)).mean() if tex is not None else math.nan
-        out.append({"policy": policy, "frontend_ms": units.mean(), "ratio_to_texture": ratio})
+    for policy in dict.fromkeys(rows["policy"]):
+        row = {"policy": policy}
+        for task, suffix in (("tri", ""), ("sfm", "_posefree")):
+            f = front[task]
+            units = f[f.index.get_level_values("policy") == policy].droplevel("policy")
+            has_texture = "texture" in set(f.index.get_level_values("policy"))
+            tex = f.xs("texture", level="policy") if has_texture else None
+            row[f"frontend_ms{suffix}"] = units.mean() if len(units) else math.nan
+            row[f"ratio_to_texture{suffix}"] = (
+                (units / tex.reindex(units.index)).mean() if tex is not None else math.nan
+            )
+        posed = front["tri"][front["tri"].index.get_level_values("policy") == policy]
+        free = front["sfm"][front["sfm"].index.get_level_values("policy") == policy]
+        row["posefree_to_posed"] = (free / posed.reindex(free.index)).mean()
+        out.append(row)
     t = pd.DataFrame(out)
     return t.iloc[t["policy"].map(_policy_order).argsort(kind="stable")].reset_index(drop=True)

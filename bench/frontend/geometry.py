@@ -1,0 +1,416 @@
+"""The geometry between views that the signals read: from the calibration's poses, or
+estimated from the images alone.
+
+Which one a selection may use is what its task grants (`bench.harness.pipeline.GRANTS`):
+the `tri` task grants the rig's poses; the `sfm` task (and `bench select` without a pose
+model) grants the images and intrinsics only, and its views reach the front end without
+their poses (`View.without_pose`), so nothing downstream can read them. `view_geometry`
+takes the rig's geometry when every view is posed, else estimates it.
+
+A `Geometry` gives, per view i: the views that overlap it, ambiguity's nearest views (two
+at most), and for each overlapping pair a two-camera frame (`pair_frame`: both cameras in
+one coordinate system) from which the epipolar geometry and the parallax are computed.
+
+**From the poses** (`rig_geometry`), as the signals have always had it: the depth prior
+D_i (the median depth of points triangulated from mutual epipolar matches of the 150
+strongest candidates, see `depth_priors`); views i and j overlap when one sees the point
+at the other's depth prior on its optical axis; the nearest views are those with the
+closest camera centres; parallax looks at every other view at D_i.
+
+**From the images** (`image_geometry`): a first pass matches the `SignalConfig.first_pass`
+strongest candidates (by response) of every pair of views (mutual nearest neighbours with
+the ratio test) and verifies them with COLMAP's calibrated two-view geometry (the known
+intrinsics, or the focal prior of photographs; RANSAC seeded, so deterministic; a 1 px
+threshold), which estimates their relative pose: the rotation and the direction of the
+translation, placing the two cameras in a frame whose unit is their baseline. The pair
+overlaps when the pose explains at least `MIN_SUPPORT` of the matches (within 1 px of its
+epipolar lines, and triangulated in front of both cameras), whatever configuration COLMAP
+names: a near-planar facade is UNCALIBRATED to COLMAP (a fundamental matrix explains a few
+more matches) with rotations right to 0.2 degrees, while wrong geometries of wide pairs
+explain none. From it:
+
+* the nearest views of i: the two overlapping views whose poses explain the most matches;
+* F = K_j^-T [t]x R K_i^-1 of the pair frame (none for a pure rotation);
+* parallax: the rig's formula in the pair frame, at the pair's working distance d_ij (the
+  median depth in view i of the matches the pose explains, in baselines; with fewer than
+  10, the distance at which the baseline subtends the saturation angle).
+
+A pair whose geometry cannot be estimated does not overlap (a value, never an error); a
+view that overlaps nothing gets zero parallax and epipolar signals, and a log line says so.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from itertools import combinations
+
+import numpy as np
+import pycolmap
+
+from bench.camera import Camera
+from bench.console import log
+from bench.frontend.features import Candidates, descriptor_distances, tentative_matches
+from bench.frontend.views import View
+
+RIG, IMAGES = "rig", "images"
+"""The two sources of geometry: the calibration's poses, or the images alone."""
+PARALLAX_SATURATION_DEG = 10.0
+EPIPOLAR_PX = 3.0
+EPIPOLAR_RATIO = 0.8
+DEPTH_CANDIDATES = 150
+DEPTH_MIN_POINTS = 10
+AMBIGUITY_VIEWS = 2
+MIN_SUPPORT = 15
+"""First-pass matches that an estimated relative pose must explain for two views to
+overlap (COLMAP's `min_num_inliers`)."""
+FIRST_PASS_RATIO = 0.8
+FIRST_PASS_MAX_ERROR = 1.0
+"""RANSAC and support threshold of the first pass, px: tighter than COLMAP's default 4 px,
+which gave relative rotations 1.5 degrees off the rig's (median, table seed 0) against 0.7."""
+FIRST_PASS_TRIALS = 1000
+"""RANSAC trials of the first pass (COLMAP's default 10000): enough for an inlier ratio of
+0.4 at 99.9% confidence; a pair with fewer inliers than that is left out."""
+RANSAC_SEED = 0
+
+
+@dataclass(frozen=True)
+class SignalConfig:
+    """Settings of the quality signals."""
+
+    depth_prior: float | None = None
+    """Working distance in scene units at which parallax and overlap are judged from the
+    poses; None (the default) estimates it per view from the calibration and sparse
+    epipolar matches. Geometry estimated from the images has no scene units and ignores it."""
+    first_pass: int = 512
+    """Geometry from the images: the strongest candidates per view (by detector response)
+    matched and verified between every pair of views."""
+
+
+def colmap_camera(cam: Camera, camera_id: int = 1) -> pycolmap.Camera:
+    c = pycolmap.Camera(
+        model="PINHOLE",
+        width=cam.width,
+        height=cam.height,
+        params=[cam.fx, cam.fy, cam.cx, cam.cy],
+        camera_id=camera_id,
+    )
+    c.has_prior_focal_length = True  # otherwise COLMAP does not estimate a calibrated geometry
+    return c
+
+
+def two_view_geometry(
+    cam_a: Camera,
+    xy_a: np.ndarray,
+    cam_b: Camera,
+    xy_b: np.ndarray,
+    matches: np.ndarray,
+    max_error: float,
+    seed: int,
+    max_trials: int | None = None,
+) -> pycolmap.TwoViewGeometry:
+    """COLMAP's calibrated two-view geometry of tentative matches (intrinsics only), with
+    the relative pose `cam2_from_cam1` (b from a) where it can be estimated."""
+    opts = pycolmap.TwoViewGeometryOptions()
+    opts.ransac.max_error = max_error
+    opts.ransac.random_seed = seed
+    if max_trials is not None:
+        opts.ransac.max_num_trials = max_trials
+    opts.compute_relative_pose = True
+    return pycolmap.estimate_calibrated_two_view_geometry(
+        colmap_camera(cam_a),
+        xy_a.astype(np.float64),
+        colmap_camera(cam_b),
+        xy_b.astype(np.float64),
+        matches.astype(np.uint32),
+        opts,
+    )
+
+
+def configuration(tvg: pycolmap.TwoViewGeometry) -> str:
+    """COLMAP's name of a two-view configuration (e.g. CALIBRATED, PLANAR, DEGENERATE)."""
+    return pycolmap.TwoViewGeometryConfiguration(int(tvg.config)).name
+
+
+def fundamental(a: Camera, b: Camera) -> np.ndarray:
+    """F with x_b^T F x_a = 0 for pixels (COLMAP convention) of one point in views a and b."""
+    R = b.R @ a.R.T
+    t = b.t - R @ a.t
+    tx = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
+    return np.linalg.inv(b.K).T @ tx @ R @ np.linalg.inv(a.K)
+
+
+def epipolar_distances(F: np.ndarray, xa: np.ndarray, xb: np.ndarray) -> np.ndarray:
+    """(Na, Nb): the larger of the two point-to-epipolar-line distances in pixels."""
+    ha, hb = np.c_[xa, np.ones(len(xa))], np.c_[xb, np.ones(len(xb))]
+    la, lb = ha @ F.T, hb @ F  # lines in b of points of a; lines in a of points of b
+    num = np.abs((la @ hb.T).astype(np.float32))
+    inv_a = 1 / np.maximum(np.hypot(la[:, 0], la[:, 1]), 1e-12)
+    inv_b = 1 / np.maximum(np.hypot(lb[:, 0], lb[:, 1]), 1e-12)
+    return num * np.maximum(inv_a[:, None], inv_b[None, :]).astype(np.float32)
+
+
+def epipolar_matches(
+    D2: np.ndarray, E: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Ratio-passing matches along epipolar lines, both ways: (passes of a, best of a,
+    passes of b, best of b) from squared descriptor distances D2 and epipolar distances E."""
+    Dm = np.where(E <= EPIPOLAR_PX, D2, np.float32(np.inf))
+
+    def one_way(M):
+        rows = np.arange(len(M))
+        if M.shape[1] < 1:
+            return np.zeros(len(M), bool), np.zeros(len(M), int)
+        best = M.argmin(1)
+        d1 = M[rows, best]
+        M[rows, best] = np.inf
+        d2 = M.min(1)
+        M[rows, best] = d1
+        return np.isfinite(d1) & (d1 < EPIPOLAR_RATIO**2 * d2), best
+
+    pa, ba = one_way(Dm)
+    pb, bb = one_way(Dm.T)
+    return pa, ba, pb, bb
+
+
+def _midpoints(
+    a: Camera, b: Camera, xa: np.ndarray, xb: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Midpoint triangulation: the depth in view a of each point, and whether it lies in
+    front of both views."""
+    ra, rb = a.rays(xa), b.rays(xb)
+    ca, cb = a.center, b.center
+    w = ca - cb
+    aa, bb_, ab = (ra * ra).sum(1), (rb * rb).sum(1), (ra * rb).sum(1)
+    den = aa * bb_ - ab**2
+    ok = den > 1e-9
+    sa = np.where(ok, (ab * (rb @ w) - bb_ * (ra @ w)) / np.where(ok, den, 1), 0)
+    sb = np.where(ok, (aa * (rb @ w) - ab * (ra @ w)) / np.where(ok, den, 1), 0)
+    X = ca + sa[:, None] * ra
+    za = a.to_camera(X)[:, 2]
+    zb = b.to_camera(cb + sb[:, None] * rb)[:, 2]
+    return za, ok & (sa > 0) & (sb > 0) & (zb > 0)
+
+
+def triangulate_depths(a: Camera, b: Camera, xa: np.ndarray, xb: np.ndarray) -> np.ndarray:
+    """The depth in view a of each midpoint-triangulated point in front of both views
+    (others dropped)."""
+    za, front = _midpoints(a, b, xa, xb)
+    return za[front]
+
+
+def saturation_depth(baseline: float) -> float:
+    """The distance at which a baseline subtends the parallax saturation angle."""
+    return baseline / (2 * math.tan(math.radians(PARALLAX_SATURATION_DEG) / 2))
+
+
+def ray_angles(
+    cand: Candidates, cam: Camera, others: list[Camera], depth: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """For the point at `depth` along each candidate's ray: the sum over the `others` that
+    see it of the angle (degrees) at the point between the two camera centres, and how
+    many see it."""
+    X = cam.center + depth * cam.rays(cand.xy)
+    total, count = np.zeros(len(cand)), np.zeros(len(cand))
+    for other in others:
+        uv, z = other.project(X)
+        vis = (
+            (z > 0)
+            & (uv[:, 0] >= 0)
+            & (uv[:, 0] < other.width)
+            & (uv[:, 1] >= 0)
+            & (uv[:, 1] < other.height)
+        )
+        u, v = cam.center - X, other.center - X
+        cos = (u * v).sum(1) / (np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1))
+        total += np.where(vis, np.degrees(np.arccos(np.clip(cos, -1, 1))), 0)
+        count += vis
+    return total, count
+
+
+def parallax(cand: Candidates, cams: list[Camera], i: int, depth: float) -> np.ndarray:
+    """p = min(1, theta / 10 deg), theta the mean ray angle over the other views that see
+    the point at `depth` along each candidate's ray."""
+    total, count = ray_angles(cand, cams[i], [c for j, c in enumerate(cams) if j != i], depth)
+    theta = np.divide(total, count, out=np.zeros_like(total), where=count > 0)
+    return np.minimum(1.0, theta / PARALLAX_SATURATION_DEG)
+
+
+@dataclass
+class Frame:
+    """View i and some other views in one coordinate system, and i's working distance there."""
+
+    camera: Camera
+    others: list[Camera]
+    depth: float
+
+
+@dataclass
+class Geometry:
+    """What the signals may know of the views' relative geometry (module docstring)."""
+
+    source: str
+    """RIG (the calibration's poses) or IMAGES (estimated from the images)."""
+    overlap: list[list[int]]
+    nearest: list[set[int]]
+    pair_frame: dict[tuple[int, int], tuple[Camera, Camera]] = field(default_factory=dict)
+    """(i, j), i < j, overlapping with a translation between them: both cameras in one frame."""
+    frames: list[list[Frame]] = field(default_factory=list)
+    """Per view, the frames its parallax is judged in."""
+
+    def fundamental(self, i: int, j: int) -> np.ndarray | None:
+        """F of views i < j (x_j^T F x_i = 0), or None without a translation between them."""
+        pair = self.pair_frame.get((i, j))
+        return None if pair is None else fundamental(*pair)
+
+    def parallax(self, i: int, cand: Candidates) -> np.ndarray:
+        """The parallax signal of view i's candidates (`parallax`, over every frame of i)."""
+        total, count = np.zeros(len(cand)), np.zeros(len(cand))
+        for f in self.frames[i]:
+            t, c = ray_angles(cand, f.camera, f.others, f.depth)
+            total += t
+            count += c
+        theta = np.divide(total, count, out=np.zeros_like(total), where=count > 0)
+        return np.minimum(1.0, theta / PARALLAX_SATURATION_DEG)
+
+
+def view_geometry(views: list[View], pools: list[Candidates], cfg: SignalConfig) -> Geometry:
+    """The rig's geometry when every view is posed, else the geometry of the images."""
+    if all(v.posed for v in views):
+        return rig_geometry(views, pools, cfg)
+    return image_geometry(views, pools, cfg)
+
+
+def _strongest(pools: list[Candidates], k: int) -> list[np.ndarray]:
+    return [np.argsort(-c.response, kind="stable")[:k] for c in pools]
+
+
+def depth_priors(views: list[View], pools: list[Candidates], cfg: SignalConfig) -> list[float]:
+    """Each view's working distance from the poses (module docstring)."""
+    n = len(views)
+    if cfg.depth_prior is not None:
+        return [float(cfg.depth_prior)] * n
+    cams = [v.camera for v in views]
+    strong = _strongest(pools, DEPTH_CANDIDATES)
+    found: list[list[np.ndarray]] = [[] for _ in range(n)]
+    for i in range(n):
+        for j in range(i + 1, n):
+            if cams[i].R[2] @ cams[j].R[2] <= 0 or not len(strong[i]) or not len(strong[j]):
+                continue
+            xa, xb = pools[i].xy[strong[i]], pools[j].xy[strong[j]]
+            D2 = descriptor_distances(
+                pools[i].descriptors[strong[i]], pools[j].descriptors[strong[j]], squared=True
+            )
+            E = epipolar_distances(fundamental(cams[i], cams[j]), xa, xb)
+            pa, ba, pb, bb = epipolar_matches(D2, E)
+            mutual = np.flatnonzero(pa & pb[ba] & (bb[ba] == np.arange(len(ba))))
+            found[i].append(triangulate_depths(cams[i], cams[j], xa[mutual], xb[ba[mutual]]))
+            found[j].append(triangulate_depths(cams[j], cams[i], xb[ba[mutual]], xa[mutual]))
+    per_view = [np.concatenate(f) if f else np.zeros(0) for f in found]
+    every = np.concatenate(per_view)
+    if len(every) >= DEPTH_MIN_POINTS:
+        fallback = float(np.median(every))
+    else:
+        centres = np.array([c.center for c in cams])
+        gaps = np.linalg.norm(centres[:, None] - centres[None], axis=2) + np.diag([np.inf] * n)
+        fallback = saturation_depth(float(np.median(gaps.min(1))))
+    return [float(np.median(d)) if len(d) >= DEPTH_MIN_POINTS else fallback for d in per_view]
+
+
+def overlapping(cams: list[Camera], i: int, j: int, depths: list[float]) -> bool:
+    """Whether view j sees the point at view i's working distance on its optical axis, or
+    view i sees view j's."""
+    for a, b in ((i, j), (j, i)):
+        X = cams[a].center + depths[a] * cams[a].R[2]
+        uv, z = cams[b].project(X[None])
+        if z[0] > 0 and 0 <= uv[0, 0] < cams[b].width and 0 <= uv[0, 1] < cams[b].height:
+            return True
+    return False
+
+
+def rig_geometry(views: list[View], pools: list[Candidates], cfg: SignalConfig) -> Geometry:
+    """The geometry of the calibration's poses (module docstring)."""
+    n = len(views)
+    cams = [v.camera for v in views]
+    depths = depth_priors(views, pools, cfg)
+    overlap = [
+        [j for j in range(n) if j != i and overlapping(cams, i, j, depths)] for i in range(n)
+    ]
+    centres = [c.center for c in cams]
+    nearest = [
+        set(sorted(o, key=lambda j: np.linalg.norm(centres[j] - centres[i]))[:AMBIGUITY_VIEWS])
+        for i, o in enumerate(overlap)
+    ]
+    pair_frame = {(i, j): (cams[i], cams[j]) for i in range(n) for j in overlap[i] if i < j}
+    frames = [
+        [Frame(cams[i], [c for j, c in enumerate(cams) if j != i], depths[i])] for i in range(n)
+    ]
+    return Geometry(RIG, overlap, nearest, pair_frame, frames)
+
+
+def _pair_camera(cam: Camera, R: np.ndarray, t: np.ndarray) -> Camera:
+    return Camera(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy, R, t)
+
+
+def _relative_pose(
+    cam_a: Camera, xa: np.ndarray, cam_b: Camera, xb: np.ndarray
+) -> tuple[Camera, Camera, np.ndarray] | None:
+    """COLMAP's relative pose of two views from matched points (xa[k] <-> xb[k]): the two
+    cameras in a frame of unit baseline, and the indices of the matches the pose explains
+    (module docstring); None without a pose or without a translation."""
+    ids = np.arange(len(xa))
+    tvg = two_view_geometry(
+        cam_a, xa, cam_b, xb, np.c_[ids, ids], FIRST_PASS_MAX_ERROR, RANSAC_SEED, FIRST_PASS_TRIALS
+    )
+    pose = tvg.cam2_from_cam1
+    if pose is None:
+        return None
+    t = np.asarray(pose.translation, float)
+    if not np.all(np.isfinite(t)) or np.linalg.norm(t) < 1e-6:
+        return None
+    a = _pair_camera(cam_a, np.eye(3), np.zeros(3))
+    b = _pair_camera(cam_b, np.asarray(pose.rotation.matrix()), t / np.linalg.norm(t))
+    E = np.diagonal(epipolar_distances(fundamental(a, b), xa, xb))
+    near = np.flatnonzero(E <= FIRST_PASS_MAX_ERROR)
+    return a, b, near[_midpoints(a, b, xa[near], xb[near])[1]]
+
+
+def image_geometry(views: list[View], pools: list[Candidates], cfg: SignalConfig) -> Geometry:
+    """The geometry estimated from the images and intrinsics alone (module docstring)."""
+    n = len(views)
+    cams = [v.camera for v in views]
+    strong = _strongest(pools, cfg.first_pass)
+    support: dict[tuple[int, int], int] = {}
+    pair_frame: dict[tuple[int, int], tuple[Camera, Camera]] = {}
+    frames: list[list[Frame]] = [[] for _ in range(n)]
+    for i, j in combinations(range(n), 2):
+        si, sj = strong[i], strong[j]
+        m = tentative_matches(pools[i].descriptors[si], pools[j].descriptors[sj], FIRST_PASS_RATIO)
+        if len(m) < MIN_SUPPORT:
+            continue
+        xa, xb = pools[i].xy[si][m[:, 0]], pools[j].xy[sj][m[:, 1]]
+        pose = _relative_pose(cams[i], xa, cams[j], xb)
+        if pose is None or len(pose[2]) < MIN_SUPPORT:
+            continue
+        a, b, explained = pose
+        support[i, j] = len(explained)
+        pair_frame[i, j] = a, b
+        for u, cu, cv, xu, xv in ((i, a, b, xa, xb), (j, b, a, xb, xa)):
+            d = triangulate_depths(cu, cv, xu[explained], xv[explained])
+            depth = float(np.median(d)) if len(d) >= DEPTH_MIN_POINTS else saturation_depth(1.0)
+            frames[u].append(Frame(cu, [cv], depth))
+    overlap = [
+        sorted({b for a, b in support if a == i} | {a for a, b in support if b == i})
+        for i in range(n)
+    ]
+    nearest = [
+        set(sorted(o, key=lambda j: (-support[min(i, j), max(i, j)], j))[:AMBIGUITY_VIEWS])
+        for i, o in enumerate(overlap)
+    ]
+    alone = [views[i].name for i in range(n) if not overlap[i]]
+    if alone:
+        log(
+            f"geometry from the images: {', '.join(alone)} overlap(s) no other view; "
+            "their parallax and epipolar signals are 0"
+        )
+    return Geometry(IMAGES, overlap, nearest, pair_frame, frames)
