@@ -102,7 +102,7 @@ def oracle_select(
                 picked.add(k)
                 chosen[v].append(k)
                 room[v] -= 1
-    return [np.array(c, dtype=np.int64) for c in chosen]
+    return [np.sort(np.array(c, dtype=np.int64)) for c in chosen]
 
 
 def tracks_in_three_views(track: list[np.ndarray], selections: list[np.ndarray]) -> int:

@@ -168,7 +168,10 @@ def feedback_select(
     inputs: list[PolicyInput], budget: int, cfg: PolicyConfig, match: Match
 ) -> tuple[list[np.ndarray], list[dict]]:
     """The loop's final selection per view, and every round's diagnostics."""
-    sel = [capped_greedy(adaptive_score(i.signals, cfg.weights), i, budget, cfg) for i in inputs]
+    sel = [
+        np.sort(capped_greedy(adaptive_score(i.signals, cfg.weights), i, budget, cfg))
+        for i in inputs
+    ]
     n_tiles = cfg.tiles[0] * cfg.tiles[1]
     tried = [np.zeros(len(i.candidates), bool) for i in inputs]
     threshold = [np.full(n_tiles, -np.inf) for _ in inputs]
@@ -179,7 +182,8 @@ def feedback_select(
         diags = keypoint_diagnostics(inputs, sel, pairs)
         logs = []
         for v, inp in enumerate(inputs):
-            sel[v], log = revise(inp, budget, cfg, sel[v], diags[v], tried[v], threshold[v])
+            chosen, log = revise(inp, budget, cfg, sel[v], diags[v], tried[v], threshold[v])
+            sel[v] = np.sort(chosen)  # a set: the order never reaches the matcher
             logs.append(log)
         rounds.append(
             {

@@ -2,7 +2,9 @@
 
 A policy receives a `PolicyInput` (the view's image and calibration, its candidates and
 their signals: no ground truth can reach it) with a budget B and a seeded generator, and
-returns exactly min(B, N) distinct candidate indices. Adding a policy is one decorated
+returns exactly min(B, N) distinct candidate indices. A selection is a set: `select`
+returns it in ascending order, so the order a policy lists its indices in never changes
+what the matcher sees. Adding a policy is one decorated
 function; `bench run --policy-module FILE` (or an installed package's `bench.policies`
 entry point) registers policies from outside the package (`bench.harness.plugins`).
 
@@ -114,7 +116,8 @@ def select(
     rng: np.random.Generator,
     cfg: PolicyConfig = PolicyConfig(),
 ) -> np.ndarray:
-    """Run a policy and check its contract (module docstring)."""
+    """Run a policy, check its contract and return its selection in ascending order (module
+    docstring)."""
     check_policies([name])
     if budget <= 0 and name != "all":
         raise BenchError(f"budget must be positive, got {budget}")
@@ -131,7 +134,7 @@ def select(
     broken = contract_violation(idx, n if name == "all" else min(budget, n), n)
     if broken:
         raise BenchError(f"policy {name} broke the contract rule '{broken}'")
-    return idx
+    return np.sort(idx)
 
 
 def tile_of(xy: np.ndarray, width: int, height: int, tiles: tuple[int, int]) -> np.ndarray:

@@ -338,8 +338,11 @@ def build_parser() -> argparse.ArgumentParser:
         "each task (tri: triangulation with the known poses; sfm: incremental mapping with "
         "unknown poses) under each track protocol, evaluated against ground truth. Rows go to "
         "RESULTS/runs.csv as they finish; an interrupted run resumes where it stopped, and a "
-        "grown grid runs only its new rows. Then table1.csv, table1_twoview.csv, table2.csv, "
-        "paired.csv, figure2.png, figure3.png/.pdf, figure_budget.png and manifest.json.",
+        "grown grid runs only its new rows. The sfm task's selections see the images and the "
+        "intrinsics only (the geometry their signals need is estimated from the images); the "
+        "tri task's see the rig's poses. Then table1.csv, table1_twoview.csv, table2.csv, "
+        "paired.csv, paired_sfm.csv, table_scenes.csv, frontend_cost.csv, figure2.png, "
+        "figure3.png/.pdf, figure_budget.png and manifest.json.",
     )
 
     def list_arg(name: str, default: str | None, metavar: str, what: str) -> None:
@@ -447,9 +450,10 @@ def build_parser() -> argparse.ArgumentParser:
     pl = sub.add_parser(
         "plot",
         help="rebuild the tables and figures from runs.csv (no rendering, no reconstruction)",
-        description="Rewrite table1.csv, table2.csv, figure3.png/.pdf (and the budget figure) "
-        "from RESULTS/runs.csv alone, and figure2.png from it plus the exported model and the "
-        "cached render.",
+        description="Rewrite table1.csv, table1_twoview.csv, table2.csv, paired.csv, "
+        "paired_sfm.csv, table_scenes.csv, frontend_cost.csv, figure3.png/.pdf and "
+        "figure_budget.png from RESULTS/runs.csv alone, and figure2.png from it plus the "
+        "exported model and the cached render.",
     )
     _results_arg(pl, LATEST, f"results folder (default: ./{LATEST})")
     _renders_arg(pl)

@@ -2,7 +2,7 @@
 model and the cached render). Nothing here renders or reconstructs.
 
 Written files: `table1.csv` (headline task and protocol), `table1_twoview.csv`,
-`table2.csv`, `paired.csv`, `table_scenes.csv`, `frontend_cost.csv`
+`table2.csv`, `paired.csv`, `paired_sfm.csv`, `table_scenes.csv`, `frontend_cost.csv`
 (`bench.harness.tables`), `figure3.png/.pdf`,
 `figure_budget.png` (with several budgets) and `figure2.png` (`bench.harness.figures`).
 A figure that cannot be drawn from these rows is removed, never left stale.
@@ -23,6 +23,7 @@ from bench.harness.tables import (
     frontend_cost,
     headline_frame,
     paired,
+    paired_sfm,
     table1,
     table2,
     table_scenes,
@@ -46,6 +47,7 @@ def write_report(df: pd.DataFrame, results: Path, renders: Path) -> None:
         "table1_twoview.csv": table1(headline_frame(df, "twoview")),
         "table2.csv": table2(frame, pairs),
         "paired.csv": pairs,
+        "paired_sfm.csv": paired_sfm(frame),
         "table_scenes.csv": table_scenes(frame) if len(frame) else pd.DataFrame(),
         "frontend_cost.csv": frontend_cost(df),
     }
@@ -75,6 +77,7 @@ REPORT_FILES = (
     "table1_twoview.csv",
     "table2.csv",
     "paired.csv",
+    "paired_sfm.csv",
     "table_scenes.csv",
     "frontend_cost.csv",
 )

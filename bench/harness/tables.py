@@ -13,7 +13,9 @@
   baseline (random, texture, grid and the field's selectors response, ssc, quadtree; never
   a reference) for each headline metric, with the paired difference to that baseline.
   `paired.csv`: adaptive against every other policy that is not a reference, per scene
-  and pooled, for every headline metric.
+  and pooled, for every headline metric. `paired_sfm.csv`: every budgeted policy (and
+  the oracle) against stock COLMAP held to B keypoints (`colmap-b`) in the sfm task's
+  mAA and registered views, per scene and pooled.
 * `table_scenes.csv`: per scene, policy and budget, the mean over seeds of the headline
   metrics and the sfm task's mAA and registered views.
 * `frontend_cost.csv`: per policy, the measured front-end time of a run (detection, the
@@ -57,6 +59,8 @@ DISPLAY = {
 }
 BASELINES = ("random", "texture", "grid", "response", "ssc", "quadtree")
 CONTENDER = "adaptive"
+PEER = "colmap-b"
+"""The stock-COLMAP peer held to the same budget, which `paired_sfm.csv` compares with."""
 HEADLINE = ("tri", "multiview")
 """The headline task and track protocol."""
 HEADLINE_BUDGET = 256
@@ -161,30 +165,46 @@ def _units(df: pd.DataFrame, policy: str, budget: int, metric: str) -> pd.Series
     return g.set_index(["scene", "seed"])[metric].astype(float)
 
 
-def paired(rows: pd.DataFrame) -> pd.DataFrame:
-    """Adaptive minus each baseline, per scene and pooled, per budget and headline metric
-    (`rows`: `headline_frame`)."""
-    baselines = [p for p in pd.unique(rows["policy"]) if p not in (CONTENDER, *REFERENCES)]
+def _paired(rows: pd.DataFrame, pairs: list[tuple[str, str]], metrics) -> pd.DataFrame:
+    """Policy minus baseline for each (policy, baseline) of `pairs`, per scene and pooled,
+    per budget and metric, over the (scene, seed) units both ran."""
     out = []
     for budget in sorted(b for b in pd.unique(rows["budget"]) if b > 0):
         for scope in [*pd.unique(rows["scene"]), "all scenes"]:
             part = rows if scope == "all scenes" else rows[rows["scene"] == scope]
-            for base in baselines:
-                for m in (m for m in PAIRED_METRICS if m in part):
-                    a, b = _units(part, CONTENDER, budget, m), _units(part, base, budget, m)
+            for policy, base in pairs:
+                for m in (m for m in metrics if m in part):
+                    a, b = _units(part, policy, budget, m), _units(part, base, budget, m)
                     strata = pd.Series(a.index.get_level_values("scene"), index=a.index)
                     res = paired_difference(a, b, strata, m)  # n = 0 when either is missing
                     out.append(
                         {
                             "scene": scope,
                             "budget": budget,
-                            "policy": CONTENDER,
+                            "policy": policy,
                             "baseline": base,
                             "metric": m,
                             **res,
                         }
                     )
     return pd.DataFrame(out)
+
+
+def paired(rows: pd.DataFrame) -> pd.DataFrame:
+    """Adaptive minus each baseline, per scene and pooled, per budget and headline metric
+    (`rows`: `headline_frame`)."""
+    baselines = [p for p in pd.unique(rows["policy"]) if p not in (CONTENDER, *REFERENCES)]
+    return _paired(rows, [(CONTENDER, b) for b in baselines], PAIRED_METRICS)
+
+
+def paired_sfm(rows: pd.DataFrame) -> pd.DataFrame:
+    """Every budgeted policy (and the oracle) minus the peer held to the budget,
+    `colmap-b`, in the sfm task's mAA and registered views, per scene and pooled, per
+    budget (`rows`: `headline_frame`)."""
+    if PEER not in set(rows["policy"]):
+        return pd.DataFrame()
+    policies = [p for p in pd.unique(rows["policy"]) if p not in REFERENCES or p == ORACLE]
+    return _paired(rows, [(p, PEER) for p in policies], ("sfm_maa", "sfm_registered_views"))
 
 
 def table2(rows: pd.DataFrame, pairs: pd.DataFrame) -> pd.DataFrame:
