@@ -55,15 +55,24 @@ def temp_dir_beside(target: Path) -> Path:
     return tmp
 
 
-def write_text_atomic(path: Path, text: str) -> None:
-    """Write through a temporary name beside `path`, then rename: readers see the old file
-    or the new one, never half of one, and a failed write leaves no temporary file."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+@contextmanager
+def atomic_path(path: Path) -> Iterator[Path]:
+    """A temporary name beside `path` (this process's own, with the same suffix) to write
+    to; renamed onto `path` when the block completes, removed whatever happens: readers
+    see the old file or the new one, never half of one."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
     try:
-        tmp.write_text(text)
+        yield tmp
         tmp.replace(path)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write text through `atomic_path`."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
 
 
 def checksum(path: Path) -> str:
@@ -126,6 +135,40 @@ def locked(entry: Path) -> Iterator[None]:
             os.close(fd)
     except OSError as e:
         raise BenchError(f"cannot write to {entry.parent}: {e.strerror}") from e
+    try:
+        yield
+    finally:
+        path.unlink(missing_ok=True)
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        os.close(fd)
+
+
+@contextmanager
+def exclusive(path: Path, what: str) -> Iterator[None]:
+    """Hold the lock file `path` for the block, or refuse at once, in one line, while
+    another process holds it (`what` names the thing it guards). The holder removes it."""
+    while True:
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o666)
+        except OSError as e:
+            raise BenchError(f"cannot write to {path.parent}: {e.strerror}") from e
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.read(fd, 32).decode(errors="replace").strip() or "?"
+            os.close(fd)
+            raise BenchError(
+                f"{what} is in use by another bench process (pid {holder}); wait for it to "
+                "finish, or use another folder"
+            ) from None
+        try:
+            if os.stat(path).st_ino == os.fstat(fd).st_ino:
+                break  # still the lock file on disk: ours
+        except FileNotFoundError:
+            pass
+        os.close(fd)  # its holder removed it as we took it: take a fresh one
+    os.ftruncate(fd, 0)
+    os.write(fd, str(os.getpid()).encode())
     try:
         yield
     finally:

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import json
+
 import cv2
 import numpy as np
 import pandas as pd
@@ -120,7 +122,39 @@ def test_select_writes_a_database_colmap_matches(dataset, tmp_path):
         assert db.num_matches() > 0 and db.num_inlier_matches() > 0
     finally:
         db.close()
-    assert (tmp_path / "out" / "overlays" / "view_00.png.png").is_file()
+    assert sorted(p.name for p in (tmp_path / "out" / "overlays").iterdir()) == [
+        f"view_{k:02d}.png" for k in range(6)
+    ]
+
+
+def test_select_says_what_it_replaces_and_what_falls_short(dataset, tmp_path, capsys):
+    out = tmp_path / "out"
+    select_to_database(dataset / "images", out, "texture", 64, overlays=True)
+    capsys.readouterr()
+    pool = 10**5  # above every pool: each image holds all of its candidates
+    select_to_database(dataset / "images", out, "texture", pool)
+    err = capsys.readouterr().err
+    assert f"replacing {out / 'database.db'}" in err
+    assert "6 image(s) have fewer candidates than the budget 100000" in err
+    assert "short of 100000 per image" in err
+    assert not (out / "overlays").exists()  # the earlier run's overlays do not linger
+    (tmp_path / "file").write_text("x")
+    argv = ["select", "--images", str(dataset / "images"), "--out", str(tmp_path / "file")]
+    assert main(argv) == 2
+    assert "is a file; give a folder" in capsys.readouterr().err
+
+
+def test_dataset_runs_name_the_options_they_ignore_and_record_no_render(
+    dataset, renders_dir, tmp_path, capsys
+):
+    argv = ["run", "--dataset", str(dataset), "--policies", "texture", "--budget", "64"]
+    argv += ["--tasks", "tri", "--protocols", "multiview", "--workers", "1", "--width", "100"]
+    argv += ["--results", str(tmp_path / "r"), "--renders", str(renders_dir)]
+    assert main([*argv, "--scenes", "table"]) == 0
+    assert "--width, --scenes ignored with --dataset" in capsys.readouterr().err
+    config = json.loads((tmp_path / "r" / "config.json").read_text())
+    assert config["settings"]["render"] is None
+    assert main([*argv, "--spp", "4"]) == 0  # other render options: named, not refused
 
 
 def test_select_with_matches_holds_verified_geometries_the_mapper_reads(dataset, tmp_path):
@@ -191,3 +225,24 @@ def test_distorted_camera_models_are_refused_in_one_line(tmp_path):
     (tmp_path / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
     with pytest.raises(BenchError, match="distortion is not supported; undistort"):
         read_colmap_model(tmp_path)
+
+
+def test_a_dataset_whose_contents_changed_is_computed_again(
+    medium_entry, renders_dir, tmp_path, capsys
+):
+    """A dataset is keyed by its content: a facade export replacing a table export in the
+    same folder is computed again (the table's rows were reused: "0 to do")."""
+    ds = tmp_path / "D"
+    export_dataset(medium_entry("table"), ds)
+    argv = ["run", "--dataset", str(ds), "--policies", "texture", "--budget", "64", "--tasks"]
+    argv += ["tri", "--protocols", "multiview", "--workers", "1", "--results", str(tmp_path / "r")]
+    argv += ["--renders", str(renders_dir)]
+    assert main(argv) == 0
+    first = pd.read_csv(tmp_path / "r" / "runs.csv")
+    export_dataset(medium_entry("facade"), ds)
+    assert f"replacing the export of table seed 0 in {ds}" in capsys.readouterr().err
+    assert main(argv) == 0
+    assert "changed since 1 row(s) were computed; computing them again" in capsys.readouterr().err
+    again = pd.read_csv(tmp_path / "r" / "runs.csv")
+    assert len(again) == 1 and again["render_key"][0] != first["render_key"][0]
+    assert again["reconstructable"][0] != first["reconstructable"][0]

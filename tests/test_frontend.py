@@ -12,7 +12,14 @@ from bench import BenchError
 from bench.camera import look_at
 from bench.frontend.features import DetectorConfig, detect
 from bench.frontend.geometry import epipolar_distances, parallax
-from bench.frontend.policies import POLICIES, PolicyConfig, PolicyInput, select, tile_of
+from bench.frontend.policies import (
+    POLICIES,
+    PolicyConfig,
+    PolicyInput,
+    Weights,
+    select,
+    tile_of,
+)
 from bench.frontend.signals import (
     SIGNALS,
     SignalConfig,
@@ -196,7 +203,7 @@ def test_bad_policy_input_is_a_clear_error(table_front):
     with pytest.raises(BenchError, match="budget must be positive"):
         select("random", inp, 0, np.random.default_rng(0))
     with pytest.raises(BenchError, match="weights must be five numbers"):
-        PolicyConfig(weights=(0.1, "x", 0, 0, 0)).validate()
+        PolicyConfig(weights=Weights(texture="x")).validate()
     with pytest.raises(BenchError, match="unknown detector 'surf'; valid: sift, orb, akaze"):
         DetectorConfig(detector="surf").validate()
 
@@ -297,3 +304,25 @@ def test_parallax_from_the_images_follows_the_parallax_from_the_poses():
     assert p_rig.max() < 1 and spearmanr(p_rig, p_img).statistic > 0.95
     centre = np.linalg.norm(pools[0].xy - [200, 150], axis=1) < 40
     assert p_img[centre].mean() < 0.5 * p_img[~centre].mean()
+
+
+def test_weights_are_a_vector_keyed_by_signal_name():
+    """`--weights 0.3,0.3,0.2,0.1,0.1` was refused (a repeated list item ran once), and the
+    weights' order differed from the signals'; each weight now lands on its named signal."""
+    import dataclasses
+
+    from bench.frontend.policies import adaptive_score
+    from bench.harness.cli import weights_arg
+
+    w = weights_arg("0.3,0.3,0.2,0.1,0.15")
+    assert dataclasses.asdict(w) == {
+        "texture": 0.3,
+        "repeatability": 0.3,
+        "distinctiveness": 0.2,
+        "parallax": 0.1,
+        "ambiguity": 0.15,
+    }
+    for name, weight in dataclasses.asdict(w).items():
+        one = Signals(**{s: np.array([float(s == name)]) for s in SIGNALS})
+        sign = -1 if name == "ambiguity" else 1
+        assert adaptive_score(one, w)[0] == pytest.approx(sign * weight), name

@@ -19,9 +19,11 @@ from bench import BenchError
 from bench.backend.reconstruction import known_pose_model
 from bench.evaluation.groundtruth import load_ground_truth
 from bench.evaluation.metrics import SceneTruth
+from bench.frontend import policies as registry
 from bench.frontend.geometry import RIG
+from bench.frontend.policies import PolicyConfig
 from bench.frontend.stage import front_end
-from bench.harness import execute, figures, pipeline
+from bench.harness import execute, figures, pipeline, plugins
 from bench.harness import grid as harness
 from bench.harness.cli import LATEST, PUBLISHED, QUICK, build_parser, main, parse_list
 from bench.harness.grid import BenchConfig, run_benchmark
@@ -366,11 +368,17 @@ def test_plot_rejects_bad_runs_csv_in_one_line(tmp_path, capsys, content, messag
         (["run", "--detector", "surf"], "invalid choice: 'surf'"),
         (["run", "--weights", "0.3,x,0,0,0"], "is not a list of float"),
         (["run", "--weights", "0.3,0.2"], "weights must be five numbers"),
+        (["run", "--seeds", "3-1"], "the range 3-1 is empty (write it low-high)"),
+        (["train-weights", "--seeds", "5-3"], "the range 5-3 is empty"),
+        (["run", "--scheduler", "x:1", "--workers", "2"], "--workers does not apply"),
+        (["run", "--scheduler", "notanaddress"], "cannot reach the Dask scheduler notanaddress"),
+        (["run", "--scheduler", "tcp://127.0.0.1:1"], "cannot reach the Dask scheduler tcp://"),
     ],
 )
 def test_run_bad_input_is_one_clear_line(argv, message, tmp_path, capsys):
+    where = ["--results", str(tmp_path / "r")] if argv[0] == "run" else []
     with pytest.raises(SystemExit) as e:
-        raise SystemExit(main([*argv, "--results", str(tmp_path / "r")]))
+        raise SystemExit(main([*argv, *where]))
     assert e.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
@@ -429,6 +437,35 @@ def test_a_budget_above_every_pool_is_refused_in_one_line(tmp_path, capsys):
     assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert "budget 100000 exceeds every candidate pool of table seed 0" in err[-1]
+    assert not (tmp_path / "r").exists()  # a refused run binds no folder to its settings
+    other = ["--budget", "16", "--spp", "3", "--policies", "texture", "--tasks", "tri"]
+    argv = [*argv[:5], *argv[7:], "--protocols", "multiview"]  # the same, less the budget
+    assert main([*argv, *other, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 0
+    assert (
+        json.loads((tmp_path / "r" / "config.json").read_text())["settings"]["render"]["spp"] == 3
+    )
+
+
+def test_a_second_run_into_a_folder_in_use_is_refused_in_one_line(tmp_path, capsys):
+    """Two runs into one folder at once lost the first run's rows; now the second is
+    refused while the first holds the folder (as another process would hold it)."""
+    from bench.files import exclusive
+
+    results = tmp_path / "r"
+    results.mkdir()
+    with exclusive(results / ".bench-run.lock", "the first run"):
+        argv = ["run", "--quick", "--scenes", "table", "--policies", "texture"]
+        assert main([*argv, "--results", str(results), "--renders", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"results folder {results} is in use by another bench" in err[0]
+    assert sorted(p.name for p in results.iterdir()) == []  # nothing written, lock released
+
+
+def test_nothing_to_compute_is_said_in_one_line(tmp_path, capsys):
+    argv = ["run", "--quick", "--policies", "colmap", "--tasks", "tri"]
+    assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "nothing to compute" in err[0] and "sfm task only" in err[0]
 
 
 # --- the harness cannot lie (issue 10): one test per hole ------------------------------
@@ -590,3 +627,157 @@ def test_a_unit_failing_on_a_worker_is_retried_once_then_recorded(
     assert len(failed) == 4 and (failed["status"] == "failed").all()
     assert failed["failure"].str.contains("retried once: RuntimeError: worker lost").all()
     assert (runs.loc[runs["policy"] != "texture", "status"] == "ok").any()
+
+
+def test_a_raising_policy_on_workers_is_one_line_without_retry_or_traceback(tmp_path, capfd):
+    module = tmp_path / "boom.py"
+    calls = tmp_path / "calls.txt"
+    module.write_text(
+        "from bench.frontend.policies import policy\n\n"
+        "@policy('boom')\n"
+        "def boom(inp, budget, rng, cfg):\n"
+        f"    open({str(calls)!r}, 'a').write('call\\n')\n"
+        "    raise ValueError('deterministic')\n"
+    )
+    argv = ["run", "--quick", "--scenes", "table", "--policies", "boom", "--workers", "2"]
+    argv += ["--policy-module", str(module), "--tasks", "tri", "--protocols", "multiview"]
+    assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 2
+    err = capfd.readouterr().err
+    assert "policy boom failed: ValueError: deterministic" in err and "Traceback" not in err
+    assert len(calls.read_text().splitlines()) == 1  # the first view raised; no retry
+
+
+def test_ctrl_c_with_workers_stops_in_a_few_lines(renders_dir, tmp_path):
+    """Ctrl-C reaches the whole process group, workers included, as a terminal sends it."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    cmd = [sys.executable, "-m", "bench", "run", "--quick", "--scenes", "table", "--workers", "2"]
+    cmd += ["--results", str(tmp_path / "r"), "--renders", str(renders_dir)]
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not (tmp_path / "r" / "runs.csv").exists() and time.monotonic() < deadline:
+        assert proc.poll() is None, proc.stderr.read()
+        time.sleep(0.1)
+    os.killpg(proc.pid, signal.SIGINT)
+    err = proc.communicate(timeout=120)[1]
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("bench: interrupted")
+
+
+def test_the_readme_synopsis_names_every_option_of_every_command():
+    import argparse
+    import re
+
+    from bench import ROOT
+
+    readme = (ROOT / "README.md").read_text()
+    block = readme[readme.index("bench scenes  ") :]
+    block = block[: block.index("```")]
+    synopsis: dict[str, str] = {}
+    for line in block.splitlines():
+        if line.startswith("bench "):
+            command = line.split()[1]
+        synopsis[command] = synopsis.get(command, "") + line
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    assert set(sub.choices) == set(synopsis)
+    for command, parser in sub.choices.items():
+        options = {o for a in parser._actions for o in a.option_strings if o.startswith("--")}
+        missing = options - {"--help"} - set(re.findall(r"--[a-z-]+", synopsis[command]))
+        assert not missing, f"bench {command}: {sorted(missing)} not in the README synopsis"
+
+
+def test_a_results_folder_that_cannot_be_written_is_one_line(tmp_path, capsys):
+    (tmp_path / "file").write_text("not a folder")
+    argv = ["run", "--quick", "--scenes", "table", "--results", str(tmp_path / "file" / "r")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cannot write to" in err[0]
+
+
+def test_images_without_any_candidate_are_named_not_a_budget_of_0(tmp_path, capsys):
+    argv = ["run", "--scenes", "table", "--seeds", "0", "--width", "8", "--height", "6"]
+    argv += ["--spp", "1", "--budget", "1", "--workers", "1", "--renders", str(tmp_path)]
+    assert main([*argv, "--results", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "found no candidate in any view of table seed 0" in err and "up to 0" not in err
+
+
+def test_a_twoview_only_run_prints_its_table_and_sfm_only_rows_name_figure2s_task(
+    quick_results, tmp_path, renders_dir, capsys
+):
+    argv = ["run", "--scenes", "table", "--seeds", "0", "--budget", "64", "--workers", "1"]
+    argv += ["--policies", "texture", "--protocols", "twoview", "--width", "320"]
+    argv += ["--height", "240", "--spp", "16", "--max-depth", "2"]
+    assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(renders_dir)]) == 0
+    out = capsys.readouterr().out
+    assert "Table 1 (twoview protocol" in out and "Empty DataFrame" not in out
+    runs = read_runs(quick_results / "runs.csv")
+    (tmp_path / "s").mkdir()
+    write_report(runs[runs["task"] == "sfm"], tmp_path / "s", renders_dir)
+    err = capsys.readouterr().err
+    assert "figure2.png not drawn" in err and "known-pose (tri) task" in err
+
+
+def test_the_budget_figure_says_n_a_for_a_panel_without_values(monkeypatch, tmp_path):
+    from bench.harness.tables import table1
+
+    t1 = table1(
+        pd.DataFrame(
+            {
+                "scene": "table",
+                "seed": 0,
+                "policy": "texture",
+                "budget": [64, 128],
+                "status": "ok",
+                "acc_completeness_pct": [1.0, 2.0],
+                "completeness_vs_oracle_pct": math.nan,  # no oracle ran
+            }
+        )
+    )
+    drawn = {}
+    monkeypatch.setattr(figures, "save", lambda fig, out, fmts: drawn.update(fig=fig))
+    figures.figure_budget(t1, tmp_path / "figure_budget")
+    texts = {
+        ax.get_title(): [t.get_text() for t in ax.texts]
+        for ax in drawn["fig"].axes
+        if ax.get_visible()
+    }
+    oracle = next(k for k in texts if "oracle" in k)
+    assert texts[oracle] == ["n/a: no run has this value"]
+    assert all(not v for k, v in texts.items() if k != oracle)
+
+
+def test_a_policy_module_decides_its_own_rows_only(renders_dir, tmp_path, monkeypatch):
+    """A module's path is not bound into the folder (running without it is not refused),
+    and editing it recomputes its policy's rows alone, not the built-in policies'."""
+    module = tmp_path / "mine.py"
+    source = (
+        "import numpy as np\nfrom bench.frontend.policies import policy\n\n"
+        "@policy('mine-{v}')\ndef mine(inp, budget, rng, cfg):\n"
+        "    return np.arange(min(budget, len(inp.candidates)))\n"
+    )
+    module.write_text(source.format(v=1))
+    grid = dict(scenes=("table",), seeds=(0,), budgets=(64,), tasks=("tri",))
+    grid |= dict(protocols=("multiview",))
+
+    def cfg(policies, modules=()):
+        run = RunConfig(render=MEDIUM, policy=dataclasses.replace(PolicyConfig(), modules=modules))
+        return BenchConfig(policies=policies, run=run, **grid)
+
+    calls = []
+    real = execute.run_unit
+    monkeypatch.setattr(execute, "run_unit", lambda *a, **k: calls.append(a[5]) or real(*a, **k))
+    results = tmp_path / "r"
+    run_benchmark(cfg(("texture", "mine-1"), (str(module),)), results, renders_dir)
+    assert sorted(calls) == ["mine-1", "texture"]
+    calls.clear()
+    run_benchmark(cfg(("texture",)), results, renders_dir)  # without the module: not refused
+    assert calls == [] and set(read_runs(results / "runs.csv")["policy"]) == {"texture", "mine-1"}
+    module.write_text(source.format(v=1).replace("np.arange(", "1 + np.arange("))
+    plugins.load_module.cache_clear()
+    registry.POLICIES.pop("mine-1")
+    run_benchmark(cfg(("texture", "mine-1"), (str(module),)), results, renders_dir)
+    assert calls == ["mine-1"]  # the edited module's rows alone

@@ -134,6 +134,42 @@ def test_a_policy_module_registers_and_its_broken_rules_are_named(fe, tmp_path):
         plugins.load_module(str(files))
 
 
+@pytest.mark.parametrize(
+    "source, message",
+    [
+        ("def broken(:\n", r"is not valid Python: invalid syntax \(line 1\)|is not valid Python"),
+        (
+            "@policy('texture')\ndef mine(inp, budget, rng, cfg):\n    return []\n",
+            "policy name 'texture' is taken",
+        ),
+        (
+            "@policy('typo', signals=('texure',))\ndef typo(inp, budget, rng, cfg):\n    return []\n",
+            "reads unknown signal 'texure'; valid: texture,",
+        ),
+    ],
+)
+def test_a_policy_modules_mistakes_are_named(tmp_path, source, message):
+    module = tmp_path / "mine.py"
+    module.write_text("from bench.frontend.policies import policy\n" + source)
+    with pytest.raises(BenchError, match=message) as e:
+        plugins.load_module(str(module))
+    assert "no ground truth" not in str(e.value) and "registers no new policy" not in str(e.value)
+
+
+def test_sys_exit_in_a_policy_is_a_failure_named_not_an_exit(fe, tmp_path):
+    module = tmp_path / "leaves.py"
+    module.write_text(
+        "import sys\nfrom bench.frontend.policies import policy\n\n"
+        "@policy('leaves')\ndef leaves(inp, budget, rng, cfg):\n    sys.exit(3)\n"
+    )
+    plugins.load_module(str(module))
+    try:
+        with pytest.raises(BenchError, match="policy leaves failed: SystemExit: 3"):
+            select("leaves", _inputs(fe)[0], BUDGET, np.random.default_rng(0))
+    finally:
+        POLICIES.pop("leaves")
+
+
 def test_an_installed_entry_point_registers_its_policies(monkeypatch):
     from importlib.metadata import EntryPoint
 

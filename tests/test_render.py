@@ -230,3 +230,24 @@ def test_scalar_fallback_renders_the_same_layout(tmp_path):
     assert meta["variant"] == "scalar_rgb"
     gt = np.load(entry / "gt_00.npz")
     assert gt["position"].shape == (24, 32, 3) and np.isfinite(gt["range"]).mean() > 0.9
+
+
+@pytest.mark.parametrize("sig, code", [("SIGTERM", 143), ("SIGINT", 130)])
+def test_a_signal_during_a_render_leaves_no_lock_or_temporary_folder(tmp_path, sig, code):
+    """`bench render` stopped mid-render (once its temporary folder exists) exits with the
+    signal's code and one line, and leaves neither its lock file nor a `.tmp-` folder."""
+    import signal
+    import time
+
+    cmd = [sys.executable, "-m", "bench", "render", "table", "--seed", "5", "--width", "96"]
+    cmd += ["--height", "72", "--spp", "64", "--renders", str(tmp_path)]
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not list(tmp_path.glob(".tmp-*")) and time.monotonic() < deadline:
+        assert proc.poll() is None, proc.stderr.read()
+        time.sleep(0.05)
+    proc.send_signal(getattr(signal, sig))
+    err = proc.communicate(timeout=120)[1]
+    assert proc.returncode == code, err
+    assert err.strip().splitlines()[-1].startswith("bench: ")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".variant-probes.json"]

@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from functools import cache
 from pathlib import Path
 
@@ -26,7 +26,7 @@ import numpy as np
 
 from bench import BenchError
 from bench.frontend.features import Candidates
-from bench.frontend.signals import Signals
+from bench.frontend.signals import SIGNALS, Signals
 from bench.frontend.views import View
 
 
@@ -40,10 +40,22 @@ class PolicyInput:
 
 
 @dataclass(frozen=True)
+class Weights:
+    """The adaptive score's weight of each signal, by name: s = w_t t + w_r r + w_q q +
+    w_p p - w_a a (the paper's values; ambiguity counts against a candidate)."""
+
+    texture: float = 0.28
+    repeatability: float = 0.27
+    distinctiveness: float = 0.22
+    parallax: float = 0.19
+    ambiguity: float = 0.20
+
+
+@dataclass(frozen=True)
 class PolicyConfig:
     """Settings of the selection policies."""
 
-    weights: tuple[float, float, float, float, float] = (0.28, 0.27, 0.22, 0.19, 0.20)
+    weights: Weights = Weights()
     """Adaptive score weights for texture, repeatability, distinctiveness, parallax and
     ambiguity: s = w_t t + w_r r + w_q q + w_p p - w_a a (the paper's values)."""
     tiles: tuple[int, int] = (8, 6)
@@ -63,10 +75,9 @@ class PolicyConfig:
     """Python files whose policies are registered before selecting (`--policy-module`)."""
 
     def validate(self) -> PolicyConfig:
-        if len(self.weights) != 5 or not all(
-            isinstance(w, int | float) and math.isfinite(w) for w in self.weights
-        ):
-            raise BenchError(f"weights must be five numbers (t, r, q, p, a), got {self.weights!r}")
+        values = [getattr(self.weights, f.name) for f in fields(Weights)]
+        if not all(isinstance(w, int | float) and math.isfinite(w) for w in values):
+            raise BenchError(f"weights must be five numbers (t, r, q, p, a), got {values!r}")
         if min(self.tiles) <= 0 or self.cap_factor <= 0:
             raise BenchError("tiles and cap_factor must be positive")
         if self.loop_rounds < 0:
@@ -81,10 +92,18 @@ SIGNALS_USED: dict[str, tuple[str, ...]] = {}
 
 
 def policy(name: str, signals: tuple[str, ...] = ()) -> Callable[[Policy], Policy]:
-    """Register a policy under `name`, with the signals it reads (for its reported cost)."""
+    """Register a policy under a name no other policy has, with the signals it reads (for
+    its reported cost, and so that `bench select` computes the costly ones)."""
+    unknown = [s for s in signals if s not in SIGNALS]
+    if unknown:
+        raise BenchError(
+            f"policy {name} reads unknown signal {unknown[0]!r}; valid: {', '.join(SIGNALS)}"
+        )
 
     def register(fn: Policy) -> Policy:
-        POLICIES[name], SIGNALS_USED[name] = fn, signals
+        if name in POLICIES:
+            raise BenchError(f"policy name {name!r} is taken; give the policy another name")
+        POLICIES[name], SIGNALS_USED[name] = fn, tuple(signals)
         return fn
 
     return register
@@ -125,7 +144,7 @@ def select(
         idx = np.asarray(POLICIES[name](inp, budget, rng, cfg)).reshape(-1)
     except BenchError:
         raise
-    except Exception as e:
+    except (Exception, SystemExit) as e:  # a policy ends no run, not even with sys.exit
         raise BenchError(f"policy {name} failed: {type(e).__name__}: {e}") from e
     n = len(inp.candidates)
     if idx.dtype.kind not in "iu":
@@ -144,12 +163,17 @@ def tile_of(xy: np.ndarray, width: int, height: int, tiles: tuple[int, int]) -> 
     return cy * tiles[0] + cx
 
 
-def adaptive_score(s: Signals, w, repeatability: np.ndarray | None = None) -> np.ndarray:
+def adaptive_score(s: Signals, w: Weights, repeatability: np.ndarray | None = None) -> np.ndarray:
     """The paper's score s; `repeatability` replaces the cheap estimate (`adaptive` passes
     the re-detection signal)."""
-    wt, wr, wq, wp, wa = w
     r = s.repeatability if repeatability is None else repeatability
-    return wt * s.texture + wr * r + wq * s.distinctiveness + wp * s.parallax - wa * s.ambiguity
+    return (
+        w.texture * s.texture
+        + w.repeatability * r
+        + w.distinctiveness * s.distinctiveness
+        + w.parallax * s.parallax
+        - w.ambiguity * s.ambiguity
+    )
 
 
 def _order(score: np.ndarray) -> np.ndarray:

@@ -24,7 +24,7 @@ from bench.frontend import features, geometry, signals
 from bench.frontend.features import Candidates, DetectorConfig
 from bench.frontend.geometry import IMAGES, RIG
 from bench.frontend.signals import SIGNALS, TIMED, SignalConfig, Signals, compute_signals
-from bench.frontend.views import Source, View, load_views
+from bench.frontend.views import View, load_views, source_key
 
 _CAND = [f.name for f in fields(Candidates)]
 
@@ -41,14 +41,6 @@ class FrontEnd:
     cached: bool
 
 
-def _dataset_identity(root: Path) -> list:
-    """A dataset's files (model and images) with their sizes and modification times."""
-    src = Source.of(root)
-    files = [src.model / "cameras.txt", src.model / "images.txt"]
-    files += sorted(p for p in src.images.rglob("*") if p.is_file())
-    return [str(root.resolve())] + [(p.name, p.stat().st_size, p.stat().st_mtime_ns) for p in files]
-
-
 def front_end(
     entry: Path, det: DetectorConfig, sig: SignalConfig, cache_dir: Path, grant: str = RIG
 ) -> FrontEnd:
@@ -62,7 +54,7 @@ def front_end(
         views = [v.without_pose() for v in views]
     key = content_key(
         {
-            "entry": entry.name if (entry / "meta.json").is_file() else _dataset_identity(entry),
+            "entry": source_key(entry),
             "geometry": grant,
             "detector": asdict(det),
             "signals": asdict(sig),

@@ -16,6 +16,7 @@ ground-truth files.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cache
 from pathlib import Path
 
 import cv2
@@ -24,7 +25,7 @@ from scipy.spatial.transform import Rotation
 
 from bench import BenchError
 from bench.camera import Camera
-from bench.files import entry_problem
+from bench.files import checksum, content_key, entry_problem
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 DEFAULT_FOCAL_FACTOR = 1.2
@@ -77,6 +78,28 @@ class Source:
         raise BenchError(
             f"{path} is neither a render entry nor a dataset (images/ and sparse/images.txt)"
         )
+
+
+def source_key(path: Path) -> str:
+    """What a set of views is, by content: a render entry's name (its key hashes what made
+    its pixels); a dataset's folder name and a hash of its model and every image, so a
+    dataset whose contents change is computed again."""
+    path = Path(path)
+    src = Source.of(path)
+    if src.model == path and (path / "meta.json").is_file():
+        return path.name
+    files = sorted(p for p in src.model.iterdir() if p.is_file())
+    files += sorted(p for p in src.images.rglob("*") if p.is_file())
+    stats = tuple((str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in files)
+    return f"{path.name}-{_contents_key(path, stats)}"
+
+
+@cache
+def _contents_key(root: Path, stats: tuple) -> str:
+    """Hash of the files' contents (memoised while their sizes and times stay the same)."""
+    return content_key(
+        [(Path(f).relative_to(root).as_posix(), checksum(f)) for f, _, _ in stats], 8
+    )
 
 
 def read_image(path: Path) -> np.ndarray:

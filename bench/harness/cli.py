@@ -7,6 +7,7 @@ import argparse
 import ast
 import dataclasses
 import inspect
+import signal
 import sys
 from functools import cache
 from pathlib import Path
@@ -14,7 +15,7 @@ from pathlib import Path
 from bench import DISTRIBUTION, ROOT, BenchError, __version__
 from bench.console import log
 from bench.frontend.features import DETECTORS, DetectorConfig
-from bench.frontend.policies import SHIPPED_WEIGHTS, PolicyConfig
+from bench.frontend.policies import SHIPPED_WEIGHTS, PolicyConfig, Weights
 from bench.render.config import QUICK_RENDER, VARIANTS, RenderConfig
 
 
@@ -103,9 +104,12 @@ def cmd_gallery(args: argparse.Namespace) -> None:
 LIST_FORM = "one comma-separated list without spaces"
 
 
-def parse_list(option: str, text: str, kind: type = str, example: str = "") -> tuple:
+def parse_list(
+    option: str, text: str, kind: type = str, example: str = "", unique: bool = True
+) -> tuple:
     """The items of a list option, which has one syntax: `--option a,b,c`. Integer items of
-    `--seeds` may also be inclusive ranges such as 100-119."""
+    `--seeds` may also be inclusive ranges such as 100-119. A repeated item runs once,
+    unless the list is a vector (`unique` False)."""
     how = f"{option} takes {LIST_FORM}, e.g. {option} {example}"
     if any(not x.strip() for x in text.split(",")):
         raise BenchError(f"{how}; got {text!r}")
@@ -115,9 +119,13 @@ def parse_list(option: str, text: str, kind: type = str, example: str = "") -> t
             lo, dash, hi = (
                 x.partition("-") if option == "--seeds" and x[1:].count("-") else (x, "", "")
             )
+            if dash and int(hi) < int(lo):
+                raise BenchError(f"{how}; the range {x} is empty (write it low-high)")
             items += list(range(int(lo), int(hi) + 1)) if dash else [kind(x)]
     except ValueError:
         raise BenchError(f"{how}; {text!r} is not a list of {kind.__name__}") from None
+    if not unique:
+        return tuple(items)
     unique = tuple(dict.fromkeys(items))
     if len(unique) < len(items):
         repeated = sorted({str(x) for x in items if items.count(x) > 1})
@@ -125,11 +133,21 @@ def parse_list(option: str, text: str, kind: type = str, example: str = "") -> t
     return unique
 
 
+def weights_arg(text: str) -> Weights:
+    """`--weights wt,wr,wq,wp,wa`: a vector, in the order of `Weights`' fields."""
+    values = parse_list("--weights", text, float, "0.28,0.27,0.22,0.19,0.20", unique=False)
+    names = [f.name for f in dataclasses.fields(Weights)]
+    if len(values) != len(names):
+        raise BenchError(f"weights must be five numbers (t, r, q, p, a), got {list(values)}")
+    return Weights(**dict(zip(names, values)))
+
+
 def cmd_run(args: argparse.Namespace) -> None:
     from bench.harness.execute import default_workers
     from bench.harness.grid import BenchConfig, run_benchmark
     from bench.harness.pipeline import RunConfig
     from bench.harness.tables import headline_frame, table1, with_oracle_share
+    from bench.scenes.spec import scene_names
 
     render = QUICK_RENDER if args.quick else RenderConfig()
     overrides = {
@@ -138,12 +156,19 @@ def cmd_run(args: argparse.Namespace) -> None:
         if getattr(args, f.name) is not None
     }
     render = dataclasses.replace(render, **overrides)
+    if args.dataset is not None:  # a dataset's images are what they are: nothing renders
+        given = [f"--{k.replace('_', '-')}" for k in overrides] + ["--scenes"] * bool(args.scenes)
+        if given:
+            log(f"{', '.join(given)} ignored with --dataset: its images are not rendered")
+        render = None
+    if args.scheduler is not None and args.workers is not None:
+        raise BenchError("--workers does not apply with --scheduler: the cluster has its workers")
     modules = tuple(str(Path(m).resolve()) for m in args.policy_module)
     run = RunConfig(
         render=render,
         detector=DetectorConfig(detector=args.detector),
         policy=PolicyConfig(
-            weights=parse_list("--weights", args.weights, float, "0.28,0.27,0.22,0.19,0.20"),
+            weights=weights_arg(args.weights),
             modules=modules,
         ),
     )
@@ -158,7 +183,7 @@ def cmd_run(args: argparse.Namespace) -> None:
         seeds = parse_list(
             "--seeds", args.seeds or ("0" if args.quick else "0,1,2"), int, "0,1,2 or 100-119"
         )
-        scenes = parse_list("--scenes", args.scenes, str, "table,facade")
+        scenes = parse_list("--scenes", args.scenes or ",".join(scene_names()), str, "table,facade")
     budget = args.budget if args.budget is not None else ("256" if args.quick else "128,256,512")
     cfg = BenchConfig(
         scenes,
@@ -189,7 +214,9 @@ def cmd_run(args: argparse.Namespace) -> None:
         workers=workers,
         scheduler=args.scheduler,
     )
-    t = table1(headline_frame(with_oracle_share(df)))
+    protocol = "multiview" if "multiview" in cfg.protocols else cfg.protocols[0]
+    t = table1(headline_frame(with_oracle_share(df), protocol))
+    print(f"Table 1 ({protocol} protocol; {', '.join(cfg.tasks)}):")
     cols = ["strategy", "budget", "runs", "acc_completeness_pct", "completeness_vs_oracle_pct"]
     cols += [
         "accuracy_pct",
@@ -307,7 +334,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"bench {__version__} ({DISTRIBUTION})")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    s = sub.add_parser("scenes", help="list the scene types and their parameters")
+    s = sub.add_parser(
+        "scenes",
+        help="list the scene types and their parameters",
+        description="List every scene type (scenes/<name>.toml) with its description and each "
+        "parameter's value and meaning.",
+    )
     s.set_defaults(func=cmd_scenes)
 
     r = sub.add_parser(
@@ -353,7 +385,7 @@ def build_parser() -> argparse.ArgumentParser:
             help=f"{what}; {LIST_FORM}" + (f" (default: {default})" if default is not None else ""),
         )
 
-    list_arg("scenes", ",".join(scene_names()), "S1,S2", "scene types")
+    list_arg("scenes", None, "S1,S2", f"scene types (default: {','.join(scene_names())})")
     list_arg("policies", ",".join(DEFAULT_POLICIES), "P1,P2", "policies")
     list_arg(
         "budget",
@@ -372,15 +404,15 @@ def build_parser() -> argparse.ArgumentParser:
         "protocols",
         ",".join(PROTOCOLS),
         "P1,P2",
-        "track protocols of the tri task: multiview (tracks of 3+ views, the headline) and "
-        "twoview (two-view tracks kept; its own table)",
+        "track protocols, applied to both tasks' triangulation: multiview (tracks of 3+ "
+        "views, the headline) and twoview (two-view tracks kept; its own table)",
     )
     list_arg(
         "seeds", None, "N1,N2", "scene seeds, e.g. 0,1,2 or 0-9 (default: 0,1,2, or 0 with --quick)"
     )
     list_arg(
         "weights",
-        ",".join(str(w) for w in PolicyConfig().weights),
+        ",".join(str(w) for w in dataclasses.astuple(Weights())),
         "W1,...,W5",
         field_docs(PolicyConfig)["weights"].rstrip("."),
     )
@@ -574,14 +606,40 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where Python is running so that cleanup code runs (an interrupt)."""
+
+
+def _terminate(signum, frame):
+    raise Terminated
+
+
+def _interrupted(e: BaseException) -> BaseException | None:
+    """The interrupt behind an exception (a renderer wraps Ctrl-C in a RuntimeError)."""
+    while e is not None:
+        if isinstance(e, KeyboardInterrupt):
+            return e
+        e = e.__cause__ or e.__context__
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    # our handler, not the one COLMAP's logging library installs (it aborts the process,
+    # leaving lock files and half-written entries behind)
+    signal.signal(signal.SIGTERM, _terminate)
     try:
         args.func(args)
     except BenchError as e:
         print(f"bench: error: {e}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except BaseException as e:
+        stop = _interrupted(e)
+        if stop is None:
+            raise
+        if isinstance(stop, Terminated):
+            print("bench: terminated; finished work is kept", file=sys.stderr)
+            return 143
         print("bench: interrupted; finished work is kept", file=sys.stderr)
         return 130
     return 0

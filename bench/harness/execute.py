@@ -7,8 +7,9 @@ which waits for its scene's front end. Renders stay in the main process, so one 
 and CUDA variants use every core, or the GPU, on their own). A worker holds one scene's
 front end and ground truth at a time (`_scene`). Rows come back to the main process,
 which alone writes `runs.csv`. A unit whose worker dies is retried once, then recorded as
-failed rows with the reason; a `BenchError` (bad input) stops the run as it does in
-process. With a cluster given by address, the workers must see the same `renders/` and
+failed rows with the reason; a `BenchError` (bad input, deterministic) comes back as a
+value, is not retried, and stops the run as it does in process. The workers of a local
+cluster ignore Ctrl-C, which the main process handles by stopping them. With a cluster given by address, the workers must see the same `renders/` and
 results folder (a shared file system).
 
 Every unit computes the same numbers wherever it runs: its inputs are files and
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -58,6 +60,11 @@ def scene_task(group: tuple, entry: Path, cfg: RunConfig, renders: Path, budgets
     t = time.perf_counter()
     fronts = _front_ends(entry, cfg, renders, grants)
     largest = max(len(p) for p in next(iter(fronts.values())).pools)
+    if largest == 0:
+        raise BenchError(
+            f"the detector found no candidate in any view of {group[0]} seed {group[1]}; "
+            "the images are too small or too flat for it (try a larger --width/--height)"
+        )
     too_big = [b for b in budgets if b > largest]
     if too_big:
         raise BenchError(
@@ -121,25 +128,69 @@ def execute(
     )
 
 
-def _on_dask(scenes, units, cfg, budgets, results, renders, workers, scheduler, on_scene, grants):
-    from distributed import Client, LocalCluster, as_completed
+def _as_value(task, *args):
+    """Run a task on a worker; bad input (a `BenchError`, deterministic) comes back as a
+    value, so it is neither retried nor printed with a worker's traceback."""
+    try:
+        return task(*args)
+    except BenchError as e:
+        return e
 
-    cluster = None
-    if scheduler is None:
-        cluster = LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+
+def _result(future):
+    """A finished future's result; bad input returned by `_as_value` is raised here."""
+    out = future.result()
+    if isinstance(out, BenchError):
+        raise out
+    return out
+
+
+def _local_cluster(workers: int):
+    """A local cluster of single-threaded worker processes that start with Ctrl-C ignored
+    (it reaches this process alone, which stops them) and log only critical errors."""
+    import logging
+
+    from distributed import LocalCluster
+
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited by the workers
+    try:
+        return LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.CRITICAL,
         )
-    client = Client(scheduler or cluster)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def check_scheduler(address: str) -> None:
+    """Refuse, in one line and within seconds, a Dask scheduler that cannot be reached."""
+    from distributed import Client
+
+    try:
+        Client(address, timeout="10s").close()
+    except (OSError, ValueError, TypeError) as e:
+        raise BenchError(f"cannot reach the Dask scheduler {address}: {e}") from None
+
+
+def _on_dask(scenes, units, cfg, budgets, results, renders, workers, scheduler, on_scene, grants):
+    from distributed import Client, as_completed
+
+    cluster = _local_cluster(workers) if scheduler is None else None
+    client = Client(scheduler or cluster, timeout="10s")
     try:
         fronts = {
             client.submit(
-                scene_task, group, entry, cfg, renders, budgets, grants, pure=False
+                _as_value, scene_task, group, entry, cfg, renders, budgets, grants, pure=False
             ): group
             for group, entry in scenes.items()
         }
         by_group = {g: f for f, g in fronts.items()}
         pending = {
             client.submit(
+                _as_value,
                 unit_task,
                 scenes[u[:2]],
                 u,
@@ -158,24 +209,18 @@ def _on_dask(scenes, units, cfg, budgets, results, renders, workers, scheduler, 
             if future in fronts:
                 exc = future.exception()
                 if exc is not None:
-                    raise (
-                        exc
-                        if isinstance(exc, BenchError)
-                        else BenchError(
-                            f"front end of {fronts[future]} failed: {type(exc).__name__}: {exc}"
-                        )
+                    raise BenchError(
+                        f"front end of {fronts[future]} failed: {type(exc).__name__}: {exc}"
                     )
-                on_scene(fronts[future], future.result())
+                on_scene(fronts[future], _result(future))
                 continue
             unit, jobs = pending[future]
             exc = future.exception()
-            if isinstance(exc, BenchError):
-                raise exc
             if exc is not None:
                 why = f"failed on a worker, retried once: {type(exc).__name__}: {exc}"
                 yield failed_rows(scenes[unit[:2]], unit, jobs, cfg, why.replace("\n", " ")[:300])
             else:
-                yield future.result()
+                yield _result(future)
     finally:
         client.close()
         if cluster is not None:

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from bench import BenchError
+from bench.console import log
 from bench.evaluation.groundtruth import CLOUD, TRUTH_DIR, load_ground_truth, write_ply_points
 from bench.files import atomic_dir, locked
 from bench.frontend.views import read_colmap_model
@@ -27,6 +28,12 @@ def export_dataset(entry: Path, out: Path) -> Path:
     entry, out = Path(entry), Path(out)
     if out.exists() and not (out / "dataset.json").is_file():
         raise BenchError(f"{out} exists and is not an earlier export; choose an empty folder")
+    if out.exists():
+        try:
+            was = json.loads((out / "dataset.json").read_text())
+            log(f"replacing the export of {was['scene']} seed {was['seed']} in {out}")
+        except (OSError, ValueError, KeyError, TypeError):
+            log(f"replacing the earlier export in {out}")
     out.parent.mkdir(parents=True, exist_ok=True)
     names = [n for n, _ in read_colmap_model(entry)]
     gts = load_ground_truth(entry)

@@ -17,6 +17,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.ticker import FixedLocator, NullLocator  # noqa: E402
 
+from bench.files import atomic_path  # noqa: E402
 from bench.harness.pipeline import ORACLE  # noqa: E402
 from bench.harness.tables import DISPLAY, HEADLINE_BUDGET  # noqa: E402
 
@@ -48,7 +49,7 @@ def _errors(t: pd.DataFrame, m: str) -> np.ndarray:
 
 def figure3(t1: pd.DataFrame, out: Path, title: str = "") -> None:
     """Aggregate metrics per strategy at the headline budget (references included), with
-    95% bootstrap intervals."""
+    95% bootstrap intervals; bars are labelled by policy id (the display names are long)."""
     b = headline_budget(t1)
     t = t1[(t1["budget"] == b) | (t1["budget"] == 0)].reset_index(drop=True)
     fig, axes = plt.subplots(3, 3, figsize=(max(15, len(t)), 11))
@@ -72,13 +73,7 @@ def figure3(t1: pd.DataFrame, out: Path, title: str = "") -> None:
                 fontsize=8,
                 color="gray",
             )
-        ax.set_xticks(
-            range(len(t)),
-            [s.replace(" (", "\n(") for s in t["strategy"]],
-            rotation=30,
-            ha="right",
-            fontsize=7,
-        )
+        ax.set_xticks(range(len(t)), t["policy"], rotation=50, ha="right", fontsize=8)
         ax.set_title(label, fontsize=10)
         if m in LOG_SCALE and (values[ok] > 0).any():
             ax.set_yscale("log")
@@ -121,23 +116,27 @@ def figure_budget(t1: pd.DataFrame, out: Path) -> None:
         ax.set_xticklabels([str(b) for b in budgets])
         ax.set_xlabel("budget per view")
         ax.set_title(label, fontsize=10)
-        if m in LOG_SCALE and (t1[m] > 0).any():
+        if not np.isfinite(t1.loc[t1["budget"] > 0, m].to_numpy(float)).any():
+            ax.set_yticks([])
+            ax.text(0.5, 0.5, "n/a: no run has this value", transform=ax.transAxes, ha="center")
+        elif m in LOG_SCALE and (t1[m] > 0).any():
             ax.set_yscale("log")
-    axes[0, 0].legend(fontsize=6)
+    entries = {}  # every panel's lines, once each (a reference may have one metric only)
+    for ax in axes.ravel():
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            entries.setdefault(label, handle)
+    fig.legend(
+        entries.values(), entries.keys(), loc="lower center", ncol=5, fontsize=8, frameon=False
+    )
     fig.suptitle("Headline metrics against the budget (mean and 95% bootstrap band over runs)")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.07, 1, 1))  # the legend below the panels, over no curve
     save(fig, out, ("png",))
 
 
 def save(fig, out: Path, formats) -> None:
     for fmt in formats:
-        path = out.with_suffix(f".{fmt}")
-        tmp = path.with_name(f".{path.stem}.tmp.{fmt}")
-        try:
+        with atomic_path(out.with_suffix(f".{fmt}")) as tmp:
             fig.savefig(tmp, dpi=120)
-            tmp.replace(path)
-        finally:
-            tmp.unlink(missing_ok=True)
     plt.close(fig)
 
 
@@ -157,7 +156,10 @@ def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | 
         & (df["protocol"] == "multiview")
     ]
     if rows.empty:
-        return "no adaptive run of the table scene in runs.csv"
+        return (
+            "it shows the points of the known-pose (tri) task of adaptive on table under "
+            "the multiview protocol, and runs.csv holds none"
+        )
     rows = rows.assign(off=(rows["budget"] - HEADLINE_BUDGET).abs()).sort_values(["off", "seed"])
     r = rows.iloc[0]
     model_dir = results / "models" / f"table-s{r['seed']}" / f"adaptive-b{r['budget']}"

@@ -25,14 +25,21 @@ from bench import ROOT, BenchError
 from bench.backend.peers import PEERS
 from bench.backend.reconstruction import PROTOCOLS, check_protocols
 from bench.console import log, progress
-from bench.files import write_text_atomic
+from bench.files import exclusive, write_text_atomic
 from bench.frontend import feedback
-from bench.frontend.policies import check_policies, learned_weights
+from bench.frontend.policies import POLICIES, check_policies, learned_weights
+from bench.frontend.views import source_key
 from bench.harness import plugins
-from bench.harness.execute import execute
-from bench.harness.pipeline import ORACLE, TASKS, RunConfig
+from bench.harness.execute import check_scheduler, execute
+from bench.harness.pipeline import ORACLE, TASKS, RunConfig, row_hash
 from bench.harness.report import write_report
-from bench.harness.runs import DAMAGED, claim_results_dir, read_runs, set_aside_damaged
+from bench.harness.runs import (
+    DAMAGED,
+    bind_results_dir,
+    check_results_dir,
+    read_runs,
+    set_aside_damaged,
+)
 from bench.harness.tables import KEY
 from bench.render.entry import render_scene
 from bench.scenes.spec import load_spec, scene_names
@@ -95,7 +102,8 @@ class BenchConfig:
             raise BenchError(f"seeds must be non-negative integers, got {list(self.seeds)}")
         if not self.budgets or min(self.budgets) <= 0:
             raise BenchError(f"budget must be positive integers, got {list(self.budgets)}")
-        self.run.render.validate()
+        if self.dataset is None:
+            self.run.render.validate()
         self.run.detector.validate()
         self.run.policy.validate()
         return self
@@ -131,26 +139,55 @@ def run_benchmark(
     scheduler: str | None = None,
 ) -> pd.DataFrame:
     """Run whatever of the grid is missing from `results/runs.csv`, then write the report
-    (see `bench.harness.runs` for what counts as finished, damaged or refused)."""
+    (see `bench.harness.runs` for what counts as finished, damaged or refused). One run at
+    a time holds a results folder; another is refused in one line while it does."""
     cfg.validate()
+    if scheduler is not None:
+        check_scheduler(scheduler)
     results, renders = Path(results), Path(renders)
+    created = not results.exists()
+    try:
+        results.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise BenchError(f"cannot write to {results}: {e.strerror}") from e
+    try:
+        with exclusive(results / ".bench-run.lock", f"results folder {results}"):
+            return _run_in(cfg, results, renders, overwrite, set_aside, workers, scheduler)
+    finally:
+        if created and results.is_dir() and not any(results.iterdir()):
+            results.rmdir()  # a refused run leaves no folder behind
+
+
+def _run_in(cfg, results, renders, overwrite, set_aside, workers, scheduler) -> pd.DataFrame:
     t_start = time.perf_counter()
     invocation = {
         "id": time.strftime("%Y%m%dT%H%M%S") + f"-{os.getpid()}",
         "git_commit": _git_commit(),  # before this run rewrites any tracked result file
     }
-    claim_results_dir(results, cfg.run.as_dict(), overwrite)
+    check_results_dir(results, cfg.run.as_dict(), overwrite)
     runs_csv = results / "runs.csv"
-    if set_aside and runs_csv.exists():
+    if set_aside and runs_csv.exists() and not overwrite:
         log(f"{set_aside_damaged(runs_csv)} damaged row(s) of {runs_csv} set aside in {DAMAGED}")
     df = (
         read_runs(runs_csv)
-        if runs_csv.exists()
-        else pd.DataFrame(columns=list(KEY) + ["config_hash"])
+        if runs_csv.exists() and not overwrite
+        else pd.DataFrame(columns=[*KEY, "config_hash", "render_key"])
     )
-    stale = df["config_hash"] != cfg.run.hash
+    # each row against its policy's hash; a policy not registered now (a module not given
+    # this time) keeps its rows as they are
+    known = set(POLICIES) | {feedback.NAME, ORACLE, *PEERS}
+    expected = df["policy"].map({p: row_hash(cfg.run, p) for p in set(df["policy"]) & known})
+    stale = expected.notna() & (df["config_hash"] != expected)
     if stale.any():
         log(f"{int(stale.sum())} row(s) were computed by other code; computing them again")
+    if cfg.dataset is not None:
+        changed = ~stale & (df["render_key"] != source_key(Path(cfg.dataset)))
+        if changed.any():
+            log(
+                f"the contents of {cfg.dataset} changed since {int(changed.sum())} row(s) were "
+                "computed; computing them again"
+            )
+        stale |= changed
     df = df[~stale]
     done = set(map(tuple, df[list(KEY)].itertuples(index=False)))
     rows = df.to_dict("records")
@@ -160,6 +197,11 @@ def run_benchmark(
         if missing:
             todo[unit] = missing
     n_rows = sum(len(j) for j in todo.values())
+    if not cfg.units():
+        raise BenchError(
+            f"nothing to compute: no policy of {', '.join(cfg.policies)} runs a task of "
+            f"{', '.join(cfg.tasks)} (the COLMAP peers run the sfm task only)"
+        )
     stage_s = dict.fromkeys(
         ["render", "frontend", "select", "match", "verify", "task", "evaluate_matches", "evaluate"],
         0.0,
@@ -179,7 +221,7 @@ def run_benchmark(
             stage_s["render"] += time.perf_counter() - t
             bar.set_postfix_str(f"{sc} seed {sd}")
             bar.update()
-    t_runs = time.perf_counter()
+    t_runs, bound = time.perf_counter(), False
     with progress("frontend", len(pending)) as fbar, progress("runs", len(todo)) as bar:
 
         def scene_ready(group, info):
@@ -190,6 +232,9 @@ def run_benchmark(
         for new in execute(
             entries, todo, cfg.run, cfg.budgets, results, renders, workers, scheduler, scene_ready
         ):
+            if not bound:  # the folder is bound by the first rows it gets, not before
+                bind_results_dir(results, cfg.run.as_dict(), overwrite)
+                bound = True
             for k in ("select", "match", "verify", "evaluate_matches"):
                 stage_s[k] += np.nan_to_num(new[0].get(f"{k}_ms", 0.0)) / 1000
             for r in new:

@@ -50,7 +50,7 @@ from bench.frontend.policies import (
 )
 from bench.frontend.signals import SignalConfig, Signals, seconds_of
 from bench.frontend.stage import FrontEnd
-from bench.frontend.views import Source, View
+from bench.frontend.views import Source, View, source_key
 from bench.harness import plugins
 from bench.render.config import RenderConfig
 
@@ -94,29 +94,40 @@ def code_hash() -> str:
 @dataclass(frozen=True)
 class RunConfig:
     """The settings that decide a run's metrics; its hash, with the code's, is stored in
-    every row (`config_hash`)."""
+    every row (`config_hash`, per row: `row_hash`)."""
 
-    render: RenderConfig = field(default_factory=RenderConfig)
+    render: RenderConfig | None = field(default_factory=RenderConfig)
+    """None for a dataset, whose images are not rendered."""
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     signals: SignalConfig = field(default_factory=SignalConfig)
     policy: PolicyConfig = field(default_factory=PolicyConfig)
     backend: BackendConfig = field(default_factory=BackendConfig)
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        """The settings that decide every row: all of them but the policy modules, whose
+        content decides their own policies' rows only (`row_hash`)."""
+        settings = asdict(self)
+        del settings["policy"]["modules"]
+        return settings
 
     @property
     def hash(self) -> str:
-        """Of the settings, the code, the learned weights and any outside policy module."""
+        """Of the settings, the code and the learned weights."""
         return content_key(
             {
                 "settings": self.as_dict(),
                 "code": code_hash(),
-                "inputs": plugins.files_hash(
-                    [weights_file(self.policy.learned_weights), *self.policy.modules]
-                ),
+                "inputs": plugins.files_hash([weights_file(self.policy.learned_weights)]),
             }
         )
+
+
+def row_hash(cfg: RunConfig, policy: str) -> str:
+    """The `config_hash` of a policy's rows: the settings' and code's, and for a policy
+    from a module (`--policy-module`, an entry point) its module's content as well."""
+    plugins.load(cfg.policy.modules)
+    origin = plugins.ORIGIN.get(policy)
+    return content_key([cfg.hash, plugins.files_hash([origin])]) if origin else cfg.hash
 
 
 def policy_rng(seed: int, policy: str, budget: int, view: int) -> np.random.Generator:
@@ -344,8 +355,8 @@ def row_identity(ident: tuple) -> dict:
         "budget": budget,
         "task": task,
         "protocol": protocol,
-        "render_key": Path(entry).name,
-        "config_hash": cfg.hash,
+        "render_key": source_key(entry),
+        "config_hash": row_hash(cfg, policy),
     }
 
 

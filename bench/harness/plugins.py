@@ -25,6 +25,8 @@ from bench.frontend.policies import POLICIES
 FORBIDDEN_IMPORTS = ("bench.scenes", "bench.render", "bench.evaluation", "bench.harness")
 FORBIDDEN_TEXT = re.compile(r"gt_\d|gt_\{|meta\.json|ground_truth|groundtruth")
 ENTRY_POINT_GROUP = "bench.policies"
+ORIGIN: dict[str, str] = {}
+"""The source file of every policy registered from outside the package."""
 
 
 def ground_truth_use(source: str, where: str) -> str | None:
@@ -32,7 +34,7 @@ def ground_truth_use(source: str, where: str) -> str | None:
     try:
         tree = ast.parse(source)
     except SyntaxError as e:
-        return f"{where} is not valid Python: {e}"
+        raise BenchError(f"policy module {where} is not valid Python: {e}") from None
     for node in ast.walk(tree):
         names = []
         if isinstance(node, ast.Import):
@@ -68,7 +70,9 @@ def load_module(path: str) -> tuple[str, ...]:
     sys.modules[name] = module
     try:
         spec.loader.exec_module(module)
-    except Exception as e:
+    except BenchError as e:  # a name taken, an unknown signal
+        raise BenchError(f"policy module {path}: {e}") from None
+    except (Exception, SystemExit) as e:
         raise BenchError(f"policy module {path} failed to import: {type(e).__name__}: {e}") from e
     added = tuple(p for p in POLICIES if p not in before)
     if not added:
@@ -76,6 +80,7 @@ def load_module(path: str) -> tuple[str, ...]:
             f"policy module {path} registers no new policy (decorate a function with "
             "@bench.frontend.policies.policy('name'))"
         )
+    ORIGIN.update(dict.fromkeys(added, str(file.resolve())))
     return added
 
 
@@ -88,10 +93,13 @@ def load_entry_points() -> tuple[str, ...]:
         origin = getattr(module, "origin", None) or getattr(module, "__file__", None)
         if origin and Path(origin).is_file():
             _check(Path(origin).read_text(), f"{ep.module} (entry point {ep.name})")
+        names = set(POLICIES)
         try:
             ep.load()
         except Exception as e:
             raise BenchError(f"policy entry point {ep.name} failed: {type(e).__name__}: {e}") from e
+        if origin:
+            ORIGIN.update(dict.fromkeys(set(POLICIES) - names, str(origin)))
     return tuple(p for p in POLICIES if p not in before)
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import pandas as pd
 
 from bench.console import log
-from bench.files import write_text_atomic
+from bench.files import atomic_path, write_text_atomic
 from bench.harness.figures import figure2, figure3, figure_budget
 from bench.harness.runs import read_runs
 from bench.harness.tables import (
@@ -94,12 +94,8 @@ def publish(results: Path, to: Path) -> int:
     for name in (*PUBLISHED_FILES, *REPORT_FILES, *FIGURES):
         src, dst = Path(results) / name, to / name
         if src.is_file():
-            tmp = dst.with_name(f".{name}.tmp")
-            try:
+            with atomic_path(dst) as tmp:
                 shutil.copyfile(src, tmp)
-                tmp.replace(dst)
-            finally:
-                tmp.unlink(missing_ok=True)
             copied += 1
         elif name != "scenes.png":
             dst.unlink(missing_ok=True)

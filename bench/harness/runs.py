@@ -166,14 +166,10 @@ def _flatten(d: dict, prefix: str = "") -> dict:
     return out
 
 
-def claim_results_dir(results: Path, settings: dict, overwrite: bool) -> None:
-    """Bind `results` to these row-deciding settings (`config.json`); refuse other settings
-    unless `overwrite`, naming each that differs."""
+def check_results_dir(results: Path, settings: dict, overwrite: bool) -> None:
+    """Refuse to compute into `results` under other row-deciding settings than the ones
+    its `config.json` holds, naming each that differs, unless `overwrite`. Writes nothing."""
     settings = json.loads(json.dumps(settings))  # tuples as lists, as stored
-    try:
-        results.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise BenchError(f"cannot write to {results}: {e.strerror}") from e
     stored_path = results / "config.json"
     if stored_path.exists() and not overwrite:
         try:
@@ -192,8 +188,14 @@ def claim_results_dir(results: Path, settings: dict, overwrite: bool) -> None:
                 f"{results} holds results of other settings ({shown}); use --overwrite to "
                 "replace them, or another --results folder"
             )
+
+
+def bind_results_dir(results: Path, settings: dict, overwrite: bool) -> None:
+    """Bind `results` to these settings (`config.json`) as the first rows are computed;
+    with `overwrite`, the rows and models of other settings go first."""
     if overwrite:
         for name in ("runs.csv", "models", DAMAGED):
             p = results / name
             shutil.rmtree(p) if p.is_dir() else p.unlink(missing_ok=True)
-    write_text_atomic(stored_path, json.dumps({"settings": settings}, indent=1))
+    settings = json.loads(json.dumps(settings))
+    write_text_atomic(results / "config.json", json.dumps({"settings": settings}, indent=1))

@@ -12,7 +12,7 @@ renamed.
 
 from __future__ import annotations
 
-import os
+import shutil
 import time
 from pathlib import Path
 
@@ -22,6 +22,7 @@ import numpy as np
 from bench import BenchError
 from bench.backend.reconstruction import write_database
 from bench.console import log, progress
+from bench.files import atomic_path
 from bench.frontend import feedback
 from bench.frontend.features import Candidates, DetectorConfig, detect
 from bench.frontend.policies import PolicyConfig, check_policies
@@ -75,34 +76,43 @@ def select_to_database(
     cams = [v.camera for v in views]
     pairs = matcher(cams, pools, cfg.backend)(sel) if match else []
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise BenchError(f"--out {out} is a file; give a folder for database.db")
     out.mkdir(parents=True, exist_ok=True)
     db = out / "database.db"
-    tmp = out / f".database.{os.getpid()}.tmp.db"
+    if db.exists():
+        log(f"replacing {db}")
     try:
-        write_database(
-            tmp,
-            cams,
-            [v.name for v in views],
-            [c.xy[s] for c, s in zip(pools, sel)],
-            pairs,
-            [c.descriptors[s] for c, s in zip(pools, sel)],
-        )
-        tmp.replace(db)
+        with atomic_path(db) as tmp:
+            write_database(
+                tmp,
+                cams,
+                [v.name for v in views],
+                [c.xy[s] for c, s in zip(pools, sel)],
+                pairs,
+                [c.descriptors[s] for c, s in zip(pools, sel)],
+            )
     except Exception as e:
         raise BenchError(f"cannot write {db}: {e}") from e
-    finally:
-        tmp.unlink(missing_ok=True)
+    shutil.rmtree(out / "overlays", ignore_errors=True)  # never beside another run's
     if overlays:
         for v, c, s in zip(views, pools, sel):
-            path = out / "overlays" / f"{v.name}.png"
+            path = (out / "overlays" / v.name).with_suffix(".png")
             path.parent.mkdir(parents=True, exist_ok=True)
             img = np.ascontiguousarray(v.image[..., ::-1])
             for x, y in c.xy[s] - 0.5:
                 cv2.circle(img, (int(round(x)), int(round(y))), 3, (0, 255, 0), 1, cv2.LINE_AA)
             cv2.imwrite(str(path), img)
+    short = {v.name: len(c) for v, c in zip(views, pools) if len(c) < budget}
+    if short:
+        log(
+            f"{len(short)} image(s) have fewer candidates than the budget {budget} and hold "
+            f"all of them: {', '.join(f'{k} ({n})' for k, n in list(short.items())[:5])}"
+        )
     n = len(views)
     log(
-        f"{policy}: {sum(len(s) for s in sel)} keypoints in {n} images "
+        f"{policy}: {sum(len(s) for s in sel)} keypoints in {n} images, "
+        f"{budget * n - sum(len(s) for s in sel)} short of {budget} per image "
         f"({(time.perf_counter() - t) / n:.2f} s per image){', matched' if match else ''}"
     )
     return db

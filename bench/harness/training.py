@@ -26,7 +26,7 @@ from bench.backend.reconstruction import triangulate
 from bench.console import log, progress
 from bench.evaluation.metrics import load_truth, point_error
 from bench.files import write_text_atomic
-from bench.frontend.policies import ADAPTIVE_SIGNALS
+from bench.frontend.policies import ADAPTIVE_SIGNALS, Weights
 from bench.frontend.stage import front_end
 from bench.frontend.views import Source
 from bench.harness.pipeline import RunConfig, code_hash
@@ -34,7 +34,8 @@ from bench.render.entry import render_scene
 
 LABEL_TAU = 0.10
 L2 = 1e-4
-PAPER = dict(zip(ADAPTIVE_SIGNALS, (0.28, 0.27, 0.22, -0.20, 0.19)))
+PAPER = {k: (-1 if k == "ambiguity" else 1) * getattr(Weights(), k) for k in ADAPTIVE_SIGNALS}
+"""The paper's weights as coefficients of the score (ambiguity counts against)."""
 """The paper's weights as coefficients (ambiguity enters its score with a minus sign)."""
 
 
