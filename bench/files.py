@@ -118,42 +118,17 @@ def write_meta(directory: Path, meta: dict) -> None:
 
 
 @contextmanager
-def locked(entry: Path) -> Iterator[None]:
-    """Hold an exclusive lock for `entry` (other processes wait). The lock file is removed
-    by its holder; a waiter that wakes on a removed file takes a fresh one."""
-    path = entry.parent / f".{entry.name}.lock"
-    try:
-        entry.parent.mkdir(parents=True, exist_ok=True)
-        while True:
-            fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o666)
-            fcntl.flock(fd, fcntl.LOCK_EX)
-            try:
-                if os.stat(path).st_ino == os.fstat(fd).st_ino:
-                    break  # still the lock file on disk: ours
-            except FileNotFoundError:
-                pass
-            os.close(fd)
-    except OSError as e:
-        raise BenchError(f"cannot write to {entry.parent}: {e.strerror}") from e
-    try:
-        yield
-    finally:
-        path.unlink(missing_ok=True)
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        os.close(fd)
-
-
-@contextmanager
-def exclusive(path: Path, what: str) -> Iterator[None]:
-    """Hold the lock file `path` for the block, or refuse at once, in one line, while
-    another process holds it (`what` names the thing it guards). The holder removes it."""
+def _lock_file(path: Path, wait: bool, what: str) -> Iterator[None]:
+    """Hold the lock file `path` for the block: waiting for another holder, or (not `wait`)
+    refusing at once, in one line naming `what`. The holder removes the file; a process
+    that takes a file its holder has just removed takes a fresh one."""
     while True:
         try:
             fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o666)
         except OSError as e:
             raise BenchError(f"cannot write to {path.parent}: {e.strerror}") from e
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
         except BlockingIOError:
             holder = os.read(fd, 32).decode(errors="replace").strip() or "?"
             os.close(fd)
@@ -166,7 +141,7 @@ def exclusive(path: Path, what: str) -> Iterator[None]:
                 break  # still the lock file on disk: ours
         except FileNotFoundError:
             pass
-        os.close(fd)  # its holder removed it as we took it: take a fresh one
+        os.close(fd)
     os.ftruncate(fd, 0)
     os.write(fd, str(os.getpid()).encode())
     try:
@@ -175,6 +150,20 @@ def exclusive(path: Path, what: str) -> Iterator[None]:
         path.unlink(missing_ok=True)
         fcntl.flock(fd, fcntl.LOCK_UN)
         os.close(fd)
+
+
+def locked(entry: Path):
+    """Hold an exclusive lock for the cache entry `entry` (other processes wait)."""
+    try:
+        entry.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise BenchError(f"cannot write to {entry.parent}: {e.strerror}") from e
+    return _lock_file(entry.parent / f".{entry.name}.lock", True, str(entry))
+
+
+def exclusive(path: Path, what: str):
+    """Hold the lock file `path`, or refuse at once while another process holds it."""
+    return _lock_file(path, False, what)
 
 
 @contextmanager

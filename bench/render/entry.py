@@ -52,6 +52,15 @@ def render_key(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -> s
 _announced: set[str] = set()
 
 
+def load_renderer(variant: str) -> None:
+    """Load Mitsuba and its variant before any lock or temporary folder exists: a signal
+    that lands while its native libraries initialise aborts the process, and then leaves
+    nothing behind."""
+    import mitsuba
+
+    mitsuba.set_variant(variant)
+
+
 def render_scene(
     name: str, seed: int, cfg: RenderConfig, renders_dir: Path, force: bool = False
 ) -> Path:
@@ -67,6 +76,8 @@ def render_scene(
         log(why)
         _announced.add(why)
     entry = renders_dir / f"{name}-s{seed}-{render_key(spec, seed, cfg, variant)}"
+    if force or not entry.exists() or files.entry_problem(entry):
+        load_renderer(variant)
     with files.locked(entry):
         problem = files.entry_problem(entry) if entry.exists() else None
         if entry.exists() and problem is None and not force:
