@@ -3,14 +3,15 @@ cluster of N single-threaded worker processes, or an existing cluster by address
 
 Units of work, with their dependencies: the front end of each (scene, seed), after its
 render (one per geometry its tasks grant); then each (scene, seed, policy, budget) unit,
-which waits for its scene's front end. Renders stay in the main process, so one process renders per machine (Mitsuba's LLVM
-and CUDA variants use every core, or the GPU, on their own). A worker holds one scene's
-front end and ground truth at a time (`_scene`). Rows come back to the main process,
-which alone writes `runs.csv`. A unit whose worker dies is retried once, then recorded as
-failed rows with the reason; a `BenchError` (bad input, deterministic) comes back as a
-value, is not retried, and stops the run as it does in process. The workers of a local
-cluster ignore Ctrl-C, which the main process handles by stopping them. With a cluster given by address, the workers must see the same `renders/` and
-results folder (a shared file system).
+which waits for its scene's front end. Renders stay in the main process, so one process
+renders per machine (Mitsuba's LLVM and CUDA variants use every core, or the GPU, on
+their own). A worker holds one scene's front ends and ground truth at a time (`_scene`).
+Rows come back to the main process, which alone writes `runs.csv`. A unit whose worker
+dies is retried once, then recorded as failed rows with the reason; a `BenchError` (bad
+input, deterministic) comes back as a value, is not retried, and stops the run as it does
+in process. The workers of a local cluster ignore Ctrl-C, which the main process handles
+by stopping them. With a cluster given by address, the workers must see the same
+`renders/` and results folder (a shared file system).
 
 Every unit computes the same numbers wherever it runs: its inputs are files and
 settings, its generators are seeded per unit, and COLMAP runs single-threaded and seeded.
@@ -28,6 +29,7 @@ from pathlib import Path
 from bench import BenchError
 from bench.backend.peers import PEERS
 from bench.evaluation.metrics import load_truth
+from bench.frontend.geometry import RIG
 from bench.frontend.stage import FrontEnd, front_end
 from bench.frontend.views import load_views
 from bench.harness.pipeline import GRANTS, RunConfig, row_identity, run_peer_unit, run_unit
@@ -46,7 +48,8 @@ def _scene(entry: Path, cfg: RunConfig, renders: Path, grants):
     if _HELD.get("key") != key:
         _HELD.clear()  # let the previous scene go before loading the next
         fronts = _front_ends(entry, cfg, renders, grants)
-        posed = load_views(entry)  # the evaluation side may read the poses
+        # the evaluation side may read the poses: the rig's front end holds them
+        posed = fronts[RIG].views if RIG in fronts else load_views(entry)
         cams, names = [v.camera for v in posed], [v.name for v in posed]
         truth = load_truth(entry, cams, names, next(iter(fronts.values())).pools)
         _HELD.update(key=key, fronts=fronts, truth=truth)
