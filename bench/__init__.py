@@ -1,15 +1,17 @@
 """Rendered-scene benchmark of keypoint selection policies for 3D reconstruction.
 
 The subpackages are the stages of the data flow, in order; a stage imports only the
-stages before it and the shared modules of this package (`camera`, `files`):
+stages before it and the shared modules of this package (`camera`, `files`, `console`,
+`vocabulary`, `results`):
 
-    scenes -> render -> frontend -> backend -> evaluation -> harness
+    scenes -> render -> frontend -> backend -> evaluation -> harness -> report -> cli
 
 `scenes` describes scenes, `render` path-traces them into cached render entries,
 `frontend` detects candidates, computes their signals and selects features (policies),
 `backend` matches, verifies and reconstructs with COLMAP, `evaluation` scores against
-ground truth (the only stage that reads it), and `harness` runs the grid, writes the
-tables and figures and holds the command line.
+ground truth (the only stage that reads it), `harness` runs the grid into a results
+folder (predictions, then scores), `report` makes the tables and figures from a results
+folder alone, and `cli` is the command line.
 """
 
 from importlib.metadata import PackageNotFoundError, version

@@ -18,12 +18,13 @@ from scipy.stats import spearmanr
 
 from bench import ROOT
 from bench.frontend.features import DetectorConfig, detect
-from bench.frontend.policies import POLICIES, SIGNALS_USED, PolicyInput, select
+from bench.frontend.policies import POLICIES, PolicyInput, select
+from bench.frontend.selection import policy_rng
 from bench.frontend.signals import TIMED, SignalConfig, compute_signals, seconds_of
 from bench.frontend.views import load_views
-from bench.harness.pipeline import policy_rng
 from bench.render.config import RenderConfig
 from bench.render.entry import render_scene
+from bench.vocabulary import METHODS
 
 
 def main() -> None:
@@ -70,7 +71,7 @@ def main() -> None:
 
     def front(policy: str, grant: str = "posed") -> float:
         b = best[grant]
-        return 1000 * (b["detect"] + seconds_of(b, SIGNALS_USED[policy])) / n + sel_ms[policy]
+        return 1000 * (b["detect"] + seconds_of(b, METHODS[policy].reads)) / n + sel_ms[policy]
 
     rho = [spearmanr(s.repeatability, s.repeatability_redetect)[0] for s in sigs]
     print(f"repeatability estimate vs re-detection: Spearman {np.mean(rho):.2f} (mean over views)")

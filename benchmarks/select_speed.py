@@ -14,8 +14,8 @@ from pathlib import Path
 import cv2
 
 from bench import ROOT
+from bench.backend.database import SelectRequest, select_to_database
 from bench.frontend.views import Source, read_colmap_model
-from bench.harness.select import select_to_database
 from bench.render.config import RenderConfig
 from bench.render.entry import render_scene
 
@@ -40,7 +40,9 @@ def main() -> None:
                     [cv2.IMWRITE_JPEG_QUALITY, 95],
                 )
             t = time.perf_counter()
-            select_to_database(folder, Path(tmp) / f"out-{size[0]}", a.policy, a.budget)
+            select_to_database(
+                SelectRequest(folder, a.policy, a.budget), Path(tmp) / f"out-{size[0]}"
+            )
             s = (time.perf_counter() - t) / len(names)
             print(
                 f"{size[0]}x{size[1]}: {s:.2f} s per image ({len(names)} images, {a.policy}, B={a.budget})"

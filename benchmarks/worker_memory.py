@@ -12,9 +12,10 @@ import tempfile
 from pathlib import Path
 
 from bench import ROOT
-from bench.harness.execute import scene_task, unit_task
+from bench.harness.execute import Plan, Work, scene_task, unit_task
 from bench.harness.grid import BenchConfig
 from bench.render.entry import render_scene
+from bench.results import Workspace
 
 ap = argparse.ArgumentParser(
     description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -26,10 +27,12 @@ cfg = BenchConfig(scenes=(a.scene,), seeds=(a.seed,))
 renders = ROOT / "renders"
 entry = render_scene(a.scene, a.seed, cfg.run.render, renders)
 before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-scene_task((a.scene, a.seed), entry, cfg.run, renders, cfg.budgets)
+work = {u: Work(tuple(cfg.jobs(u.policy))) for u in cfg.units()}
+plan = Plan({(a.scene, a.seed): entry}, work, cfg.budgets)
+scene_task((a.scene, a.seed), entry, cfg.run, renders, plan)
 with tempfile.TemporaryDirectory() as tmp:
     for unit in cfg.units():
-        unit_task(entry, unit, cfg.jobs(unit[2]), cfg.run, Path(tmp), renders)
+        unit_task(unit, plan, cfg.run, Workspace(Path(tmp), renders))
 peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 print(
     f"{a.scene} seed {a.seed}: {len(cfg.units())} units; peak RSS {peak:.0f} MiB "

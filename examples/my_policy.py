@@ -11,7 +11,7 @@ import numpy as np
 from bench.frontend.policies import policy
 
 
-@policy("center-texture", signals=("texture",))
+@policy("center-texture", "Texture, centre-weighted", reads=("texture",))
 def center_texture(inp, budget, rng, cfg):
     """Texture, discounted by the distance from the image centre (a made-up prior)."""
     cam = inp.view.camera

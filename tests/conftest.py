@@ -60,3 +60,14 @@ def synthetic_rig():
     rng = np.random.default_rng(3)
     X = np.c_[rng.uniform(-2.5, 2.5, 150), rng.uniform(-1.5, 1.5, 150), rng.uniform(0, 2, 150)]
     return cams, X
+
+
+def bench_run(cfg, results, renders, workers=1, scheduler=None, **options):
+    """`bench run` of a grid (`BenchConfig`) with its report, as the command line runs it."""
+    from bench.harness.execute import Cluster
+    from bench.harness.grid import RunOptions, run_benchmark
+    from bench.report.write import write_report
+    from bench.results import Workspace
+
+    options = RunOptions(cluster=Cluster(workers, scheduler), **options)
+    return run_benchmark(cfg, Workspace(results, renders), options, report=write_report)

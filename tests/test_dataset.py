@@ -12,14 +12,14 @@ import pycolmap
 import pytest
 
 from bench import BenchError
+from bench.backend.database import SelectRequest, select_to_database
+from bench.cli import main
+from bench.evaluation.export import export_dataset
 from bench.frontend.views import load_image_folder, read_colmap_model
-from bench.harness.cli import main
-from bench.harness.export import export_dataset
-from bench.harness.grid import BenchConfig, run_benchmark
-from bench.harness.pipeline import RunConfig
-from bench.harness.select import select_to_database
-from bench.harness.tables import KEY
-from tests.conftest import MEDIUM
+from bench.harness.config import RunConfig
+from bench.harness.grid import BenchConfig
+from bench.vocabulary import KEY
+from tests.conftest import MEDIUM, bench_run
 
 GRID = dict(seeds=(0,), policies=("texture", "adaptive", "oracle", "colmap-b"), budgets=(64,))
 NOT_COMPARED = {"scene", "render_key", "render_s_per_view", "invocation", "ground_truth"}
@@ -43,10 +43,10 @@ def test_export_has_the_colmap_layout_and_reads_back(dataset, medium_entry):
 
 def test_dataset_run_gives_the_metrics_of_the_rendered_path(dataset, renders_dir, tmp_path):
     run = RunConfig(render=MEDIUM)
-    rendered = run_benchmark(
+    rendered = bench_run(
         BenchConfig(scenes=("table",), run=run, **GRID), tmp_path / "r", renders_dir, workers=1
     )
-    data = run_benchmark(
+    data = bench_run(
         BenchConfig(scenes=(dataset.name,), run=run, dataset=str(dataset), **GRID),
         tmp_path / "d",
         renders_dir,
@@ -96,14 +96,10 @@ def test_dataset_without_pixel_truth_scores_poses_and_leaves_the_rest_nan(
 
 
 def test_select_writes_a_database_colmap_matches(dataset, tmp_path):
-    db_path = select_to_database(
-        dataset / "images",
-        tmp_path / "out",
-        "adaptive",
-        150,
-        cameras=dataset / "sparse",
-        overlays=True,
+    request = SelectRequest(
+        dataset / "images", "adaptive", 150, cameras=dataset / "sparse", overlays=True
     )
+    db_path = select_to_database(request, tmp_path / "out")
     db = pycolmap.Database.open(str(db_path))
     try:
         images = db.read_all_images()
@@ -129,10 +125,10 @@ def test_select_writes_a_database_colmap_matches(dataset, tmp_path):
 
 def test_select_says_what_it_replaces_and_what_falls_short(dataset, tmp_path, capsys):
     out = tmp_path / "out"
-    select_to_database(dataset / "images", out, "texture", 64, overlays=True)
+    select_to_database(SelectRequest(dataset / "images", "texture", 64, overlays=True), out)
     capsys.readouterr()
     pool = 10**5  # above every pool: each image holds all of its candidates
-    select_to_database(dataset / "images", out, "texture", pool)
+    select_to_database(SelectRequest(dataset / "images", "texture", pool), out)
     err = capsys.readouterr().err
     assert f"replacing {out / 'database.db'}" in err
     assert "6 image(s) have fewer candidates than the budget 100000" in err
@@ -158,9 +154,10 @@ def test_dataset_runs_name_the_options_they_ignore_and_record_no_render(
 
 
 def test_select_with_matches_holds_verified_geometries_the_mapper_reads(dataset, tmp_path):
-    db_path = select_to_database(
-        dataset / "images", tmp_path / "o", "adaptive", 200, cameras=dataset / "sparse", match=True
+    request = SelectRequest(
+        dataset / "images", "adaptive", 200, cameras=dataset / "sparse", match=True
     )
+    db_path = select_to_database(request, tmp_path / "o")
     db = pycolmap.Database.open(str(db_path))
     try:
         pair_ids, geometries = db.read_two_view_geometries()

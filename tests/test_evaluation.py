@@ -13,7 +13,6 @@ from bench.backend.matching import expected_ransac_iterations
 from bench.camera import look_at
 from bench.evaluation.groundtruth import GroundTruth
 from bench.evaluation.metrics import (
-    SceneTruth,
     completeness_pct,
     coverage_pct,
     point_error,
@@ -33,6 +32,7 @@ from bench.evaluation.poses import (
     relative_pose_errors,
     similarity,
 )
+from bench.evaluation.truth import SceneTruth
 from bench.frontend.features import Candidates
 
 # --- metrics on five hand-made points -------------------------------------------------

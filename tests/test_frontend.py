@@ -311,8 +311,8 @@ def test_weights_are_a_vector_keyed_by_signal_name():
     weights' order differed from the signals'; each weight now lands on its named signal."""
     import dataclasses
 
+    from bench.cli.run import weights_arg
     from bench.frontend.policies import adaptive_score
-    from bench.harness.cli import weights_arg
 
     w = weights_arg("0.3,0.3,0.2,0.1,0.15")
     assert dataclasses.asdict(w) == {

@@ -15,25 +15,42 @@ import pandas as pd
 import pycolmap
 import pytest
 
-from bench import BenchError
+from bench import BenchError, vocabulary
 from bench.backend.reconstruction import known_pose_model
+from bench.cli import build_parser, main
+from bench.cli.common import LATEST, PUBLISHED, QUICK, parse_list
 from bench.evaluation.groundtruth import load_ground_truth
-from bench.evaluation.metrics import SceneTruth
+from bench.evaluation.truth import SceneTruth
+from bench.frontend import plugins
 from bench.frontend import policies as registry
 from bench.frontend.geometry import RIG
 from bench.frontend.policies import PolicyConfig
 from bench.frontend.stage import front_end
-from bench.harness import execute, figures, pipeline, plugins
+from bench.harness import evaluate, execute
 from bench.harness import grid as harness
-from bench.harness.cli import LATEST, PUBLISHED, QUICK, build_parser, main, parse_list
-from bench.harness.grid import BenchConfig, run_benchmark
-from bench.harness.pipeline import RunConfig, export_model, run_unit
-from bench.harness.report import publish, write_report
-from bench.harness.runs import read_runs
-from bench.harness.stats import bootstrap_mean, paired_difference
-from bench.harness.tables import KEY
+from bench.harness import predict as prediction
+from bench.harness.config import RunConfig
+from bench.harness.execute import Work, compute_unit
+from bench.harness.grid import BenchConfig
+from bench.harness.predict import LoadedScene, export_model
 from bench.render import entry as render
-from tests.conftest import MEDIUM, TINY, synthetic_rig
+from bench.report import figures
+from bench.report.stats import bootstrap_mean, paired_difference
+from bench.report.write import publish, write_report
+from bench.results import Workspace, read_runs
+from bench.vocabulary import KEY, Job, Unit, Vocabulary
+from tests.conftest import MEDIUM, TINY, bench_run, synthetic_rig
+
+
+def spy(monkeypatch, calls: list, what=lambda unit: (unit.policy, unit.budget)):
+    """Record `what` of every unit that is predicted (selected, matched, mapped)."""
+    real = execute.predict
+    monkeypatch.setattr(
+        execute,
+        "predict",
+        lambda scene, unit, *a: calls.append(what(unit)) or real(scene, unit, *a),
+    )
+
 
 # --- one run ------------------------------------------------------------------------
 
@@ -75,8 +92,9 @@ def table_run(medium_entry, tmp_path_factory):
     out = tmp_path_factory.mktemp("models")
 
     def run(policy: str, budget: int = 128):
-        (row,) = run_unit(
-            entry, {RIG: fe}, truth, "table", 0, policy, budget, [("tri", "multiview")], cfg, out
+        unit, work = Unit("table", 0, policy, budget), Work((Job("tri", "multiview"),))
+        (row,) = compute_unit(
+            LoadedScene(entry, {RIG: fe}, truth), unit, work, cfg, Workspace(out, out)
         )
         return row, out / "models" / "table-s0" / f"{policy}-b{budget}"
 
@@ -123,9 +141,12 @@ def test_the_order_of_a_policys_indices_does_not_change_any_metric(medium_entry,
     truth = SceneTruth.build(
         [v.camera for v in fronts["rig"].views], load_ground_truth(entry), fronts["rig"].pools
     )
-    jobs = [("tri", "multiview"), ("sfm", "multiview")]
+    work = Work((Job("tri", "multiview"), Job("sfm", "multiview")))
+    scene = LoadedScene(entry, fronts, truth)
     rows = {
-        p: run_unit(entry, fronts, truth, "table", 0, p, 128, jobs, cfg, tmp_path / p)
+        p: compute_unit(
+            scene, Unit("table", 0, p, 128), work, cfg, Workspace(tmp_path / p, tmp_path)
+        )
         for p in ("forwards", "backwards")
     }
     skip = {"policy", "failure"} | {k for k in rows["forwards"][0] if k.endswith("_ms")}
@@ -180,7 +201,7 @@ ROWS = 2 * (6 * 2 * 2 + 2 * 2)  # scenes x (selections x tasks x protocols + pee
 @pytest.fixture(scope="module")
 def quick_results(renders_dir, tmp_path_factory):
     results = tmp_path_factory.mktemp("results")
-    run_benchmark(SMALL, results, renders_dir)
+    bench_run(SMALL, results, renders_dir)
     return results
 
 
@@ -208,7 +229,14 @@ def test_quick_run_writes_every_file_with_documented_columns(quick_results):
     capped = runs.loc[runs["policy"] == "colmap-b", "keypoints_per_view"]
     assert len(capped) and (capped == 64).all()  # a hard cap: exactly B per view
     assert runs["maa"].notna().sum() == runs["task"].eq("sfm").sum()  # never NaN, failed or not
-    assert {"render_key", "config_hash", "status", "failure", *TIMING} <= set(runs.columns)
+    assert {
+        "render_key",
+        "prediction_hash",
+        "evaluation_hash",
+        "status",
+        "failure",
+        *TIMING,
+    } <= set(runs.columns)
     t1 = pd.read_csv(quick_results / "table1.csv")
     assert {
         "strategy",
@@ -241,10 +269,18 @@ def test_quick_run_writes_every_file_with_documented_columns(quick_results):
     assert manifest["seconds"]["total"] > 0 and "render" in manifest["seconds"]
     for run in ("adaptive-b64", "all-b0", "oracle-b64/twoview"):
         assert (quick_results / "models" / "table-s0" / run / "points3D.txt").is_file()
+    # every job's model in its own folder (sfm's two protocols once shared one)
+    ws, mapped = Workspace(quick_results, quick_results), runs[(runs["task"] == "sfm")]
+    for r in mapped[mapped["status"] == "ok"].itertuples():
+        folder = ws.model_dir(Unit(r.scene, r.seed, r.policy, r.budget), Job(r.task, r.protocol))
+        model = pycolmap.Reconstruction(str(folder))
+        assert (model.num_reg_images(), model.num_points3D()) == (r.registered_views, r.points)
+    assert set(mapped.loc[mapped["status"] == "ok", "protocol"]) == {"multiview", "twoview"}
 
 
 def test_plot_rebuilds_the_tables_from_runs_csv_alone(quick_results, tmp_path, renders_dir, capsys):
-    shutil.copy(quick_results / "runs.csv", tmp_path / "runs.csv")
+    for name in ("runs.csv", "vocabulary.json"):
+        shutil.copy(quick_results / name, tmp_path / name)
     assert main(["plot", "--results", str(tmp_path), "--renders", str(renders_dir)]) == 0
     for name in ("table1.csv", "table2.csv"):
         assert (tmp_path / name).read_bytes() == (quick_results / name).read_bytes()
@@ -253,8 +289,7 @@ def test_plot_rebuilds_the_tables_from_runs_csv_alone(quick_results, tmp_path, r
 
 
 def test_several_budgets_give_a_budget_figure(quick_results, tmp_path, renders_dir):
-    from bench.harness.report import write_report
-
+    shutil.copy(quick_results / "vocabulary.json", tmp_path)
     runs = pd.read_csv(quick_results / "runs.csv")
     budgeted = runs[runs["budget"] > 0]
     write_report(pd.concat([runs, budgeted.assign(budget=32)]), tmp_path, renders_dir)
@@ -264,7 +299,7 @@ def test_several_budgets_give_a_budget_figure(quick_results, tmp_path, renders_d
 
 
 def test_same_command_gives_identical_metrics(quick_results, renders_dir, tmp_path):
-    run_benchmark(SMALL, tmp_path, renders_dir)
+    bench_run(SMALL, tmp_path, renders_dir)
     a, b = (pd.read_csv(d / "runs.csv") for d in (quick_results, tmp_path))
     metrics = [c for c in a.columns if c not in TIMING]
     pd.testing.assert_frame_equal(a[metrics], b[metrics])
@@ -272,64 +307,86 @@ def test_same_command_gives_identical_metrics(quick_results, renders_dir, tmp_pa
 
 def test_interrupted_run_resumes_without_redoing_rows(renders_dir, tmp_path, monkeypatch):
     calls = []
-    real = execute.run_unit
+    real = execute.predict
 
-    def interrupt_after_three(*args, **kwargs):
+    def interrupt_after_three(scene, unit, *args):
         if len(calls) == 3:
             raise KeyboardInterrupt
-        calls.append(args[4:7])
-        return real(*args, **kwargs)
+        calls.append(unit)
+        return real(scene, unit, *args)
 
-    monkeypatch.setattr(execute, "run_unit", interrupt_after_three)
+    monkeypatch.setattr(execute, "predict", interrupt_after_three)
     with pytest.raises(KeyboardInterrupt):
-        run_benchmark(SMALL, tmp_path, renders_dir)
+        bench_run(SMALL, tmp_path, renders_dir)
     assert len(pd.read_csv(tmp_path / "runs.csv")) == 3 * 4  # tasks x protocols
+    monkeypatch.setattr(execute, "predict", real)
     calls.clear()
-    monkeypatch.setattr(execute, "run_unit", lambda *a, **k: calls.append(a[4:7]) or real(*a, **k))
-    run_benchmark(SMALL, tmp_path, renders_dir)
-    assert len(calls) == 2 * 6 - 3  # the peers do not go through run_unit
+    spy(monkeypatch, calls)
+    bench_run(SMALL, tmp_path, renders_dir)
+    assert len(calls) == 2 * 8 - 3  # every unit of both scenes, but the three done
     runs = pd.read_csv(tmp_path / "runs.csv")
     assert len(runs) == ROWS and not runs.duplicated(list(KEY)).any()
     calls.clear()
     rendered = []
     monkeypatch.setattr(harness, "render_scene", lambda *a, **k: rendered.append(a))
-    run_benchmark(SMALL, tmp_path, renders_dir)  # all done: nothing rendered, nothing run
+    bench_run(SMALL, tmp_path, renders_dir)  # all done: nothing rendered, nothing run
     assert calls == [] and rendered == []
 
 
 def test_growing_a_results_folder_runs_only_the_new_rows(
     quick_results, renders_dir, tmp_path, monkeypatch
 ):
-    """Hole 4: a new budget needs no --overwrite and runs only its rows; a changed setting
+    """A new budget needs no --overwrite and runs only its rows; a changed setting
     is refused, naming the setting."""
     shutil.copytree(quick_results, tmp_path / "r")
     calls = []
-    real = execute.run_unit
-    monkeypatch.setattr(execute, "run_unit", lambda *a, **k: calls.append(a[5:7]) or real(*a, **k))
+    spy(monkeypatch, calls)
     grown = dataclasses.replace(SMALL, scenes=("table",), budgets=(64, 32))
-    run_benchmark(grown, tmp_path / "r", renders_dir)
-    assert sorted(set(calls)) == [(p, 32) for p in sorted(POLICIES[:5])]
+    bench_run(grown, tmp_path / "r", renders_dir)
+    assert sorted(calls) == [(p, 32) for p in sorted(POLICIES[:6])]
     runs = pd.read_csv(tmp_path / "r" / "runs.csv")
     assert len(runs) == ROWS + 5 * 4 + 2  # the new budget's selections and its colmap-b
     other = dataclasses.replace(SMALL, run=RunConfig(render=dataclasses.replace(MEDIUM, spp=4)))
     with pytest.raises(BenchError, match=r"other settings \(render.spp: 16 there, 4 now\)"):
-        run_benchmark(other, tmp_path / "r", renders_dir)
+        bench_run(other, tmp_path / "r", renders_dir)
     assert len(pd.read_csv(tmp_path / "r" / "runs.csv")) == len(runs)  # nothing lost
 
 
 def test_rows_computed_by_other_code_are_computed_again(
     quick_results, renders_dir, tmp_path, monkeypatch
 ):
-    """Hole 2: the key that decides whether a row is finished covers the stages' code."""
+    """The key that decides whether a row is finished covers the stages' code."""
     shutil.copytree(quick_results, tmp_path / "r")
-    monkeypatch.setattr(pipeline, "code_hash", lambda: "another-code")
+    monkeypatch.setattr(prediction, "prediction_code_hash", lambda: "another-code")
     calls = []
-    real = execute.run_unit
-    monkeypatch.setattr(execute, "run_unit", lambda *a, **k: calls.append(a[5:7]) or real(*a, **k))
-    run_benchmark(dataclasses.replace(SMALL, scenes=("table",)), tmp_path / "r", renders_dir)
-    assert len(calls) == 6  # every selection unit of the table scene, again
+    spy(monkeypatch, calls)
+    bench_run(dataclasses.replace(SMALL, scenes=("table",)), tmp_path / "r", renders_dir)
+    assert len(calls) == 8  # every unit of the table scene, again
     runs = pd.read_csv(tmp_path / "r" / "runs.csv")
-    assert runs["config_hash"].nunique() == 1 and len(runs) == ROWS // 2
+    assert runs["prediction_hash"].nunique() == 1 and len(runs) == ROWS // 2
+
+
+def test_a_changed_metric_rescores_the_stored_predictions_alone(
+    quick_results, renders_dir, tmp_path, monkeypatch
+):
+    """Scores apart from predictions: a new evaluation hash (a metric edited), or
+    --reevaluate, scores every row again from the stored predictions without selecting,
+    matching or mapping, and gives the same metrics."""
+    shutil.copytree(quick_results, tmp_path / "r")
+    calls = []
+    spy(monkeypatch, calls)
+    monkeypatch.setattr(evaluate, "evaluation_hash", lambda: "another-metric")
+    monkeypatch.setattr(harness, "evaluation_hash", lambda: "another-metric")
+    again = bench_run(SMALL, tmp_path / "r", renders_dir)
+    assert calls == [] and set(again["evaluation_hash"]) == {"another-metric"}
+    before = read_runs(quick_results / "runs.csv")
+    metrics = [c for c in before.columns if c not in TIMING and c != "evaluation_hash"]
+    pd.testing.assert_frame_equal(before[metrics], again[metrics])
+    bench_run(SMALL, tmp_path / "r", renders_dir, reevaluate=True)
+    assert calls == []
+    shutil.rmtree(tmp_path / "r" / "models" / "table-s0" / "texture-b64")  # its prediction lost
+    bench_run(SMALL, tmp_path / "r", renders_dir, reevaluate=True)
+    assert calls == [("texture", 64)]  # predicted again; nothing else
 
 
 @pytest.mark.parametrize(
@@ -468,7 +525,7 @@ def test_nothing_to_compute_is_said_in_one_line(tmp_path, capsys):
     assert len(err) == 1 and "nothing to compute" in err[0] and "sfm task only" in err[0]
 
 
-# --- the harness cannot lie (issue 10): one test per hole ------------------------------
+# --- the harness cannot publish wrong numbers ----------------------------------------
 
 
 def _cut(path: Path, row: int) -> str:
@@ -479,7 +536,7 @@ def _cut(path: Path, row: int) -> str:
     return cut
 
 
-def test_hole1_a_damaged_runs_csv_is_refused_naming_the_row_and_set_aside_on_request(
+def test_a_damaged_runs_csv_is_refused_naming_the_row_and_set_aside_on_request(
     quick_results, renders_dir, tmp_path, capsys
 ):
     r = tmp_path / "r"
@@ -493,7 +550,7 @@ def test_hole1_a_damaged_runs_csv_is_refused_naming_the_row_and_set_aside_on_req
         err = capsys.readouterr().err.strip().splitlines()
         assert f"{r / 'runs.csv'} is damaged: row at line 31" in err[-1]
     assert (r / "table1.csv").read_bytes() == before  # nothing published from it
-    run_benchmark(SMALL, r, renders_dir, set_aside=True)
+    bench_run(SMALL, r, renders_dir, set_aside=True)
     assert cut in (r / "runs.damaged.csv").read_text()
     runs = read_runs(r / "runs.csv")
     assert len(runs) == ROWS and not runs.duplicated(list(KEY)).any()  # recomputed
@@ -504,13 +561,13 @@ def test_hole1_a_damaged_runs_csv_is_refused_naming_the_row_and_set_aside_on_req
     assert "its header lacks status" in capsys.readouterr().err
 
 
-def test_hole3_repeated_list_items_run_once(capsys):
+def test_repeated_list_items_run_once(capsys):
     assert parse_list("--seeds", "0,1,0,1-2", int) == (0, 1, 2)
     assert parse_list("--policies", "texture,texture", str) == ("texture",)
     assert "--seeds repeats 0, 1; each runs once" in capsys.readouterr().err
 
 
-def test_hole5_runs_never_write_the_published_snapshot():
+def test_runs_never_write_the_published_snapshot():
     args = build_parser().parse_args(["run"])
     assert args.results is None  # resolved to results/latest (results/quick with --quick)
     for argv in (["plot"], ["publish"], ["gallery"]):
@@ -520,7 +577,7 @@ def test_hole5_runs_never_write_the_published_snapshot():
     assert LATEST != PUBLISHED and QUICK != PUBLISHED
 
 
-def test_hole5_publish_copies_a_checked_folder_and_removes_stale_files(quick_results, tmp_path):
+def test_publish_copies_a_checked_folder_and_removes_stale_files(quick_results, tmp_path):
     snap = tmp_path / "published"
     snap.mkdir()
     (snap / "figure_budget.png").write_bytes(b"stale")  # quick_results has one budget
@@ -529,7 +586,7 @@ def test_hole5_publish_copies_a_checked_folder_and_removes_stale_files(quick_res
     assert not (snap / "figure_budget.png").exists()
 
 
-def test_hole7_bad_input_leaves_no_lock_or_temporary_file(tmp_path, capsys):
+def test_bad_input_leaves_no_lock_or_temporary_file(tmp_path, capsys):
     renders = tmp_path / "renders"
     assert main(["render", "table", "--seed", "-1", "--renders", str(renders)]) == 2
     assert "seed must be a non-negative integer" in capsys.readouterr().err
@@ -539,12 +596,10 @@ def test_hole7_bad_input_leaves_no_lock_or_temporary_file(tmp_path, capsys):
     assert not results.exists()
 
 
-def test_hole8_a_rerun_that_does_nothing_keeps_the_manifest_timings(
-    quick_results, renders_dir, tmp_path
-):
+def test_a_rerun_that_does_nothing_keeps_the_manifest_timings(quick_results, renders_dir, tmp_path):
     shutil.copytree(quick_results, tmp_path / "r")
     first = json.loads((tmp_path / "r" / "manifest.json").read_text())
-    run_benchmark(SMALL, tmp_path / "r", renders_dir)  # every row done
+    bench_run(SMALL, tmp_path / "r", renders_dir)  # every row done
     again = json.loads((tmp_path / "r" / "manifest.json").read_text())
     assert again["seconds"] == first["seconds"] and again["seconds"]["total"] > 0
     (inv,) = again["invocations"]
@@ -552,7 +607,7 @@ def test_hole8_a_rerun_that_does_nothing_keeps_the_manifest_timings(
     assert inv["rows"] == inv["rows_now"] == ROWS and set(runs["invocation"]) == {inv["id"]}
 
 
-def test_hole9_figures_state_nothing_impossible(quick_results, tmp_path, renders_dir, monkeypatch):
+def test_figures_state_nothing_impossible(quick_results, tmp_path, renders_dir, monkeypatch):
     runs = read_runs(quick_results / "runs.csv")
     t1 = pd.read_csv(quick_results / "table1.csv")
     for m in ("acc_completeness_pct", "accuracy_pct", "coverage_pct", "inlier_pct"):
@@ -560,6 +615,7 @@ def test_hole9_figures_state_nothing_impossible(quick_results, tmp_path, renders
     drawn = {}
     monkeypatch.setattr(figures, "save", lambda fig, out, fmts: drawn.__setitem__(out.name, fig))
     (tmp_path / "figure2.png").write_bytes(b"an older figure")
+    shutil.copy(quick_results / "vocabulary.json", tmp_path)
     budgeted = runs[runs["budget"] > 0]
     write_report(pd.concat([runs, budgeted.assign(budget=128)]), tmp_path, renders_dir)
     assert not (tmp_path / "figure2.png").exists()  # not drawable here: removed, not stale
@@ -569,7 +625,7 @@ def test_hole9_figures_state_nothing_impossible(quick_results, tmp_path, renders
     assert "n/a" in texts  # the peers have no known-pose metrics: drawn as missing
 
 
-def test_hole10_written_files_respect_the_umask(tmp_path):
+def test_written_files_respect_the_umask(tmp_path):
     old = os.umask(0o022)
     try:
         entry = render.render_scene("table", 3, TINY, tmp_path)
@@ -595,8 +651,8 @@ PARALLEL = dataclasses.replace(
 
 
 def test_two_dask_workers_give_the_same_metrics_as_one_process(renders_dir, tmp_path):
-    one = run_benchmark(PARALLEL, tmp_path / "one", renders_dir, workers=1)
-    two = run_benchmark(PARALLEL, tmp_path / "two", renders_dir, workers=2)
+    one = bench_run(PARALLEL, tmp_path / "one", renders_dir, workers=1)
+    two = bench_run(PARALLEL, tmp_path / "two", renders_dir, workers=2)
     metrics = [c for c in one.columns if c not in TIMING]
     pd.testing.assert_frame_equal(
         one[metrics].sort_values(list(KEY), ignore_index=True),
@@ -610,17 +666,17 @@ def test_a_unit_failing_on_a_worker_is_retried_once_then_recorded(
     from distributed import LocalCluster
 
     calls = []
-    real = execute.run_unit
+    real = execute.predict
 
-    def flaky(*a, **k):
-        calls.append(a[5])
-        if a[5] == "texture":
+    def flaky(scene, unit, *a):
+        calls.append(unit.policy)
+        if unit.policy == "texture":
             raise RuntimeError("worker lost")
-        return real(*a, **k)
+        return real(scene, unit, *a)
 
-    monkeypatch.setattr(execute, "run_unit", flaky)
+    monkeypatch.setattr(execute, "predict", flaky)
     with LocalCluster(n_workers=1, processes=False, dashboard_address=None) as cluster:
-        run_benchmark(PARALLEL, tmp_path, renders_dir, scheduler=cluster.scheduler_address)
+        bench_run(PARALLEL, tmp_path, renders_dir, scheduler=cluster.scheduler_address)
     assert calls.count("texture") == 2  # tried, then retried once
     runs = read_runs(tmp_path / "runs.csv")
     failed = runs[runs["policy"] == "texture"]
@@ -716,13 +772,14 @@ def test_a_twoview_only_run_prints_its_table_and_sfm_only_rows_name_figure2s_tas
     assert "Table 1 (twoview protocol" in out and "Empty DataFrame" not in out
     runs = read_runs(quick_results / "runs.csv")
     (tmp_path / "s").mkdir()
+    shutil.copy(quick_results / "vocabulary.json", tmp_path / "s")
     write_report(runs[runs["task"] == "sfm"], tmp_path / "s", renders_dir)
     err = capsys.readouterr().err
     assert "figure2.png not drawn" in err and "known-pose (tri) task" in err
 
 
 def test_the_budget_figure_says_n_a_for_a_panel_without_values(monkeypatch, tmp_path):
-    from bench.harness.tables import table1
+    from bench.report.tables import table1
 
     t1 = table1(
         pd.DataFrame(
@@ -735,7 +792,8 @@ def test_the_budget_figure_says_n_a_for_a_panel_without_values(monkeypatch, tmp_
                 "acc_completeness_pct": [1.0, 2.0],
                 "completeness_vs_oracle_pct": math.nan,  # no oracle ran
             }
-        )
+        ),
+        Vocabulary.current(),
     )
     drawn = {}
     monkeypatch.setattr(figures, "save", lambda fig, out, fmts: drawn.update(fig=fig))
@@ -768,16 +826,130 @@ def test_a_policy_module_decides_its_own_rows_only(renders_dir, tmp_path, monkey
         return BenchConfig(policies=policies, run=run, **grid)
 
     calls = []
-    real = execute.run_unit
-    monkeypatch.setattr(execute, "run_unit", lambda *a, **k: calls.append(a[5]) or real(*a, **k))
+    spy(monkeypatch, calls, lambda unit: unit.policy)
     results = tmp_path / "r"
-    run_benchmark(cfg(("texture", "mine-1"), (str(module),)), results, renders_dir)
+    bench_run(cfg(("texture", "mine-1"), (str(module),)), results, renders_dir)
     assert sorted(calls) == ["mine-1", "texture"]
     calls.clear()
-    run_benchmark(cfg(("texture",)), results, renders_dir)  # without the module: not refused
+    bench_run(cfg(("texture",)), results, renders_dir)  # without the module: not refused
     assert calls == [] and set(read_runs(results / "runs.csv")["policy"]) == {"texture", "mine-1"}
     module.write_text(source.format(v=1).replace("np.arange(", "1 + np.arange("))
     plugins.load_module.cache_clear()
     registry.POLICIES.pop("mine-1")
-    run_benchmark(cfg(("texture", "mine-1"), (str(module),)), results, renders_dir)
+    vocabulary.METHODS.pop("mine-1")
+    bench_run(cfg(("texture", "mine-1"), (str(module),)), results, renders_dir)
     assert calls == ["mine-1"]  # the edited module's rows alone
+
+
+# --- the architecture: one vocabulary, a report that reads results only ---------------
+
+
+def test_plot_and_publish_run_without_colmap_opencv_or_mitsuba(quick_results, tmp_path):
+    """The report stage reads results only: with pycolmap, cv2, mitsuba and drjit made
+    unimportable, `bench plot` rewrites every table and figure (Figure 2 included) and
+    `bench publish` copies them."""
+    import subprocess
+    import sys
+
+    shutil.copytree(quick_results, tmp_path / "r")
+    for name in ("table1.csv", "figure2.png", "figure3.png"):
+        (tmp_path / "r" / name).unlink()
+    blocked = (
+        "import sys\nfor m in ('pycolmap', 'cv2', 'mitsuba', 'drjit'):\n    sys.modules[m] = None\n"
+    )
+    script = blocked + (
+        "from bench.cli import main\n"
+        f"assert main(['plot', '--results', {str(tmp_path / 'r')!r}, '--renders', "
+        f"{str(quick_results.parent)!r}]) == 0\n"
+        f"assert main(['publish', '--results', {str(tmp_path / 'r')!r}, '--to', "
+        f"{str(tmp_path / 'p')!r}]) == 0\n"
+        "assert not {'pycolmap', 'cv2', 'mitsuba', 'drjit', 'scipy.spatial'} & {"
+        "m for m, v in sys.modules.items() if v is not None}\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    for name in ("table1.csv", "figure3.png"):
+        assert (tmp_path / "r" / name).is_file() and (tmp_path / "p" / name).is_file()
+    same = (tmp_path / "r" / "table1.csv").read_bytes() == (
+        quick_results / "table1.csv"
+    ).read_bytes()
+    assert same
+
+
+def test_figure2_is_drawn_from_the_exported_model_alone(quick_results, renders_dir, tmp_path):
+    from bench.report.figures import figure2, read_text_model
+
+    runs = read_runs(quick_results / "runs.csv")
+    assert figure2(runs, quick_results, renders_dir, tmp_path / "figure2") is None
+    assert (tmp_path / "figure2.png").is_file()
+    images, ids, X = read_text_model(quick_results / "models" / "table-s0" / "adaptive-b64")
+    model = pycolmap.Reconstruction(str(quick_results / "models" / "table-s0" / "adaptive-b64"))
+    assert sorted(ids) == sorted(model.points3D) and len(X) == model.num_points3D()
+    for image in model.images.values():
+        xy, observed = images[image.name]
+        assert len(xy) == image.num_points2D()
+        assert observed.sum() == sum(p.has_point3D() for p in image.points2D)
+
+
+def test_a_task_is_added_in_one_place(renders_dir, tmp_path, monkeypatch):
+    """A new task is one registration in the task registry: the grid runs it, its rows
+    are checked against its required metrics and Table 1 shows its columns."""
+    from bench.backend.reconstruction import known_pose_task
+    from bench.harness import tasks
+
+    def count_points(truth, model, names, protocol):
+        return {"observed_points": 0 if model is None else model.num_points3D()}
+
+    runner = tasks.TaskRunner(
+        vocabulary.Task("count", "rig", needs=("observed_points",), columns=("observed_points",)),
+        reconstruct=lambda m, cfg, protocol: known_pose_task(
+            m.image_dir, m.cams, m.names, m.xy, m.pairs, cfg, protocol
+        ),
+        evaluate=count_points,
+    )
+    monkeypatch.setitem(tasks.RUNNERS, "count", runner)
+    monkeypatch.setitem(vocabulary.TASKS, "count", runner.spec)
+    grid = dataclasses.replace(
+        SMALL, scenes=("table",), policies=("texture",), tasks=("tri", "count")
+    )
+    runs = bench_run(grid, tmp_path, renders_dir)
+    counted = runs[runs["task"] == "count"].set_index("protocol")["observed_points"]
+    tri = runs[runs["task"] == "tri"].set_index("protocol")["points"]
+    assert (counted == tri).all() and counted.sum() > 0
+    assert "count_observed_points" in pd.read_csv(tmp_path / "table1.csv").columns
+
+
+@pytest.mark.parametrize(
+    "setting, message",
+    [
+        ("backend.ratio=2", "backend.ratio must lie in (0, 1]"),
+        ("backend.ratio=x", "--set backend.ratio=x: expected float"),
+        ("backend.speed=1", "BackendConfig has no setting 'speed'; valid: ratio,"),
+        ("policy.tiles=8", "expected 2 comma-separated values"),
+        ("policy.weights=1", "set its fields (weights.texture,"),
+        ("signals.first_pass=2", "signals.first_pass >= 8"),
+        ("ratio", "--set takes section.field=value"),
+    ],
+)
+def test_a_bad_setting_is_one_line(setting, message, tmp_path, capsys):
+    argv = ["run", "--quick", "--set", setting, "--results", str(tmp_path / "r")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+    assert not (tmp_path / "r").exists()
+
+
+def test_every_setting_is_reachable_with_set_and_recorded():
+    from bench.cli.common import apply_settings, settings_help
+    from bench.harness.config import RunConfig
+
+    run = apply_settings(
+        RunConfig(),
+        ["backend.ratio=0.7", "policy.tiles=4,3", "signals.depth_prior=none", "render.spp=4"]
+        + ["policy.weights.parallax=0.5", "detector.detector=orb"],
+    )
+    assert (run.backend.ratio, run.policy.tiles, run.signals.depth_prior) == (0.7, (4, 3), None)
+    assert (run.render.spp, run.policy.weights.parallax, run.detector.detector) == (4, 0.5, "orb")
+    assert run.as_dict()["backend"]["ratio"] == 0.7  # what config.json records
+    names = settings_help(RunConfig)
+    assert "backend.ratio" in names and "policy.weights.texture" in names and len(names) > 25

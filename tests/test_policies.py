@@ -9,8 +9,7 @@ import pytest
 
 from bench import ROOT, BenchError
 from bench.backend.matching import BackendConfig, match_and_verify
-from bench.backend.peers import PEERS
-from bench.frontend import feedback
+from bench.frontend import feedback, plugins
 from bench.frontend.features import DetectorConfig
 from bench.frontend.geometry import SignalConfig, depth_priors
 from bench.frontend.policies import (
@@ -18,12 +17,13 @@ from bench.frontend.policies import (
     SHIPPED_WEIGHTS,
     PolicyConfig,
     PolicyInput,
+    policy,
     select,
     tile_of,
 )
 from bench.frontend.stage import front_end
-from bench.harness import plugins
 from bench.harness.grid import BenchConfig
+from bench.vocabulary import METHODS
 
 BUDGET = 64
 
@@ -116,11 +116,11 @@ def test_a_policy_module_registers_and_its_broken_rules_are_named(fe, tmp_path):
     with pytest.raises(BenchError, match="'distinct indices"):
         select("short", inp, BUDGET, np.random.default_rng(0))
     with pytest.raises(BenchError, match="'exact budget"):
-        POLICIES["short2"] = lambda inp, b, rng, cfg: np.arange(b - 1)
+        policy("short2")(lambda inp, b, rng, cfg: np.arange(b - 1))
         try:
             select("short2", inp, BUDGET, np.random.default_rng(0))
         finally:
-            del POLICIES["short2"]
+            del POLICIES["short2"], METHODS["short2"]
     peek = tmp_path / "peek.py"
     peek.write_text(
         "from bench.evaluation.groundtruth import load_ground_truth\n"
@@ -143,7 +143,7 @@ def test_a_policy_module_registers_and_its_broken_rules_are_named(fe, tmp_path):
             "policy name 'texture' is taken",
         ),
         (
-            "@policy('typo', signals=('texure',))\ndef typo(inp, budget, rng, cfg):\n    return []\n",
+            "@policy('typo', reads=('texure',))\ndef typo(inp, budget, rng, cfg):\n    return []\n",
             "reads unknown signal 'texure'; valid: texture,",
         ),
     ],
@@ -209,7 +209,12 @@ def test_sfm_selections_are_blind_to_the_poses_and_tri_selections_are_not(medium
     """Every policy's sfm selection is array-equal with the rig's poses replaced by random
     ones (the task grants no poses: `GRANTS`); cross-view's tri selection, which reads the
     epipolar geometry of the poses, changes."""
-    from bench.harness.pipeline import GRANTS, RunConfig, policy_selection
+    from bench.backend.matching import matcher
+    from bench.frontend.policies import PolicyInput
+    from bench.frontend.selection import select_views
+    from bench.harness.config import RunConfig
+    from bench.harness.grid import default_policies
+    from bench.harness.tasks import RUNNERS
 
     entry = medium_entry("table")
     true = _dataset(entry, tmp_path / "true")
@@ -217,13 +222,15 @@ def test_sfm_selections_are_blind_to_the_poses_and_tri_selections_are_not(medium
     cfg = RunConfig()
 
     def selections(dataset, task, policy):
-        fe = front_end(dataset, cfg.detector, cfg.signals, tmp_path / "fe", GRANTS[task])
-        return policy_selection(policy, fe.views, fe.pools, fe.signals, BUDGET, 0, cfg)[0]
+        grant = RUNNERS[task].spec.grant
+        fe = front_end(dataset, cfg.detector, cfg.signals, tmp_path / "fe", grant)
+        inputs = [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
+        match = matcher([v.camera for v in fe.views], fe.pools, cfg.backend)
+        return select_views(policy, inputs, BUDGET, 0, cfg.policy, match)[0]
 
-    from bench.harness.grid import DEFAULT_POLICIES
-
-    for policy in [p for p in DEFAULT_POLICIES if p not in ("all", "oracle", *PEERS)]:
-        a, b = selections(true, "sfm", policy), selections(wrong, "sfm", policy)
-        assert all(np.array_equal(x, y) for x, y in zip(a, b)), policy
+    roles = ("baseline", "contender")
+    for name in [p for p in default_policies() if METHODS[p].role in roles]:
+        a, b = selections(true, "sfm", name), selections(wrong, "sfm", name)
+        assert all(np.array_equal(x, y) for x, y in zip(a, b)), name
     a, b = selections(true, "tri", "cross-view"), selections(wrong, "tri", "cross-view")
     assert not all(np.array_equal(x, y) for x, y in zip(a, b))

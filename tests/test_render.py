@@ -12,7 +12,7 @@ import pytest
 
 from bench import BenchError
 from bench.camera import look_at, read_colmap_rig
-from bench.harness.cli import main
+from bench.cli import main
 from bench.render import entry as render
 from bench.render import mitsuba, variant
 from bench.scenes.spec import build_scene, load_spec, scene_names

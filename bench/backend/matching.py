@@ -16,9 +16,10 @@ from itertools import combinations
 
 import numpy as np
 
+from bench import BenchError
 from bench.camera import Camera
-from bench.frontend.features import tentative_matches
-from bench.frontend.geometry import configuration, two_view_geometry
+from bench.frontend.features import Candidates, tentative_matches
+from bench.frontend.geometry import configuration, two_view_geometry, verification_options
 
 
 @dataclass(frozen=True)
@@ -33,6 +34,13 @@ class BackendConfig:
     """Minimum triangulation angle in degrees for a track to become a point (COLMAP's default)."""
     seed: int = 0
     """Seed of COLMAP's RANSAC, triangulator and mapper."""
+
+    def validate(self) -> BackendConfig:
+        if not 0 < self.ratio <= 1:
+            raise BenchError(f"backend.ratio must lie in (0, 1], got {self.ratio}")
+        if self.ransac_max_error <= 0 or self.min_tri_angle < 0:
+            raise BenchError("backend.ransac_max_error must be > 0 and min_tri_angle >= 0")
+        return self
 
 
 @dataclass
@@ -61,7 +69,8 @@ def verify(
     configuration, rotation of b from a where COLMAP estimated the relative pose)."""
     if len(matches) < 5:
         return np.zeros((0, 2), np.int64), "TOO_FEW_MATCHES", None
-    tvg = two_view_geometry(cam_a, xy_a, cam_b, xy_b, matches, cfg.ransac_max_error, cfg.seed)
+    opts = verification_options(cfg.ransac_max_error, cfg.seed)
+    tvg = two_view_geometry(cam_a, xy_a, cam_b, xy_b, matches, opts)
     inliers = np.asarray(tvg.inlier_matches, np.int64).reshape(-1, 2)
     R = np.asarray(tvg.cam2_from_cam1.rotation.matrix()) if len(inliers) else None
     return inliers, configuration(tvg), R
@@ -80,6 +89,17 @@ def match_and_verify(
         seconds["verify"] += time.perf_counter() - t
         pairs.append(PairMatches(i, j, m, inliers, config, R))
     return pairs, seconds
+
+
+def matcher(cams: list[Camera], pools: list[Candidates], cfg: BackendConfig):
+    """Selections per view -> the verified pairs of those keypoints (for the feedback loop)."""
+
+    def match(selection: list[np.ndarray]) -> list[PairMatches]:
+        xy = [c.xy[s] for c, s in zip(pools, selection)]
+        desc = [c.descriptors[s] for c, s in zip(pools, selection)]
+        return match_and_verify(cams, xy, desc, cfg)[0]
+
+    return match
 
 
 def expected_ransac_iterations(

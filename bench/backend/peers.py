@@ -28,8 +28,16 @@ import pycolmap
 from bench.backend.matching import BackendConfig
 from bench.backend.reconstruction import Reconstruction, map_database, quiet_colmap, write_images
 from bench.camera import Camera
+from bench.vocabulary import Method, declare_method
 
-PEERS = ("colmap", "colmap-b", "colmap-soft-b")
+PEERS = tuple(
+    declare_method(m).name
+    for m in (
+        Method("colmap", "COLMAP default SIFT (peer)", "peer", whole_pool=True),
+        Method("colmap-b", "COLMAP SIFT, B largest-scale (peer)", "peer"),
+        Method("colmap-soft-b", "COLMAP SIFT soft limit B (peer)", "peer"),
+    )
+)
 """Peer rows: `colmap` (budget 0: COLMAP's default), `colmap-b` and `colmap-soft-b` (one per
 budget)."""
 

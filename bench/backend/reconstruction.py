@@ -39,10 +39,10 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-from bench import BenchError
 from bench.backend.matching import BackendConfig, PairMatches
 from bench.camera import Camera
 from bench.frontend.geometry import colmap_camera
+from bench.vocabulary import PROTOCOLS
 
 
 @contextmanager
@@ -55,17 +55,6 @@ def quiet_colmap():
         yield
     finally:
         pycolmap.logging.minloglevel = level
-
-
-PROTOCOLS = {"multiview": 3, "twoview": 2}
-"""Track protocols of the known-pose task: the fewest views a point's track may have."""
-
-
-def check_protocols(names) -> list[str]:
-    unknown = [n for n in names if n not in PROTOCOLS]
-    if unknown:
-        raise BenchError(f"unknown protocol {unknown[0]!r}; valid: {', '.join(PROTOCOLS)}")
-    return list(names)
 
 
 def camera_ids(cams: list[Camera]) -> list[int]:

@@ -37,8 +37,11 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from bench.backend.matching import tentative_matches
-from bench.evaluation.metrics import SceneTruth
+from bench.evaluation.truth import SceneTruth
 from bench.frontend.features import Candidates
+from bench.vocabulary import ORACLE, Method, declare_method
+
+declare_method(Method(ORACLE, "Oracle (ground truth, reference)", "reference"))
 
 
 def matchable_tracks(truth: SceneTruth, pools: list[Candidates], ratio: float) -> list[np.ndarray]:

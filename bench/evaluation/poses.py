@@ -28,7 +28,8 @@ from itertools import combinations
 import numpy as np
 
 from bench.camera import Camera
-from bench.evaluation.metrics import SceneTruth, model_points, point_metrics, track_metrics
+from bench.evaluation.metrics import model_points, point_metrics, track_metrics
+from bench.evaluation.truth import SceneTruth
 
 MAA_THRESHOLDS_DEG = tuple(range(1, 11))
 

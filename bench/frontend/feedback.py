@@ -41,9 +41,11 @@ from bench.frontend.policies import (
     contract_violation,
     tile_of,
 )
+from bench.vocabulary import Method, declare_method
 
-NAME = "adaptive-loop"
-SIGNALS_USED = ADAPTIVE_SIGNALS
+NAME = declare_method(
+    Method("adaptive-loop", "Adaptive feedback loop", "contender", reads=ADAPTIVE_SIGNALS)
+).name
 MIN_ANGLE_DEG = 1.5
 EXPLORE = 0.05
 

@@ -1,7 +1,7 @@
 """The geometry between views that the signals read: from the calibration's poses, or
 estimated from the images alone.
 
-Which one a selection may use is what its task grants (`bench.harness.pipeline.GRANTS`):
+Which one a selection may use is what its task grants (`Task.grant`, `bench.harness.tasks`):
 the `tri` task grants the rig's poses; the `sfm` task (and `bench select` without a pose
 model) grants the images and intrinsics only, and its views reach the front end without
 their poses (`View.without_pose`), so nothing downstream can read them. `view_geometry`
@@ -99,24 +99,30 @@ def colmap_camera(cam: Camera, camera_id: int = 1) -> pycolmap.Camera:
     return c
 
 
-def two_view_geometry(
-    cam_a: Camera,
-    xy_a: np.ndarray,
-    cam_b: Camera,
-    xy_b: np.ndarray,
-    matches: np.ndarray,
-    max_error: float,
-    seed: int,
-    max_trials: int | None = None,
-) -> pycolmap.TwoViewGeometry:
-    """COLMAP's calibrated two-view geometry of tentative matches (intrinsics only), with
-    the relative pose `cam2_from_cam1` (b from a) where it can be estimated."""
+def verification_options(
+    max_error: float, seed: int, max_trials: int | None = None
+) -> pycolmap.TwoViewGeometryOptions:
+    """COLMAP's two-view verification: its RANSAC threshold (px), seed and trial limit,
+    with the relative pose computed."""
     opts = pycolmap.TwoViewGeometryOptions()
     opts.ransac.max_error = max_error
     opts.ransac.random_seed = seed
     if max_trials is not None:
         opts.ransac.max_num_trials = max_trials
     opts.compute_relative_pose = True
+    return opts
+
+
+def two_view_geometry(
+    cam_a: Camera,
+    xy_a: np.ndarray,
+    cam_b: Camera,
+    xy_b: np.ndarray,
+    matches: np.ndarray,
+    opts: pycolmap.TwoViewGeometryOptions,
+) -> pycolmap.TwoViewGeometry:
+    """COLMAP's calibrated two-view geometry of tentative matches (intrinsics only), with
+    the relative pose `cam2_from_cam1` (b from a) where it can be estimated."""
     return pycolmap.estimate_calibrated_two_view_geometry(
         colmap_camera(cam_a),
         xy_a.astype(np.float64),
@@ -359,9 +365,8 @@ def _relative_pose(
     cameras in a frame of unit baseline, and the indices of the matches the pose explains
     (module docstring); None without a pose or without a translation."""
     ids = np.arange(len(xa))
-    tvg = two_view_geometry(
-        cam_a, xa, cam_b, xb, np.c_[ids, ids], FIRST_PASS_MAX_ERROR, RANSAC_SEED, FIRST_PASS_TRIALS
-    )
+    opts = verification_options(FIRST_PASS_MAX_ERROR, RANSAC_SEED, FIRST_PASS_TRIALS)
+    tvg = two_view_geometry(cam_a, xa, cam_b, xb, np.c_[ids, ids], opts)
     pose = tvg.cam2_from_cam1
     if pose is None:
         return None

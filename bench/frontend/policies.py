@@ -6,10 +6,10 @@ returns exactly min(B, N) distinct candidate indices. A selection is a set: `sel
 returns it in ascending order, so the order a policy lists its indices in never changes
 what the matcher sees. Adding a policy is one decorated
 function; `bench run --policy-module FILE` (or an installed package's `bench.policies`
-entry point) registers policies from outside the package (`bench.harness.plugins`).
+entry point) registers policies from outside the package (`bench.frontend.plugins`).
 
 The contract, checked on every call (`select`), each rule named in its error:
-exact budget (min(B, N) indices; `all` the whole pool), distinct indices, valid range
+exact budget (min(B, N) indices; a whole-pool method such as `all` the whole pool), distinct indices, valid range
 (0 <= index < N); and no ground truth (checked on a policy module's source before it runs).
 """
 
@@ -28,6 +28,7 @@ from bench import BenchError
 from bench.frontend.features import Candidates
 from bench.frontend.signals import SIGNALS, Signals
 from bench.frontend.views import View
+from bench.vocabulary import METHODS, Method, declare_method
 
 
 @dataclass(frozen=True)
@@ -87,33 +88,39 @@ class PolicyConfig:
 
 Policy = Callable[[PolicyInput, int, np.random.Generator, PolicyConfig], np.ndarray]
 POLICIES: dict[str, Policy] = {}
-SIGNALS_USED: dict[str, tuple[str, ...]] = {}
-"""The signals each policy reads, so its front-end cost can be reported honestly."""
+"""The selection function of every policy (its metadata: `bench.vocabulary.METHODS`)."""
 
 
-def policy(name: str, signals: tuple[str, ...] = ()) -> Callable[[Policy], Policy]:
-    """Register a policy under a name no other policy has, with the signals it reads (for
-    its reported cost, and so that `bench select` computes the costly ones)."""
-    unknown = [s for s in signals if s not in SIGNALS]
+def policy(
+    name: str,
+    label: str | None = None,
+    role: str = "contender",
+    whole_pool: bool = False,
+    reads: tuple[str, ...] = (),
+) -> Callable[[Policy], Policy]:
+    """Register a policy under a name no other method has: its display label (default:
+    the name), its role (`bench.vocabulary.ROLES`), whether it takes the whole pool
+    (then it runs once per scene and seed, as budget 0) and the signals it reads (for its
+    reported cost, and so that `bench select` computes the costly ones)."""
+    unknown = [s for s in reads if s not in SIGNALS]
     if unknown:
         raise BenchError(
             f"policy {name} reads unknown signal {unknown[0]!r}; valid: {', '.join(SIGNALS)}"
         )
 
     def register(fn: Policy) -> Policy:
-        if name in POLICIES:
-            raise BenchError(f"policy name {name!r} is taken; give the policy another name")
-        POLICIES[name], SIGNALS_USED[name] = fn, tuple(signals)
+        declare_method(Method(name, label or name, role, whole_pool, tuple(reads)))
+        POLICIES[name] = fn
         return fn
 
     return register
 
 
-def check_policies(names, extra=()) -> list[str]:
-    unknown = [n for n in names if n not in POLICIES and n not in extra]
+def check_policies(names) -> list[str]:
+    """Refuse, in one line, a name no method has declared."""
+    unknown = [n for n in names if n not in METHODS]
     if unknown:
-        valid = ", ".join([*POLICIES, *extra])
-        raise BenchError(f"unknown policy {unknown[0]!r}; valid: {valid}")
+        raise BenchError(f"unknown policy {unknown[0]!r}; valid: {', '.join(METHODS)}")
     return list(names)
 
 
@@ -137,8 +144,11 @@ def select(
 ) -> np.ndarray:
     """Run a policy, check its contract and return its selection in ascending order (module
     docstring)."""
-    check_policies([name])
-    if budget <= 0 and name != "all":
+    if name not in POLICIES:
+        check_policies([name])
+        raise BenchError(f"{name} is not a selection policy (a reference or a peer)")
+    whole = METHODS[name].whole_pool
+    if budget <= 0 and not whole:
         raise BenchError(f"budget must be positive, got {budget}")
     try:
         idx = np.asarray(POLICIES[name](inp, budget, rng, cfg)).reshape(-1)
@@ -150,7 +160,7 @@ def select(
     if idx.dtype.kind not in "iu":
         raise BenchError(f"policy {name} broke the contract rule 'integer indices': {idx.dtype}")
     idx = idx.astype(np.int64)
-    broken = contract_violation(idx, n if name == "all" else min(budget, n), n)
+    broken = contract_violation(idx, n if whole else min(budget, n), n)
     if broken:
         raise BenchError(f"policy {name} broke the contract rule '{broken}'")
     return np.sort(idx)
@@ -181,19 +191,19 @@ def _order(score: np.ndarray) -> np.ndarray:
     return np.lexsort((np.arange(len(score)), -score))
 
 
-@policy("random")
+@policy("random", "Random budget", role="baseline")
 def random_policy(inp, budget, rng, cfg):
     """A uniform random subset."""
     return rng.choice(len(inp.candidates), size=min(budget, len(inp.candidates)), replace=False)
 
 
-@policy("texture", ("texture",))
+@policy("texture", "Texture-only", role="baseline", reads=("texture",))
 def texture_policy(inp, budget, rng, cfg):
     """The B candidates of highest texture."""
     return _order(inp.signals.texture)[:budget]
 
 
-@policy("grid", ("texture",))
+@policy("grid", "Uniform grid", role="baseline", reads=("texture",))
 def grid_policy(inp, budget, rng, cfg):
     """Equal quota per tile, best texture first inside each tile; quota a tile cannot use
     goes to the others: round k takes every tile's k-th best candidate, ordered by texture."""
@@ -241,7 +251,8 @@ def capped_greedy(
 
 @policy(
     "adaptive",
-    ("texture", "repeatability_redetect", "distinctiveness", "ambiguity", "parallax"),
+    "Adaptive optimized",
+    reads=("texture", "repeatability_redetect", "distinctiveness", "ambiguity", "parallax"),
 )
 def adaptive_policy(inp, budget, rng, cfg):
     """The paper's score s (its repeatability: four re-detections per view) under the soft
@@ -250,13 +261,13 @@ def adaptive_policy(inp, budget, rng, cfg):
     return capped_greedy(adaptive_score(s, cfg.weights, s.repeatability_redetect), inp, budget, cfg)
 
 
-@policy("adaptive-fast", ADAPTIVE_SIGNALS)
+@policy("adaptive-fast", "Adaptive, cheap repeatability", reads=ADAPTIVE_SIGNALS)
 def adaptive_fast_policy(inp, budget, rng, cfg):
     """`adaptive` with the cheap repeatability estimate (no re-detection)."""
     return capped_greedy(adaptive_score(inp.signals, cfg.weights), inp, budget, cfg)
 
 
-@policy("cross-view", (*ADAPTIVE_SIGNALS, "epipolar"))
+@policy("cross-view", "Adaptive + epipolar signal", reads=(*ADAPTIVE_SIGNALS, "epipolar"))
 def cross_view_policy(inp, budget, rng, cfg):
     """`adaptive-fast` plus epipolar_weight x the epipolar signal: candidates with a
     ratio-passing match on their epipolar lines in other views first (beyond the paper)."""
@@ -289,7 +300,7 @@ def learned_weights(path: str) -> dict:
         raise BenchError(f"cannot read the learned weights {path}: {e}") from e
 
 
-@policy("learned", ADAPTIVE_SIGNALS)
+@policy("learned", "Learned weights", reads=ADAPTIVE_SIGNALS)
 def learned_policy(inp, budget, rng, cfg):
     """The logit of a logistic model of "became an accurate point" over the five signals
     (weights fitted by `bench train-weights` on training seeds), under the adaptive tile
@@ -301,13 +312,13 @@ def learned_policy(inp, budget, rng, cfg):
     return capped_greedy(score, inp, budget, cfg)
 
 
-@policy("response")
+@policy("response", "Detector response (top-B)", role="baseline")
 def response_policy(inp, budget, rng, cfg):
     """The B strongest detector responses: what COLMAP-style and learned pipelines keep."""
     return _order(inp.candidates.response)[:budget]
 
 
-@policy("ssc")
+@policy("ssc", "SSC (Bailo 2018)", role="baseline")
 def ssc_policy(inp, budget, rng, cfg):
     """Suppression via Square Covering (Bailo et al., "Efficient adaptive non-maximal
     suppression algorithms for homogeneous spatial keypoint distribution", Pattern
@@ -351,7 +362,7 @@ def ssc_policy(inp, budget, rng, cfg):
     return order[best[:want]]
 
 
-@policy("quadtree")
+@policy("quadtree", "Quadtree (ORB-SLAM)", role="baseline")
 def quadtree_policy(inp, budget, rng, cfg):
     """ORB-SLAM's DistributeOctTree (Mur-Artal et al. 2015): split the image into
     quadrants, most populous first, until there are at least B cells or none can split;
@@ -387,7 +398,7 @@ def quadtree_policy(inp, budget, rng, cfg):
     return best
 
 
-@policy("all")
+@policy("all", "All candidates (reference)", role="reference", whole_pool=True)
 def all_policy(inp, budget, rng, cfg):
     """The whole pool, whatever the budget: the reference row."""
     return np.arange(len(inp.candidates))

@@ -9,7 +9,6 @@ it, so reported front-end times do not depend on whether the cache was warm.
 
 from __future__ import annotations
 
-import os
 import time
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
@@ -19,7 +18,7 @@ import numpy as np
 
 from bench import BenchError
 from bench.console import log
-from bench.files import content_key, source_hash
+from bench.files import atomic_path, content_key, source_hash
 from bench.frontend import features, geometry, signals
 from bench.frontend.features import Candidates, DetectorConfig
 from bench.frontend.geometry import IMAGES, RIG
@@ -80,13 +79,10 @@ def front_end(
     arrays = {f"{f}_{v}": getattr(c, f) for v, c in enumerate(pools) for f in _CAND}
     arrays |= {f"{s}_{v}": getattr(g, s) for v, g in enumerate(sigs) for s in SIGNALS}
     arrays |= {f"seconds_{k}": np.float64(s) for k, s in seconds.items()}
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        np.savez(tmp, **arrays)
-        tmp.replace(path)
+        with atomic_path(path) as tmp:
+            np.savez(tmp, **arrays)
     except OSError as e:
         raise BenchError(f"cannot write the front-end cache {path}: {e.strerror}") from e
-    finally:
-        tmp.unlink(missing_ok=True)
     return FrontEnd(views, pools, sigs, seconds, cached=False)

@@ -1,8 +1,10 @@
 """Stage 6, the harness. In: the benchmark grid (scenes, seeds, policies, budgets, tasks,
-protocols) and the run configuration. Out: `runs.csv`, the tables, figures and manifest.
+protocols) and the run configuration. Out: a results folder: `runs.csv`, the stored
+predictions and models, `config.json`, `vocabulary.json` and `manifest.json`.
 
-`pipeline` is one unit of work end to end (render entry -> rows of metrics); `execute`
-runs the units in process or on Dask; `grid` drives the whole grid resumably; `runs` is
-the contract of `runs.csv`; `stats`, `tables` and `figures` make the report from
-`runs.csv` alone (`report`); `cli` is the `bench` command line.
+`config` holds the run's settings; `tasks` the task registry (each task's reconstruction,
+evaluation and required metrics); `predict` one unit up to its exported models, stored as
+its prediction; `evaluate` scores a stored prediction into rows; `execute` runs the units
+in process or on Dask; `grid` drives the whole grid resumably; `training` fits the
+`learned` policy's weights.
 """

@@ -2,16 +2,17 @@
 cluster of N single-threaded worker processes, or an existing cluster by address).
 
 Units of work, with their dependencies: the front end of each (scene, seed), after its
-render (one per geometry its tasks grant); then each (scene, seed, policy, budget) unit,
-which waits for its scene's front end. Renders stay in the main process, so one process
-renders per machine (Mitsuba's LLVM and CUDA variants use every core, or the GPU, on
-their own). A worker holds one scene's front ends and ground truth at a time (`_scene`).
-Rows come back to the main process, which alone writes `runs.csv`. A unit whose worker
-dies is retried once, then recorded as failed rows with the reason; a `BenchError` (bad
-input, deterministic) comes back as a value, is not retried, and stops the run as it does
-in process. The workers of a local cluster ignore Ctrl-C, which the main process handles
-by stopping them. With a cluster given by address, the workers must see the same
-`renders/` and results folder (a shared file system).
+render (one per geometry its tasks grant); then each unit, which waits for its scene's
+front end, predicts (`bench.harness.predict`; skipped when it only re-scores a current
+stored prediction) and scores (`bench.harness.evaluate`). Renders stay in the main
+process, so one process renders per machine (Mitsuba's LLVM and CUDA variants use every
+core, or the GPU, on their own). A worker holds one scene at a time (`_scene`). Rows come
+back to the main process, which alone writes `runs.csv`. A unit whose worker dies is
+retried once, then recorded as failed rows with the reason; a `BenchError` (bad input,
+deterministic) comes back as a value, is not retried, and stops the run as it does in
+process. The workers of a local cluster ignore Ctrl-C, which the main process handles by
+stopping them. With a cluster given by address, the workers must see the same `renders/`
+and results folder (a shared file system).
 
 Every unit computes the same numbers wherever it runs: its inputs are files and
 settings, its generators are seeded per unit, and COLMAP runs single-threaded and seeded.
@@ -23,112 +24,141 @@ import math
 import os
 import signal
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 from bench import BenchError
-from bench.backend.peers import PEERS
-from bench.evaluation.metrics import load_truth
+from bench.evaluation.truth import load_truth
 from bench.frontend.geometry import RIG
-from bench.frontend.stage import FrontEnd, front_end
+from bench.frontend.stage import front_end
 from bench.frontend.views import load_views
-from bench.harness.pipeline import GRANTS, RunConfig, row_identity, run_peer_unit, run_unit
+from bench.harness.config import RunConfig
+from bench.harness.evaluate import evaluate, identity
+from bench.harness.predict import LoadedScene, has_prediction, predict
+from bench.harness.tasks import RUNNERS
+from bench.results import Workspace
+from bench.vocabulary import Job, Unit
 
 _HELD: dict = {}
-"""The one scene (front end and ground truth) this process holds."""
+"""The one scene this process holds."""
 
 
-def _front_ends(entry: Path, cfg: RunConfig, renders: Path, grants) -> dict[str, FrontEnd]:
-    """The front end of an entry under each geometry granted, computed or read from its cache."""
-    return {g: front_end(entry, cfg.detector, cfg.signals, renders / "frontend", g) for g in grants}
+@dataclass(frozen=True)
+class Work:
+    """What a unit has to do: its jobs, and whether it only re-scores them."""
+
+    jobs: tuple[Job, ...]
+    rescore: bool = False
+    """Score the stored prediction again; predict only where none is current."""
 
 
-def _scene(entry: Path, cfg: RunConfig, renders: Path, grants):
-    key = (str(entry), cfg.hash, tuple(grants))
+@dataclass(frozen=True)
+class Plan:
+    """The work of a run: render entry per (scene, seed), work per unit, the budgets."""
+
+    entries: dict[tuple[str, int], Path]
+    work: dict[Unit, Work]
+    budgets: tuple[int, ...]
+
+    @property
+    def grants(self) -> tuple[str, ...]:
+        return tuple(
+            sorted({RUNNERS[j.task].spec.grant for w in self.work.values() for j in w.jobs})
+        )
+
+
+@dataclass(frozen=True)
+class Cluster:
+    """Where units run: `workers` local processes (1: this process), or a scheduler."""
+
+    workers: int = 1
+    scheduler: str | None = None
+
+
+def _scene(entry: Path, cfg: RunConfig, renders: Path, grants) -> LoadedScene:
+    key = (str(entry), repr(cfg), tuple(grants))
     if _HELD.get("key") != key:
         _HELD.clear()  # let the previous scene go before loading the next
-        fronts = _front_ends(entry, cfg, renders, grants)
+        fronts = {
+            g: front_end(entry, cfg.detector, cfg.signals, renders / "frontend", g) for g in grants
+        }
         # the evaluation side may read the poses: the rig's front end holds them
         posed = fronts[RIG].views if RIG in fronts else load_views(entry)
         cams, names = [v.camera for v in posed], [v.name for v in posed]
         truth = load_truth(entry, cams, names, next(iter(fronts.values())).pools)
-        _HELD.update(key=key, fronts=fronts, truth=truth)
-    return _HELD["fronts"], _HELD["truth"]
+        _HELD.update(key=key, scene=LoadedScene(entry, fronts, truth))
+    return _HELD["scene"]
 
 
-def scene_task(group: tuple, entry: Path, cfg: RunConfig, renders: Path, budgets, grants) -> dict:
+def scene_task(group: tuple, entry: Path, cfg: RunConfig, renders: Path, plan: Plan) -> dict:
     """The front ends of the render entry of `group` (scene, seed) under each geometry
     granted, computed or read from their cache, checked against the budgets; returns their
     seconds and the largest pool."""
     t = time.perf_counter()
-    fronts = _front_ends(entry, cfg, renders, grants)
+    fronts = {
+        g: front_end(entry, cfg.detector, cfg.signals, renders / "frontend", g) for g in plan.grants
+    }
     largest = max(len(p) for p in next(iter(fronts.values())).pools)
+    scene, seed = group
     if largest == 0:
         raise BenchError(
-            f"the detector found no candidate in any view of {group[0]} seed {group[1]}; "
+            f"the detector found no candidate in any view of {scene} seed {seed}; "
             "the images are too small or too flat for it (try a larger --width/--height)"
         )
-    too_big = [b for b in budgets if b > largest]
+    too_big = [b for b in plan.budgets if b > largest]
     if too_big:
         raise BenchError(
-            f"budget {too_big[0]} exceeds every candidate pool of {group[0]} seed {group[1]} "
+            f"budget {too_big[0]} exceeds every candidate pool of {scene} seed {seed} "
             f"(the largest has {largest}); every policy would select the whole pool. "
             f"Use budgets up to {largest}"
         )
     return {"seconds": time.perf_counter() - t, "largest_pool": largest}
 
 
-def unit_task(
-    entry: Path,
-    unit: tuple,
-    jobs: list,
-    cfg: RunConfig,
-    results: Path,
-    renders: Path,
-    grants,
-    *_after,
+def compute_unit(
+    scene: LoadedScene, unit: Unit, work: Work, cfg: RunConfig, ws: Workspace
 ) -> list[dict]:
-    """The rows of one (scene, seed, policy, budget) unit (`_after`: what it waits for)."""
-    scene, seed, policy, budget = unit
-    fronts, truth = _scene(entry, cfg, renders, grants)
-    args = (entry, fronts, truth, scene, seed, policy, budget, jobs, cfg, results)
-    return run_peer_unit(*args) if policy in PEERS else run_unit(*args)
+    """The rows of one unit: predicted (unless it only re-scores a current prediction),
+    then scored."""
+    jobs = list(work.jobs)
+    if not (work.rescore and has_prediction(ws, unit, jobs, cfg)):
+        predict(scene, unit, jobs, cfg, ws)
+    return evaluate(scene, unit, jobs, cfg, ws)
 
 
-def failed_rows(entry: Path, unit: tuple, jobs: list, cfg: RunConfig, why: str) -> list[dict]:
+def unit_task(unit: Unit, plan: Plan, cfg: RunConfig, ws: Workspace, *_after) -> list[dict]:
+    """The rows of one unit of a plan (`_after`: what it waits for)."""
+    scene = _scene(plan.entries[unit.group], cfg, ws.renders, plan.grants)
+    return compute_unit(scene, unit, plan.work[unit], cfg, ws)
+
+
+def failed_rows(unit: Unit, plan: Plan, cfg: RunConfig, why: str) -> list[dict]:
     """Rows recording a unit that could not be computed."""
+    entry = plan.entries[unit.group]
     return [
-        row_identity((entry, *unit, task, protocol, cfg))
-        | {"wall_ms": math.nan, "status": "failed", "failure": why}
-        for task, protocol in jobs
+        identity(entry, unit, job, cfg) | {"wall_ms": math.nan, "status": "failed", "failure": why}
+        for job in plan.work[unit].jobs
     ]
 
 
+OnScene = Callable[[tuple[str, int], dict], None]
+
+
 def execute(
-    scenes: dict[tuple, Path],
-    units: dict[tuple, list],
-    cfg: RunConfig,
-    budgets,
-    results: Path,
-    renders: Path,
-    workers: int,
-    scheduler: str | None,
-    on_scene,
+    plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, on_scene: OnScene
 ) -> Iterator[list[dict]]:
-    """Yield the rows of each unit as it finishes. `scenes`: render entry per (scene,
-    seed); `units`: jobs per unit; `on_scene(group, info)` is told when a front end is ready."""
-    results, renders = Path(results).resolve(), Path(renders).resolve()
-    grants = tuple(sorted({GRANTS[task] for jobs in units.values() for task, _ in jobs}))
-    if workers == 1 and scheduler is None:
-        for group, entry in scenes.items():
-            on_scene(group, scene_task(group, entry, cfg, renders, budgets, grants))
-            for unit, jobs in ((u, j) for u, j in units.items() if u[:2] == group):
-                yield unit_task(entry, unit, jobs, cfg, results, renders, grants)
+    """Yield the rows of each unit as it finishes; `on_scene(group, info)` is told when a
+    scene's front end is ready."""
+    ws = Workspace(Path(ws.results).resolve(), Path(ws.renders).resolve())
+    if cluster.workers == 1 and cluster.scheduler is None:
+        for group, entry in plan.entries.items():
+            on_scene(group, scene_task(group, entry, cfg, ws.renders, plan))
+            for unit in (u for u in plan.work if u.group == group):
+                yield unit_task(unit, plan, cfg, ws)
         _HELD.clear()
         return
-    yield from _on_dask(
-        scenes, units, cfg, budgets, results, renders, workers, scheduler, on_scene, grants
-    )
+    yield from _on_dask(plan, cfg, ws, cluster, on_scene)
 
 
 def _as_value(task, *args):
@@ -178,35 +208,33 @@ def check_scheduler(address: str) -> None:
         raise BenchError(f"cannot reach the Dask scheduler {address}: {e}") from None
 
 
-def _on_dask(scenes, units, cfg, budgets, results, renders, workers, scheduler, on_scene, grants):
+def _on_dask(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, on_scene: OnScene):
     from distributed import Client, as_completed
 
-    cluster = _local_cluster(workers) if scheduler is None else None
-    client = Client(scheduler or cluster, timeout="10s")
+    local = _local_cluster(cluster.workers) if cluster.scheduler is None else None
+    client = Client(cluster.scheduler or local, timeout="10s")
     try:
+        shared = client.scatter(plan, broadcast=True)  # sent once, not with every unit
         fronts = {
             client.submit(
-                _as_value, scene_task, group, entry, cfg, renders, budgets, grants, pure=False
+                _as_value, scene_task, group, entry, cfg, ws.renders, shared, pure=False
             ): group
-            for group, entry in scenes.items()
+            for group, entry in plan.entries.items()
         }
         by_group = {g: f for f, g in fronts.items()}
         pending = {
             client.submit(
                 _as_value,
                 unit_task,
-                scenes[u[:2]],
-                u,
-                jobs,
+                unit,
+                shared,
                 cfg,
-                results,
-                renders,
-                grants,
-                by_group[u[:2]],
+                ws,
+                by_group[unit.group],
                 retries=1,
                 pure=False,
-            ): (u, jobs)
-            for u, jobs in units.items()
+            ): unit
+            for unit in plan.work
         }
         for future in as_completed([*fronts, *pending]):
             if future in fronts:
@@ -217,17 +245,17 @@ def _on_dask(scenes, units, cfg, budgets, results, renders, workers, scheduler, 
                     )
                 on_scene(fronts[future], _result(future))
                 continue
-            unit, jobs = pending[future]
+            unit = pending[future]
             exc = future.exception()
             if exc is not None:
                 why = f"failed on a worker, retried once: {type(exc).__name__}: {exc}"
-                yield failed_rows(scenes[unit[:2]], unit, jobs, cfg, why.replace("\n", " ")[:300])
+                yield failed_rows(unit, plan, cfg, why.replace("\n", " ")[:300])
             else:
                 yield _result(future)
     finally:
         client.close()
-        if cluster is not None:
-            cluster.close()
+        if local is not None:
+            local.close()
 
 
 def default_workers() -> int:

@@ -1,10 +1,12 @@
-"""`bench run`: every (scene, seed, policy, budget) of the grid, resumable and reproducible.
+"""`bench run`: every unit of the grid, resumable and reproducible.
 
 Stages per (scene, seed): render (cached) -> front end (cached) -> for each policy and
-budget: one run (`bench.harness.pipeline.run_one`), its row appended to `runs.csv` at once (the
+budget: one unit (`bench.harness.execute`), its rows appended to `runs.csv` at once (the
 file is rewritten through a temporary name, so an interrupt keeps every finished row).
-The configuration is stored in `config.json` beside the results; a run into a directory
-holding another configuration is refused unless `overwrite`.
+The settings are stored in `config.json` beside the results and the vocabulary of the rows
+in `vocabulary.json`; a run into a folder holding other settings is refused unless
+`overwrite`. Rows whose prediction is current but whose scoring is not (or every row,
+with `reevaluate`) are scored again from the stored predictions.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import os
 import platform
 import subprocess
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from importlib.metadata import version
 from pathlib import Path
@@ -22,44 +25,34 @@ import numpy as np
 import pandas as pd
 
 from bench import ROOT, BenchError
-from bench.backend.peers import PEERS
-from bench.backend.reconstruction import PROTOCOLS, check_protocols
 from bench.console import log, progress
 from bench.files import exclusive, write_text_atomic
-from bench.frontend import feedback
-from bench.frontend.policies import POLICIES, check_policies, learned_weights
+from bench.frontend import plugins
+from bench.frontend.policies import check_policies, learned_weights
 from bench.frontend.views import source_key
-from bench.harness import plugins
-from bench.harness.execute import check_scheduler, execute
-from bench.harness.pipeline import ORACLE, TASKS, RunConfig, row_hash
-from bench.harness.report import write_report
-from bench.harness.runs import (
+from bench.harness.config import RunConfig
+from bench.harness.evaluate import evaluation_hash
+from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
+from bench.harness.predict import prediction_hash
+from bench.harness.tasks import RUNNERS
+from bench.render.entry import render_scene
+from bench.results import (
     DAMAGED,
+    Workspace,
     bind_results_dir,
     check_results_dir,
     read_runs,
     set_aside_damaged,
 )
-from bench.harness.tables import KEY
-from bench.render.entry import render_scene
 from bench.scenes.spec import load_spec, scene_names
+from bench.vocabulary import KEY, METHODS, PROTOCOLS, Job, Unit, Vocabulary
 
-DEFAULT_POLICIES = (
-    "random",
-    "texture",
-    "grid",
-    "adaptive",
-    "response",
-    "ssc",
-    "quadtree",
-    "adaptive-fast",
-    feedback.NAME,
-    "learned",
-    "cross-view",
-    "all",
-    ORACLE,
-    *PEERS,
-)
+
+def default_policies() -> tuple[str, ...]:
+    """Every method the package declares, in display order (not those of modules)."""
+    vocab = Vocabulary.current()
+    names = [n for n in METHODS if n not in plugins.ORIGIN]
+    return tuple(sorted(names, key=vocab.order))
 
 
 @dataclass(frozen=True)
@@ -68,9 +61,9 @@ class BenchConfig:
 
     scenes: tuple[str, ...] = field(default_factory=lambda: tuple(scene_names()))
     seeds: tuple[int, ...] = (0, 1, 2)
-    policies: tuple[str, ...] = DEFAULT_POLICIES
+    policies: tuple[str, ...] = field(default_factory=default_policies)
     budgets: tuple[int, ...] = (128, 256, 512)
-    tasks: tuple[str, ...] = TASKS
+    tasks: tuple[str, ...] = field(default_factory=lambda: tuple(RUNNERS))
     protocols: tuple[str, ...] = tuple(PROTOCOLS)
     run: RunConfig = field(default_factory=RunConfig)
     dataset: str | None = None
@@ -82,7 +75,7 @@ class BenchConfig:
             for s in self.scenes:
                 load_spec(s)
         plugins.load(self.run.policy.modules)
-        check_policies(self.policies, extra=(feedback.NAME, ORACLE, *PEERS))
+        check_policies(self.policies)
         if "learned" in self.policies and self.dataset is None:
             trained = set(learned_weights(self.run.policy.learned_weights)["seeds"])
             shared = sorted(trained & set(self.seeds))
@@ -92,11 +85,13 @@ class BenchConfig:
                     "evaluation seeds; evaluate on other seeds, or train on others "
                     "(bench train-weights --seeds ...)"
                 )
-        check_protocols(self.protocols)
-        unknown = [t for t in self.tasks if t not in TASKS]
+        unknown = [p for p in self.protocols if p not in PROTOCOLS]
+        if unknown:
+            raise BenchError(f"unknown protocol {unknown[0]!r}; valid: {', '.join(PROTOCOLS)}")
+        unknown = [t for t in self.tasks if t not in RUNNERS]
         if unknown or not self.tasks:
             raise BenchError(
-                f"unknown task {unknown[0] if unknown else ''!r}; valid: {', '.join(TASKS)}"
+                f"unknown task {unknown[0] if unknown else ''!r}; valid: {', '.join(RUNNERS)}"
             )
         if not self.seeds or min(self.seeds) < 0:
             raise BenchError(f"seeds must be non-negative integers, got {list(self.seeds)}")
@@ -104,47 +99,60 @@ class BenchConfig:
             raise BenchError(f"budget must be positive integers, got {list(self.budgets)}")
         if self.dataset is None:
             self.run.render.validate()
-        self.run.detector.validate()
-        self.run.policy.validate()
+        self.run.validate()
         return self
 
     def as_dict(self) -> dict:
         return json.loads(json.dumps(asdict(self)))  # tuples as lists, as stored
 
-    def units(self) -> list[tuple[str, int, str, int]]:
-        """Every (scene, seed, policy, budget) of the grid that has a job; `all` and `colmap`
-        are one unit per scene and seed, with budget 0 (the whole pool; COLMAP's default)."""
+    def units(self) -> list[Unit]:
+        """Every unit of the grid that has a job; a whole-pool method (`all`, `colmap`)
+        is one unit per scene and seed, with budget 0."""
         return [
-            (sc, sd, p, b)
+            Unit(sc, sd, p, b)
             for sc in self.scenes
             for sd in self.seeds
             for p in self.policies
-            for b in ((0,) if p in ("all", "colmap") else self.budgets)
+            for b in ((0,) if METHODS[p].whole_pool else self.budgets)
             if self.jobs(p)
         ]
 
-    def jobs(self, policy: str) -> list[tuple[str, str]]:
-        """Every (task, protocol) of a unit of `policy` (the peers run the sfm task only)."""
-        tasks = [t for t in self.tasks if t == "sfm" or policy not in PEERS]
-        return [(t, pr) for t in tasks for pr in self.protocols]
+    def jobs(self, policy: str) -> list[Job]:
+        """Every job of a unit of `policy` (a peer runs the tasks that admit peers)."""
+        peer = METHODS[policy].role == "peer"
+        tasks = [t for t in self.tasks if RUNNERS[t].spec.peers or not peer]
+        return [Job(t, pr) for t in tasks for pr in self.protocols]
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How `run_benchmark` treats what the results folder already holds, and where it runs."""
+
+    overwrite: bool = False
+    """Replace results of other settings."""
+    set_aside: bool = False
+    """Move damaged rows to `runs.damaged.csv` and compute them again."""
+    reevaluate: bool = False
+    """Score every row of the grid again from its stored prediction."""
+    cluster: Cluster = field(default_factory=Cluster)
+
+
+Report = Callable[[pd.DataFrame, Path, Path], None]
 
 
 def run_benchmark(
     cfg: BenchConfig,
-    results: Path,
-    renders: Path,
-    overwrite: bool = False,
-    set_aside: bool = False,
-    workers: int = 1,
-    scheduler: str | None = None,
+    ws: Workspace,
+    options: RunOptions = RunOptions(),
+    report: Report | None = None,
 ) -> pd.DataFrame:
-    """Run whatever of the grid is missing from `results/runs.csv`, then write the report
-    (see `bench.harness.runs` for what counts as finished, damaged or refused). One run at
-    a time holds a results folder; another is refused in one line while it does."""
+    """Run whatever of the grid is missing from `runs.csv`, then `report(rows, results,
+    renders)` (see `bench.results` for what counts as finished, damaged or refused). One
+    run at a time holds a results folder; another is refused in one line while it does."""
     cfg.validate()
-    if scheduler is not None:
-        check_scheduler(scheduler)
-    results, renders = Path(results), Path(renders)
+    if options.cluster.scheduler is not None:
+        check_scheduler(options.cluster.scheduler)
+    results = Path(ws.results)
     created = not results.exists()
     try:
         results.mkdir(parents=True, exist_ok=True)
@@ -152,34 +160,34 @@ def run_benchmark(
         raise BenchError(f"cannot write to {results}: {e.strerror}") from e
     try:
         with exclusive(results / ".bench-run.lock", f"results folder {results}"):
-            return _run_in(cfg, results, renders, overwrite, set_aside, workers, scheduler)
+            return _run_in(cfg, ws, options, report)
     finally:
         if created and results.is_dir() and not any(results.iterdir()):
             results.rmdir()  # a refused run leaves no folder behind
 
 
-def _run_in(cfg, results, renders, overwrite, set_aside, workers, scheduler) -> pd.DataFrame:
-    t_start = time.perf_counter()
-    invocation = {
-        "id": time.strftime("%Y%m%dT%H%M%S") + f"-{os.getpid()}",
-        "git_commit": _git_commit(),  # before this run rewrites any tracked result file
-    }
-    check_results_dir(results, cfg.run.as_dict(), overwrite)
-    runs_csv = results / "runs.csv"
-    if set_aside and runs_csv.exists() and not overwrite:
-        log(f"{set_aside_damaged(runs_csv)} damaged row(s) of {runs_csv} set aside in {DAMAGED}")
-    df = (
-        read_runs(runs_csv)
-        if runs_csv.exists() and not overwrite
-        else pd.DataFrame(columns=[*KEY, "config_hash", "render_key"])
-    )
+def _current_rows(
+    cfg: BenchConfig, ws: Workspace, options: RunOptions
+) -> tuple[pd.DataFrame, pd.Series]:
+    """The rows of `runs.csv` whose prediction is current, and which of them to score again."""
+    vocab = Vocabulary.current()
+    runs_csv = ws.runs_csv
+    if options.set_aside and runs_csv.exists() and not options.overwrite:
+        n = set_aside_damaged(runs_csv, vocab)
+        log(f"{n} damaged row(s) of {runs_csv} set aside in {DAMAGED}")
+    if not runs_csv.exists() or options.overwrite:
+        df = pd.DataFrame(columns=[*KEY, "prediction_hash", "evaluation_hash", "render_key"])
+        return df, pd.Series(False, index=df.index)
+    df = read_runs(runs_csv, vocab)
     # each row against its policy's hash; a policy not registered now (a module not given
     # this time) keeps its rows as they are
-    known = set(POLICIES) | {feedback.NAME, ORACLE, *PEERS}
-    expected = df["policy"].map({p: row_hash(cfg.run, p) for p in set(df["policy"]) & known})
-    stale = expected.notna() & (df["config_hash"] != expected)
+    known = set(METHODS)
+    expected = df["policy"].map({p: prediction_hash(cfg.run, p) for p in set(df["policy"]) & known})
+    stale = expected.notna() & (df["prediction_hash"] != expected)
     if stale.any():
-        log(f"{int(stale.sum())} row(s) were computed by other code; computing them again")
+        log(
+            f"{int(stale.sum())} row(s) were computed by other code or settings; computing them again"
+        )
     if cfg.dataset is not None:
         changed = ~stale & (df["render_key"] != source_key(Path(cfg.dataset)))
         if changed.any():
@@ -189,14 +197,32 @@ def _run_in(cfg, results, renders, overwrite, set_aside, workers, scheduler) -> 
             )
         stale |= changed
     df = df[~stale]
-    done = set(map(tuple, df[list(KEY)].itertuples(index=False)))
-    rows = df.to_dict("records")
-    todo = {}
+    rescore = df["policy"].isin(known) & (
+        options.reevaluate | (df["evaluation_hash"] != evaluation_hash())
+    )
+    return df, rescore
+
+
+def _run_in(
+    cfg: BenchConfig, ws: Workspace, options: RunOptions, report: Report | None
+) -> pd.DataFrame:
+    t_start = time.perf_counter()
+    invocation = {
+        "id": time.strftime("%Y%m%dT%H%M%S") + f"-{os.getpid()}",
+        "git_commit": _git_commit(),  # before this run rewrites any tracked result file
+    }
+    check_results_dir(ws.results, cfg.run.as_dict(), options.overwrite)
+    df, rescore = _current_rows(cfg, ws, options)
+    keys = lambda frame: set(map(tuple, frame[list(KEY)].itertuples(index=False)))  # noqa: E731
+    done, again = keys(df[~rescore]), keys(df[rescore])
+    rows = df[~rescore].to_dict("records")
+    work = {}
     for unit in cfg.units():
-        missing = [j for j in cfg.jobs(unit[2]) if (*unit, *j) not in done]
+        missing = [j for j in cfg.jobs(unit.policy) if (*asdict(unit).values(), *j) not in done]
         if missing:
-            todo[unit] = missing
-    n_rows = sum(len(j) for j in todo.values())
+            redo = all((*asdict(unit).values(), *j) in again for j in missing)
+            work[unit] = Work(tuple(missing), rescore=redo)
+    n_rows = sum(len(w.jobs) for w in work.values())
     if not cfg.units():
         raise BenchError(
             f"nothing to compute: no policy of {', '.join(cfg.policies)} runs a task of "
@@ -206,57 +232,71 @@ def _run_in(cfg, results, renders, overwrite, set_aside, workers, scheduler) -> 
         ["render", "frontend", "select", "match", "verify", "task", "evaluate_matches", "evaluate"],
         0.0,
     )
-    log(f"{len(done)} of {len(done) + n_rows} rows already in {runs_csv}; {n_rows} to do")
-
-    pending = sorted({u[:2] for u in todo}, key=lambda g: (cfg.scenes.index(g[0]), g[1]))
+    n_again = sum(len(w.jobs) for w in work.values() if w.rescore)
+    log(
+        f"{len(done)} of {len(done) + n_rows} rows already in {ws.runs_csv}; {n_rows} to do"
+        + (f", {n_again} of them scored again from stored predictions" if n_again else "")
+    )
+    groups = sorted({u.group for u in work}, key=lambda g: (cfg.scenes.index(g[0]), g[1]))
     entries = {}
-    with progress("render", len(pending)) as bar:
-        for sc, sd in pending:
+    with progress("render", len(groups)) as bar:
+        for sc, sd in groups:
             t = time.perf_counter()
             entries[sc, sd] = (
                 Path(cfg.dataset)
                 if cfg.dataset is not None
-                else render_scene(sc, sd, cfg.run.render, renders)
+                else render_scene(sc, sd, cfg.run.render, ws.renders)
             )
             stage_s["render"] += time.perf_counter() - t
             bar.set_postfix_str(f"{sc} seed {sd}")
             bar.update()
+    plan = Plan(entries, work, cfg.budgets)
     t_runs, bound = time.perf_counter(), False
-    with progress("frontend", len(pending)) as fbar, progress("runs", len(todo)) as bar:
+    with progress("frontend", len(groups)) as fbar, progress("runs", len(work)) as bar:
 
         def scene_ready(group, info):
+            scene, seed = group
             stage_s["frontend"] += info["seconds"]
-            fbar.set_postfix_str(f"{group[0]} seed {group[1]}")
+            fbar.set_postfix_str(f"{scene} seed {seed}")
             fbar.update()
 
-        for new in execute(
-            entries, todo, cfg.run, cfg.budgets, results, renders, workers, scheduler, scene_ready
-        ):
+        for new in execute(plan, cfg.run, ws, options.cluster, scene_ready):
             if not bound:  # the folder is bound by the first rows it gets, not before
-                bind_results_dir(results, cfg.run.as_dict(), overwrite)
+                bind_results_dir(
+                    ws.results, cfg.run.as_dict(), Vocabulary.current(), options.overwrite
+                )
                 bound = True
-            for k in ("select", "match", "verify", "evaluate_matches"):
-                stage_s[k] += np.nan_to_num(new[0].get(f"{k}_ms", 0.0)) / 1000
-            for r in new:
-                stage_s["task"] += np.nan_to_num(r.get("task_ms", 0.0)) / 1000
-                stage_s["evaluate"] += np.nan_to_num(r.get("evaluate_ms", 0.0)) / 1000
+            _add_seconds(stage_s, new)
             rows += [r | {"invocation": invocation["id"]} for r in new]
             table = pd.DataFrame(rows).sort_values(list(KEY), kind="stable")
-            write_text_atomic(runs_csv, table.to_csv(index=False))
-            r = new[0]
-            bar.set_postfix_str(f"{r['scene']} s{r['seed']} {r['policy']} b{r['budget']}")
+            write_text_atomic(ws.runs_csv, table.to_csv(index=False))
+            first = new[0]
+            bar.set_postfix_str(
+                f"{first['scene']} s{first['seed']} {first['policy']} b{first['budget']}"
+            )
             bar.update()
     stage_s["runs_wall"] = time.perf_counter() - t_runs
-    t = time.perf_counter()
-    out = read_runs(runs_csv)
-    write_report(out, results, renders)
-    stage_s["report"] = time.perf_counter() - t
+    out = read_runs(ws.runs_csv)
+    if report is not None:
+        t = time.perf_counter()
+        report(out, ws.results, ws.renders)
+        stage_s["report"] = time.perf_counter() - t
     invocation |= {"rows": n_rows, "seconds": {"total": time.perf_counter() - t_start, **stage_s}}
-    write_manifest(results, cfg, invocation, out, renders)
+    write_manifest(ws, cfg, invocation, out)
     log(
-        f"{n_rows} rows done, {len(done)} reused, in {invocation['seconds']['total']:.0f} s; results in {results}"
+        f"{n_rows} rows done, {len(done)} reused, in {invocation['seconds']['total']:.0f} s; "
+        f"results in {ws.results}"
     )
     return out
+
+
+def _add_seconds(stage_s: dict[str, float], new: list[dict]) -> None:
+    """A unit's stage seconds into the run's totals (the shared stages counted once)."""
+    for k in ("select", "match", "verify", "evaluate_matches"):
+        stage_s[k] += np.nan_to_num(new[0].get(f"{k}_ms", 0.0)) / 1000
+    for r in new:
+        stage_s["task"] += np.nan_to_num(r.get("task_ms", 0.0)) / 1000
+        stage_s["evaluate"] += np.nan_to_num(r.get("evaluate_ms", 0.0)) / 1000
 
 
 def _git_commit() -> str:
@@ -276,13 +316,11 @@ def _git_commit() -> str:
         return "unknown"
 
 
-def write_manifest(
-    results: Path, cfg: BenchConfig, invocation: dict, rows: pd.DataFrame, renders: Path
-) -> None:
+def write_manifest(ws: Workspace, cfg: BenchConfig, invocation: dict, rows: pd.DataFrame) -> None:
     """Versions, variant, host, settings and the invocations that computed the rows of
     `runs.csv`: each with its commit and seconds per stage, kept while it owns a row (a rerun
     that computes nothing adds nothing), and their sum."""
-    path = results / "manifest.json"
+    path = ws.results / "manifest.json"
     try:
         earlier = json.loads(path.read_text()).get("invocations", [])
     except (OSError, ValueError, AttributeError):
@@ -297,7 +335,7 @@ def write_manifest(
     for inv in kept:
         for k, v in inv["seconds"].items():
             total[k] = total.get(k, 0.0) + v
-    entries = [renders / k for k in rows["render_key"].unique()]
+    entries = [ws.renders / k for k in rows["render_key"].unique()]
     metas = [
         json.loads((e / "meta.json").read_text()) for e in entries if (e / "meta.json").is_file()
     ]
@@ -316,7 +354,7 @@ def write_manifest(
         "variant": sorted({m["variant"] for m in metas}),
         "host": {"node": platform.node(), "platform": platform.platform(), "cpus": os.cpu_count()},
         "settings": cfg.run.as_dict(),
-        "config_hash": cfg.run.hash,
+        "evaluation_hash": evaluation_hash(),
         "grid": {k: sorted(map(str, rows[k].unique())) for k in KEY},
         "git_commit": sorted({inv["git_commit"] for inv in kept}),
         "invocations": kept,

@@ -7,6 +7,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from bench.files import atomic_path
 from bench.scenes.spec import N_VIEWS
 
 
@@ -23,10 +24,6 @@ def write_gallery(entries: dict[str, Path], out: Path, thumb_width: int = 320) -
         cv2.putText(thumbs[0], name, (8, 28), cv2.FONT_HERSHEY_SIMPLEX, 0.9, (255, 255, 255), 2)
         rows.append(np.concatenate(thumbs, 1))
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp.png")
-    try:
+    with atomic_path(out) as tmp:
         cv2.imwrite(str(tmp), np.concatenate(rows, 0))
-        tmp.replace(out)
-    finally:
-        tmp.unlink(missing_ok=True)
     return out

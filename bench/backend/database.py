@@ -14,22 +14,40 @@ from __future__ import annotations
 
 import shutil
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from bench import BenchError
+from bench.backend.matching import BackendConfig, matcher
 from bench.backend.reconstruction import write_database
 from bench.console import log, progress
 from bench.files import atomic_path
-from bench.frontend import feedback
+from bench.frontend import feedback, plugins
 from bench.frontend.features import Candidates, DetectorConfig, detect
-from bench.frontend.policies import PolicyConfig, check_policies
-from bench.frontend.signals import SignalConfig, compute_signals
+from bench.frontend.geometry import SignalConfig
+from bench.frontend.policies import POLICIES, PolicyConfig, PolicyInput, check_policies
+from bench.frontend.selection import select_views
+from bench.frontend.signals import compute_signals
 from bench.frontend.views import load_image_folder
-from bench.harness import plugins
-from bench.harness.pipeline import RunConfig, matcher, policy_selection, signals_used
+from bench.vocabulary import METHODS
+
+
+@dataclass(frozen=True)
+class SelectRequest:
+    """What `bench select` is asked for."""
+
+    images: Path
+    policy: str
+    budget: int
+    cameras: Path | None = None
+    """A COLMAP model with the intrinsics and poses (None: the focal-length prior)."""
+    match: bool = False
+    overlays: bool = False
+    policy_modules: tuple[str, ...] = ()
+    max_candidates: int = 8192
 
 
 def strongest(cand: Candidates, k: int) -> Candidates:
@@ -47,34 +65,29 @@ def strongest(cand: Candidates, k: int) -> Candidates:
     )
 
 
-def select_to_database(
-    images: Path,
-    out: Path,
-    policy: str,
-    budget: int,
-    cameras: Path | None = None,
-    match: bool = False,
-    overlays: bool = False,
-    policy_modules: tuple[str, ...] = (),
-    max_candidates: int = 8192,
-) -> Path:
+def select_to_database(request: SelectRequest, out: Path) -> Path:
     """Write OUT/database.db (module docstring); returns its path."""
-    plugins.load(policy_modules)
-    check_policies([policy], extra=(feedback.NAME,))
-    det, cfg = DetectorConfig(), RunConfig(policy=PolicyConfig(modules=tuple(policy_modules)))
+    policy, budget = request.policy, request.budget
+    plugins.load(request.policy_modules)
+    check_policies([policy])
+    if policy not in POLICIES and policy != feedback.NAME:
+        raise BenchError(f"{policy} is not a selection policy; valid: a policy of `bench run`")
+    det, backend = DetectorConfig(), BackendConfig()
     t = time.perf_counter()
-    views = load_image_folder(images, cameras)
+    views = load_image_folder(request.images, request.cameras)
     if not all(v.posed for v in views):
         log("no poses (no --cameras): the geometry of the signals is estimated from the images")
     with progress("detect", len(views)) as bar:
         pools = []
         for v in views:
-            pools.append(strongest(detect(v, det), max_candidates))
+            pools.append(strongest(detect(v, det), request.max_candidates))
             bar.update()
-    sigs, _ = compute_signals(views, pools, det, SignalConfig(), signals_used(policy))
-    sel, _ = policy_selection(policy, views, pools, sigs, budget, 0, cfg)
+    sigs, _ = compute_signals(views, pools, det, SignalConfig(), METHODS[policy].reads)
     cams = [v.camera for v in views]
-    pairs = matcher(cams, pools, cfg.backend)(sel) if match else []
+    inputs = [PolicyInput(v, c, g) for v, c, g in zip(views, pools, sigs)]
+    cfg = PolicyConfig(modules=tuple(request.policy_modules))
+    sel, _ = select_views(policy, inputs, budget, 0, cfg, matcher(cams, pools, backend))
+    pairs = matcher(cams, pools, backend)(sel) if request.match else []
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise BenchError(f"--out {out} is a file; give a folder for database.db")
@@ -95,7 +108,7 @@ def select_to_database(
     except Exception as e:
         raise BenchError(f"cannot write {db}: {e}") from e
     shutil.rmtree(out / "overlays", ignore_errors=True)  # never beside another run's
-    if overlays:
+    if request.overlays:
         for v, c, s in zip(views, pools, sel):
             path = (out / "overlays" / v.name).with_suffix(".png")
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -113,6 +126,6 @@ def select_to_database(
     log(
         f"{policy}: {sum(len(s) for s in sel)} keypoints in {n} images, "
         f"{budget * n - sum(len(s) for s in sel)} short of {budget} per image "
-        f"({(time.perf_counter() - t) / n:.2f} s per image){', matched' if match else ''}"
+        f"({(time.perf_counter() - t) / n:.2f} s per image){', matched' if request.match else ''}"
     )
     return db

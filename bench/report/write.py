@@ -1,11 +1,12 @@
-"""The report: tables and figures from `runs.csv` alone (Figure 2 also reads the exported
-model and the cached render). Nothing here renders or reconstructs.
+"""The report: tables and figures from `runs.csv` and the vocabulary recorded beside it
+(Figure 2 also reads an exported model and its render). Nothing here renders, selects or
+reconstructs, and nothing here imports the stages that do.
 
 Written files: `table1.csv` (headline task and protocol), `table1_twoview.csv`,
 `table2.csv`, `paired.csv`, `paired_sfm.csv`, `table_scenes.csv`, `frontend_cost.csv`
-(`bench.harness.tables`), `figure3.png/.pdf`,
-`figure_budget.png` (with several budgets) and `figure2.png` (`bench.harness.figures`).
-A figure that cannot be drawn from these rows is removed, never left stale.
+(`bench.report.tables`), `figure3.png/.pdf`, `figure_budget.png` (with several budgets)
+and `figure2.png` (`bench.report.figures`). A figure that cannot be drawn from these
+rows is removed, never left stale.
 """
 
 from __future__ import annotations
@@ -17,9 +18,8 @@ import pandas as pd
 
 from bench.console import log
 from bench.files import atomic_path, write_text_atomic
-from bench.harness.figures import figure2, figure3, figure_budget
-from bench.harness.runs import read_runs
-from bench.harness.tables import (
+from bench.report.figures import figure2, figure3, figure_budget
+from bench.report.tables import (
     frontend_cost,
     headline_frame,
     paired,
@@ -29,6 +29,8 @@ from bench.harness.tables import (
     table_scenes,
     with_oracle_share,
 )
+from bench.results import read_runs
+from bench.vocabulary import VOCABULARY_FILE, Vocabulary
 
 
 def _drop(*paths: Path) -> None:
@@ -37,19 +39,21 @@ def _drop(*paths: Path) -> None:
 
 
 def write_report(df: pd.DataFrame, results: Path, renders: Path) -> None:
-    """Every table and figure of `results` from the rows `df`."""
+    """Every table and figure of `results` from the rows `df`, under the vocabulary
+    recorded in `results`."""
     results = Path(results)
+    vocab = Vocabulary.load(results)
     df = with_oracle_share(df)
-    frame = headline_frame(df)
-    t1, pairs = table1(frame), paired(frame)
+    frame = headline_frame(df, vocab)
+    t1, pairs = table1(frame, vocab), paired(frame, vocab)
     tables = {
         "table1.csv": t1,
-        "table1_twoview.csv": table1(headline_frame(df, "twoview")),
-        "table2.csv": table2(frame, pairs),
+        "table1_twoview.csv": table1(headline_frame(df, vocab, "twoview"), vocab),
+        "table2.csv": table2(frame, pairs, vocab),
         "paired.csv": pairs,
-        "paired_sfm.csv": paired_sfm(frame),
-        "table_scenes.csv": table_scenes(frame) if len(frame) else pd.DataFrame(),
-        "frontend_cost.csv": frontend_cost(df),
+        "paired_sfm.csv": paired_sfm(frame, vocab),
+        "table_scenes.csv": table_scenes(frame, vocab) if len(frame) else pd.DataFrame(),
+        "frontend_cost.csv": frontend_cost(df, vocab),
     }
     for name, t in tables.items():
         if t.empty:
@@ -71,7 +75,7 @@ def write_report(df: pd.DataFrame, results: Path, renders: Path) -> None:
         log(f"figure2.png not drawn (and any older one removed): {why}")
 
 
-PUBLISHED_FILES = ("runs.csv", "config.json", "manifest.json", "scenes.png")
+PUBLISHED_FILES = ("runs.csv", "config.json", VOCABULARY_FILE, "manifest.json", "scenes.png")
 REPORT_FILES = (
     "table1.csv",
     "table1_twoview.csv",

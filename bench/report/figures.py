@@ -18,8 +18,8 @@ import pandas as pd  # noqa: E402
 from matplotlib.ticker import FixedLocator, NullLocator  # noqa: E402
 
 from bench.files import atomic_path  # noqa: E402
-from bench.harness.pipeline import ORACLE  # noqa: E402
-from bench.harness.tables import DISPLAY, HEADLINE_BUDGET  # noqa: E402
+from bench.results import Workspace  # noqa: E402
+from bench.vocabulary import HEADLINE, HEADLINE_BUDGET, ORACLE, Job, Unit  # noqa: E402
 
 PANELS = (
     ("acc_completeness_pct", "Acc. completeness % (e < 0.10)"),
@@ -98,9 +98,7 @@ def figure_budget(t1: pd.DataFrame, out: Path) -> None:
         for policy, g in t1[t1["budget"] > 0].groupby("policy", sort=False):
             g = g.sort_values("budget")
             style = {"linestyle": ":", "color": "black"} if policy == ORACLE else {}
-            line = ax.plot(
-                g["budget"], g[m], marker="o", label=DISPLAY.get(policy, policy), **style
-            )
+            line = ax.plot(g["budget"], g[m], marker="o", label=g["strategy"].iloc[0], **style)
             ax.fill_between(
                 g["budget"], g[f"{m}_lo"], g[f"{m}_hi"], color=line[0].get_color(), alpha=0.15
             )
@@ -108,7 +106,7 @@ def figure_budget(t1: pd.DataFrame, out: Path) -> None:
             if np.isfinite(ref[m].iloc[0]):
                 style = "--" if policy == "all" else "-."
                 ax.axhline(
-                    ref[m].iloc[0], color="gray", linestyle=style, label=DISPLAY.get(policy, policy)
+                    ref[m].iloc[0], color="gray", linestyle=style, label=ref["strategy"].iloc[0]
                 )
         ax.set_xscale("log")
         ax.xaxis.set_major_locator(FixedLocator(budgets))
@@ -140,20 +138,33 @@ def save(fig, out: Path, formats) -> None:
     plt.close(fig)
 
 
+def read_text_model(folder: Path) -> tuple[dict, np.ndarray, np.ndarray]:
+    """An exported COLMAP text model, read without COLMAP: {image name: (keypoints (N, 2)
+    in COLMAP's pixel convention, whether each observes a point)}, the point ids and
+    their positions (M, 3)."""
+    lines = [x for x in (folder / "images.txt").read_text().splitlines() if not x.startswith("#")]
+    images = {}
+    for head, obs in zip(lines[::2], lines[1::2]):
+        values = np.array(obs.split(), float).reshape(-1, 3)
+        images[head.split()[9]] = (values[:, :2], values[:, 2] >= 0)
+    rows = [
+        x.split()[:4]
+        for x in (folder / "points3D.txt").read_text().splitlines()
+        if x and not x.startswith("#")
+    ]
+    table = np.array(rows, float).reshape(-1, 4)
+    return images, table[:, 0].astype(int), table[:, 1:]
+
+
 def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | None:
     """Two views of `table` with the adaptive selection, and its sparse points coloured by
-    error. Returns why it could not be drawn, or None."""
-    import cv2
-    import pycolmap
-    from scipy.spatial import cKDTree
-
-    from bench.evaluation.groundtruth import load_ground_truth
-
+    their error (`point_errors.csv`, written by the evaluation). Returns why it could not
+    be drawn, or None."""
     rows = df[
         (df["scene"] == "table")
         & (df["policy"] == "adaptive")
-        & (df["task"] == "tri")
-        & (df["protocol"] == "multiview")
+        & (df["task"] == HEADLINE[0])
+        & (df["protocol"] == HEADLINE[1])
     ]
     if rows.empty:
         return (
@@ -162,24 +173,24 @@ def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | 
         )
     rows = rows.assign(off=(rows["budget"] - HEADLINE_BUDGET).abs()).sort_values(["off", "seed"])
     r = rows.iloc[0]
-    model_dir = results / "models" / f"table-s{r['seed']}" / f"adaptive-b{r['budget']}"
+    unit = Unit("table", int(r["seed"]), "adaptive", int(r["budget"]))
+    model_dir = Workspace(results, renders).model_dir(unit, Job(*HEADLINE))
     entry = renders / r["render_key"]
-    if not model_dir.is_dir() or not entry.is_dir():
+    if not (model_dir / "images.txt").is_file() or not entry.is_dir():
         return f"missing {model_dir if not model_dir.is_dir() else entry}"
-    model = pycolmap.Reconstruction(str(model_dir))
-    gts = load_ground_truth(entry)
-    surface = cKDTree(np.concatenate([g.position[g.single_surface] for g in gts]))
-    X = np.array([p.xyz for p in model.points3D.values()]).reshape(-1, 3)
-    err = surface.query(X)[0] if len(X) else np.zeros(0)
+    images, ids, X = read_text_model(model_dir)
+    errors = model_dir / "point_errors.csv"
+    err = np.zeros(len(ids))
+    if errors.is_file() and len(ids):
+        known = pd.read_csv(errors).set_index("point3D_id")["error"]
+        err = known.reindex(ids).to_numpy(float)
     fig = plt.figure(figsize=(15, 4.8))
-    for k, image_id in enumerate(sorted(model.images)[:: max(1, len(model.images) - 1)][:2]):
-        img = model.images[image_id]
+    names = sorted(images)
+    for k, name in enumerate(names[:: max(1, len(names) - 1)][:2]):
+        xy, tri = images[name]
+        xy = xy - 0.5  # COLMAP -> matplotlib pixel centres
         ax = fig.add_subplot(1, 3, k + 1)
-        ax.imshow(cv2.imread(str(entry / img.name))[..., ::-1])
-        xy = (
-            np.array([p.xy for p in img.points2D]).reshape(-1, 2) - 0.5
-        )  # COLMAP -> matplotlib pixel centres
-        tri = np.array([p.has_point3D() for p in img.points2D], bool)
+        ax.imshow(plt.imread(entry / name))
         ax.scatter(
             *xy[~tri].T,
             s=6,
@@ -189,7 +200,7 @@ def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | 
             label="selected",
         )
         ax.scatter(*xy[tri].T, s=8, c="red", label="selected and triangulated")
-        ax.set_title(f"{img.name}: {len(xy)} adaptive features", fontsize=10)
+        ax.set_title(f"{name}: {len(xy)} adaptive features", fontsize=10)
         ax.axis("off")
         if k == 0:
             ax.legend(loc="lower left", fontsize=8)

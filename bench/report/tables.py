@@ -3,7 +3,7 @@
 * `table1.csv`: per strategy and budget, the headline task and protocol (`tri`,
   `multiview`) and beside it the `sfm` task's metrics (prefixed `sfm_`: mAA, registered
   views, ...): the mean of every metric over runs with a 95% bootstrap interval
-  (`<metric>_lo`, `<metric>_hi`; `bench.harness.stats`). The stock-COLMAP peers have sfm
+  (`<metric>_lo`, `<metric>_hi`; `bench.report.stats`). The stock-COLMAP peers have sfm
   columns only. `table1_twoview.csv`: both tasks under the `twoview` track protocol, never
   mixed into the headline.
 * `completeness_vs_oracle_pct`: a run's completeness as a percentage of the oracle's in the
@@ -35,91 +35,29 @@ import math
 import numpy as np
 import pandas as pd
 
-from bench.harness.pipeline import ORACLE, REFERENCES, TASKS
-from bench.harness.stats import LOWER_IS_BETTER, bootstrap_mean, paired_difference
+from bench.report.stats import LOWER_IS_BETTER, bootstrap_mean, paired_difference
+from bench.vocabulary import HEADLINE, HEADLINE_POLICY, ORACLE, PAIRED_PEER, UNIT_KEY, Vocabulary
 
-KEY = ("scene", "seed", "policy", "budget", "task", "protocol")
-DISPLAY = {
-    "random": "Random budget",
-    "texture": "Texture-only",
-    "grid": "Uniform grid",
-    "response": "Detector response (top-B)",
-    "ssc": "SSC (Bailo 2018)",
-    "quadtree": "Quadtree (ORB-SLAM)",
-    "adaptive": "Adaptive optimized",
-    "adaptive-fast": "Adaptive, cheap repeatability",
-    "adaptive-loop": "Adaptive feedback loop",
-    "learned": "Learned weights",
-    "cross-view": "Adaptive + epipolar signal",
-    "all": "All candidates (reference)",
-    ORACLE: "Oracle (ground truth, reference)",
-    "colmap": "COLMAP default SIFT (peer)",
-    "colmap-b": "COLMAP SIFT, B largest-scale (peer)",
-    "colmap-soft-b": "COLMAP SIFT soft limit B (peer)",
-}
-BASELINES = ("random", "texture", "grid", "response", "ssc", "quadtree")
-CONTENDER = "adaptive"
-PEER = "colmap-b"
-"""The stock-COLMAP peer held to the same budget, which `paired_sfm.csv` compares with."""
-HEADLINE = ("tri", "multiview")
-"""The headline task and track protocol."""
-HEADLINE_BUDGET = 256
-TABLE1_METRICS = (
-    "rmse",
-    "acc_completeness_pct",
-    "completeness_vs_oracle_pct",
-    "accuracy_pct",
-    "inlier_pct",
-    "coverage_pct",
-    "runtime_proxy",
-    "wall_ms",
-    "median_error",
-    "match_precision_pct",
-    "acc_completeness_pct_0.02",
-    "acc_completeness_pct_0.05",
-    "acc_completeness_pct_0.20",
-    "accuracy_pct_0.02",
-    "accuracy_pct_0.05",
-    "accuracy_pct_0.20",
-    "points",
-    "reconstructable",
-    "mean_track_length",
-    "mean_tri_angle_deg",
-    "runtime_scoring",
-    "runtime_matching",
-    "runtime_robust",
-    "task_ms",
-)
-SFM_METRICS = (
-    "maa",
-    "keypoints_per_view",
-    "registered_views",
-    "median_pose_err_deg",
-    "cam_center_err",
-    "points",
-    "accuracy_pct",
-    "rmse",
-    "median_error",
-    "mean_track_length",
-    "mean_reproj_px",
-    "task_ms",
-    "wall_ms",
-)
-"""The sfm task's columns in Table 1 (as `sfm_<name>`)."""
 PAIRED_METRICS = ("acc_completeness_pct", "accuracy_pct", "rmse", "median_error", "sfm_maa")
 """The headline metrics that paired statistics compare."""
-UNIT = ["scene", "seed", "policy", "budget"]
+UNIT = list(UNIT_KEY)
 
 
-def headline_frame(df: pd.DataFrame, protocol: str = HEADLINE[1]) -> pd.DataFrame:
-    """One row per (scene, seed, policy, budget) under a track protocol: the known-pose
-    task's columns, and the sfm task's as `sfm_<name>` (a unit with only one of the tasks
-    has NaN for the other)."""
+def headline_frame(
+    df: pd.DataFrame, vocab: Vocabulary, protocol: str = HEADLINE[1]
+) -> pd.DataFrame:
+    """One row per (scene, seed, policy, budget) under a track protocol: the headline
+    task's columns, and every other task's as `<task>_<name>` (a unit without one of the
+    tasks has NaN for it)."""
     rows = df[df["protocol"] == protocol]
-    tri = rows[rows["task"] == "tri"]
-    cols = [c for c in (*SFM_METRICS, "status") if c in df]
-    sfm = rows[rows["task"] == "sfm"][UNIT + cols].rename(columns={c: f"sfm_{c}" for c in cols})
-    return tri.merge(sfm, on=UNIT, how="outer")
+    frame = rows[rows["task"] == HEADLINE[0]]
+    for task in (t for t in vocab.tasks if t != HEADLINE[0]):
+        cols = [c for c in (*vocab.tasks[task].columns, "status") if c in df]
+        part = rows[rows["task"] == task][UNIT + cols]
+        frame = frame.merge(
+            part.rename(columns={c: f"{task}_{c}" for c in cols}), on=UNIT, how="outer"
+        )
+    return frame
 
 
 def with_oracle_share(df: pd.DataFrame) -> pd.DataFrame:
@@ -132,21 +70,19 @@ def with_oracle_share(df: pd.DataFrame) -> pd.DataFrame:
     return df.assign(completeness_vs_oracle_pct=np.where(ref > 0, share, math.nan))
 
 
-def _policy_order(policy: str) -> int:
-    return list(DISPLAY).index(policy) if policy in DISPLAY else len(DISPLAY)
-
-
-def table1(rows: pd.DataFrame) -> pd.DataFrame:
+def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     """Per strategy and budget: every metric's mean and 95% bootstrap interval over runs
     (`rows`: `headline_frame`, or the rows of one task and protocol)."""
     out = []
-    metrics = [*TABLE1_METRICS, *(f"sfm_{m}" for m in SFM_METRICS)]
+    others = [t for t in vocab.tasks if t != HEADLINE[0]]
+    metrics = [*vocab.tasks[HEADLINE[0]].columns]
+    metrics += [f"{t}_{m}" for t in others for m in vocab.tasks[t].columns]
     for (policy, budget), g in rows.groupby(["policy", "budget"], sort=False):
-        row = {"strategy": DISPLAY.get(policy, policy), "policy": policy, "budget": budget}
+        row = {"strategy": vocab.label(policy), "policy": policy, "budget": budget}
         row["runs"] = len(g)
         row["failed_runs"] = int((g["status"] == "failed").sum())
-        if "sfm_status" in g:
-            row["sfm_failed_runs"] = int((g["sfm_status"] == "failed").sum())
+        for t in (t for t in others if f"{t}_status" in g):
+            row[f"{t}_failed_runs"] = int((g[f"{t}_status"] == "failed").sum())
         for m in metrics:
             if m in g:
                 row[m], row[f"{m}_lo"], row[f"{m}_hi"] = bootstrap_mean(g[m].astype(float))
@@ -155,7 +91,7 @@ def table1(rows: pd.DataFrame) -> pd.DataFrame:
     if t.empty:
         return t
     order = t.apply(
-        lambda r: (r["budget"] if r["budget"] > 0 else math.inf, _policy_order(r["policy"])), axis=1
+        lambda r: (r["budget"] if r["budget"] > 0 else math.inf, vocab.order(r["policy"])), axis=1
     )
     return t.loc[order.sort_values().index].reset_index(drop=True)
 
@@ -190,24 +126,26 @@ def _paired(rows: pd.DataFrame, pairs: list[tuple[str, str]], metrics) -> pd.Dat
     return pd.DataFrame(out)
 
 
-def paired(rows: pd.DataFrame) -> pd.DataFrame:
-    """Adaptive minus each baseline, per scene and pooled, per budget and headline metric
-    (`rows`: `headline_frame`)."""
-    baselines = [p for p in pd.unique(rows["policy"]) if p not in (CONTENDER, *REFERENCES)]
-    return _paired(rows, [(CONTENDER, b) for b in baselines], PAIRED_METRICS)
+def paired(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
+    """The headline policy (adaptive) minus every other baseline or contender, per scene
+    and pooled, per budget and headline metric (`rows`: `headline_frame`)."""
+    ranked = set(vocab.with_role("baseline", "contender")) - {HEADLINE_POLICY}
+    others = [p for p in pd.unique(rows["policy"]) if p in ranked]
+    return _paired(rows, [(HEADLINE_POLICY, b) for b in others], PAIRED_METRICS)
 
 
-def paired_sfm(rows: pd.DataFrame) -> pd.DataFrame:
+def paired_sfm(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     """Every budgeted policy (and the oracle) minus the peer held to the budget,
     `colmap-b`, in the sfm task's mAA and registered views, per scene and pooled, per
     budget (`rows`: `headline_frame`)."""
-    if PEER not in set(rows["policy"]):
+    if PAIRED_PEER not in set(rows["policy"]):
         return pd.DataFrame()
-    policies = [p for p in pd.unique(rows["policy"]) if p not in REFERENCES or p == ORACLE]
-    return _paired(rows, [(p, PEER) for p in policies], ("sfm_maa", "sfm_registered_views"))
+    ranked = {*vocab.with_role("baseline", "contender"), ORACLE}
+    policies = [p for p in pd.unique(rows["policy"]) if p in ranked]
+    return _paired(rows, [(p, PAIRED_PEER) for p in policies], ("sfm_maa", "sfm_registered_views"))
 
 
-def table2(rows: pd.DataFrame, pairs: pd.DataFrame) -> pd.DataFrame:
+def table2(rows: pd.DataFrame, pairs: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     """Per scene (and pooled) and budget: adaptive, the best baseline of each headline metric
     and the paired difference to it, plus the oracle's completeness (`rows`:
     `headline_frame`)."""
@@ -219,8 +157,9 @@ def table2(rows: pd.DataFrame, pairs: pd.DataFrame) -> pd.DataFrame:
             means = part.groupby("policy")[[m for m in PAIRED_METRICS if m in part]].mean()
             row = {"scene": scope, "budget": budget}
             for m in (m for m in PAIRED_METRICS if m in means):
-                row[f"adaptive_{m}"] = means[m].get(CONTENDER, math.nan)
-                base = means.loc[[p for p in BASELINES if p in means.index], m].dropna()
+                row[f"adaptive_{m}"] = means[m].get(HEADLINE_POLICY, math.nan)
+                baselines = vocab.with_role("baseline")
+                base = means.loc[[p for p in baselines if p in means.index], m].dropna()
                 best = (
                     (base.idxmin() if m in LOWER_IS_BETTER else base.idxmax()) if len(base) else ""
                 )
@@ -240,7 +179,7 @@ def table2(rows: pd.DataFrame, pairs: pd.DataFrame) -> pd.DataFrame:
             row["oracle_acc_completeness_pct"] = means["acc_completeness_pct"].get(ORACLE, math.nan)
             out.append(row)
     t = pd.DataFrame(out)
-    # the DESIGN.md column names of the first table 2
+    # the column name Table 2 has had since its first version
     return t.rename(
         columns={
             "best_baseline_acc_completeness_pct_policy": "best_baseline_acc_completeness_policy",
@@ -251,26 +190,29 @@ def table2(rows: pd.DataFrame, pairs: pd.DataFrame) -> pd.DataFrame:
 SCENE_METRICS = ("acc_completeness_pct", "accuracy_pct", "rmse", "points", "coverage_pct")
 
 
-def table_scenes(rows: pd.DataFrame) -> pd.DataFrame:
+def table_scenes(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     """Per scene, policy and budget: means over seeds (`rows`: `headline_frame`)."""
     cols = [m for m in (*SCENE_METRICS, "sfm_maa", "sfm_registered_views") if m in rows]
     t = rows.groupby(["scene", "policy", "budget"], sort=False)[cols].mean().reset_index()
     t.insert(3, "seeds", rows.groupby(["scene", "policy", "budget"], sort=False).size().values)
-    order = t.apply(lambda r: (r["scene"], r["budget"], _policy_order(r["policy"])), axis=1)
+    order = t.apply(lambda r: (r["scene"], r["budget"], vocab.order(r["policy"])), axis=1)
     return t.loc[order.sort_values().index].reset_index(drop=True)
 
 
-def frontend_cost(df: pd.DataFrame) -> pd.DataFrame:
+def frontend_cost(df: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     """Per policy: mean front-end ms of a run (detect + its signals + select) with the
     rig's poses (the `tri` task) and the mean ratio to texture-only over the units both
     ran; the same with the geometry from the images (the `sfm` task, `_posefree`) and the
     mean ratio of the pose-free to the posed front end over the units both ran."""
     parts = ["detect_ms", "signals_ms", "select_ms"]
-    rows = df[(df["protocol"] == HEADLINE[1]) & ~df["policy"].isin([ORACLE, *REFERENCES])]
+    ranked = vocab.with_role("baseline", "contender")
+    rows = df[(df["protocol"] == HEADLINE[1]) & df["policy"].isin(ranked)]
     if rows.empty or not set(parts) <= set(rows):
         return pd.DataFrame()
     unit = ["scene", "seed", "budget", "policy"]
-    front = {task: rows[rows["task"] == task].set_index(unit)[parts].sum(axis=1) for task in TASKS}
+    front = {
+        task: rows[rows["task"] == task].set_index(unit)[parts].sum(axis=1) for task in vocab.tasks
+    }
     out = []
     for policy in dict.fromkeys(rows["policy"]):
         row = {"policy": policy}
@@ -288,4 +230,4 @@ def frontend_cost(df: pd.DataFrame) -> pd.DataFrame:
         row["posefree_to_posed"] = (free / posed.reindex(free.index)).mean()
         out.append(row)
     t = pd.DataFrame(out)
-    return t.iloc[t["policy"].map(_policy_order).argsort(kind="stable")].reset_index(drop=True)
+    return t.iloc[t["policy"].map(vocab.order).argsort(kind="stable")].reset_index(drop=True)

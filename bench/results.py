@@ -1,4 +1,5 @@
-"""`runs.csv`, the results folder's one source of truth: its contract, checked on every read.
+"""The results folder: its layout (`Workspace`) and `runs.csv`, its one source of truth,
+with the contract checked on every read.
 
 Every row is validated: the file's structure (each line has as many fields as the header:
 a row cut in the middle is caught), the required columns, the key values (scene, policy,
@@ -8,9 +9,10 @@ file is one `BenchError` naming the file and the first bad row, and nothing is p
 from it. Recovery: `bench run --set-aside-damaged` moves the damaged rows (as they were)
 to `runs.damaged.csv` beside it and computes them again.
 
-A row is finished when its `config_hash` is the current configuration's: the hash covers
-the settings and the source of every stage that produces a row's numbers, so rows left
-by other code are computed again. A results folder is bound to its settings
+A row is finished when its `prediction_hash` (the settings and the source of every stage
+up to the reconstruction) and its `evaluation_hash` (the source of the scoring) are the
+current ones: a row whose prediction is stale is computed again; a row whose evaluation
+alone is stale is scored again from the unit's stored prediction. A results folder is bound to its settings
 (`config.json`); its grid may grow (new scenes, seeds, policies, budgets, tasks run only
 the new rows), and only a change of settings needs `--overwrite`.
 """
@@ -22,22 +24,50 @@ import io
 import json
 import math
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
 
 from bench import BenchError
-from bench.backend.reconstruction import PROTOCOLS
 from bench.files import write_text_atomic
-from bench.harness.pipeline import TASKS
-from bench.harness.tables import KEY
+from bench.vocabulary import HEADLINE, KEY, PROTOCOLS, VOCABULARY_FILE, Job, Unit, Vocabulary
 
-TEXT_COLUMNS = ("scene", "policy", "task", "protocol", "render_key", "config_hash", "status")
+HASHES = ("prediction_hash", "evaluation_hash")
+TEXT_COLUMNS = ("scene", "policy", "task", "protocol", "render_key", *HASHES, "status")
 TEXT_COLUMNS += ("failure", "invocation", "ground_truth")
-REQUIRED = (*KEY, "render_key", "config_hash", "status", "failure", "invocation", "wall_ms")
-OK_NEEDS = {"tri": ("points", "acc_completeness_pct"), "sfm": ("maa", "registered_views")}
-"""The metrics an `ok` row of each task must have."""
+REQUIRED = (*KEY, "render_key", *HASHES, "status", "failure", "invocation", "wall_ms")
 DAMAGED = "runs.damaged.csv"
+PREDICTION = "prediction"
+"""A unit's stored prediction: `prediction.json` (written last) and `prediction.npz`."""
+
+
+@dataclass(frozen=True)
+class Workspace:
+    """Where a run reads and writes: its results folder and the render cache."""
+
+    results: Path
+    renders: Path
+
+    @property
+    def runs_csv(self) -> Path:
+        return self.results / "runs.csv"
+
+    def unit_dir(self, unit: Unit) -> Path:
+        """A unit's folder: its prediction, and the headline job's model at the top."""
+        return (
+            self.results / "models" / f"{unit.scene}-s{unit.seed}" / f"{unit.policy}-b{unit.budget}"
+        )
+
+    def model_dir(self, unit: Unit, job: Job) -> Path:
+        """Where a job's model is exported: the headline task's folder is the unit's, any
+        other task's a subfolder named after it; in it, the headline protocol's model at
+        the top and any other protocol's in a subfolder named after the protocol (e.g.
+        `twoview/`, `sfm/`, `sfm/twoview/`)."""
+        folder = self.unit_dir(unit)
+        if job.task != HEADLINE[0]:
+            folder = folder / job.task
+        return folder if job.protocol == HEADLINE[1] else folder / job.protocol
 
 
 class DamagedRuns(BenchError):
@@ -48,9 +78,9 @@ class DamagedRuns(BenchError):
         self.lines = lines
 
 
-def _row_problem(row: dict[str, str]) -> str | None:
+def _row_problem(row: dict[str, str], vocab: Vocabulary) -> str | None:
     """Why one row (raw strings) breaks the contract, or None."""
-    for k in ("scene", "policy", "render_key", "config_hash", "invocation"):
+    for k in ("scene", "policy", "render_key", *HASHES, "invocation"):
         if not row[k]:
             return f"empty {k}"
     for k in ("seed", "budget"):
@@ -59,7 +89,7 @@ def _row_problem(row: dict[str, str]) -> str | None:
                 raise ValueError
         except ValueError:
             return f"{k} {row[k]!r} is not a non-negative integer"
-    if row["task"] not in TASKS:
+    if row["task"] not in vocab.tasks:
         return f"unknown task {row['task']!r}"
     if row["protocol"] not in PROTOCOLS:
         return f"unknown protocol {row['protocol']!r}"
@@ -73,7 +103,7 @@ def _row_problem(row: dict[str, str]) -> str | None:
         return None if row["failure"] else "a failed row without a reason"
     if row["status"] != "ok":
         return f"status {row['status']!r} is neither ok nor failed"
-    needs = OK_NEEDS[row["task"]]
+    needs = vocab.tasks[row["task"]].needs
     if row.get("ground_truth") in ("poses", "point cloud"):  # a dataset without pixel truth
         needs = tuple(k for k in needs if k != "acc_completeness_pct")
     for k in needs:
@@ -82,8 +112,11 @@ def _row_problem(row: dict[str, str]) -> str | None:
     return None
 
 
-def check_runs(path: Path) -> tuple[list[str], list[tuple[int, str]], list[tuple[int, str, str]]]:
-    """(header, good rows as (line, text), damaged rows as (line, text, why))."""
+def check_runs(
+    path: Path, vocab: Vocabulary | None = None
+) -> tuple[list[str], list[tuple[int, str]], list[tuple[int, str, str]]]:
+    """(header, good rows as (line, text), damaged rows as (line, text, why)), the rows
+    checked against `vocab` (default: the vocabulary recorded beside the file)."""
     try:
         text = Path(path).read_text()
     except UnicodeDecodeError:
@@ -92,9 +125,15 @@ def check_runs(path: Path) -> tuple[list[str], list[tuple[int, str]], list[tuple
     if not lines:
         raise DamagedRuns(f"{path} is damaged: it is empty", [1])
     header = next(csv.reader([lines[0]]))
+    if "config_hash" in header and "prediction_hash" not in header:
+        raise BenchError(
+            f"{path} was written by an earlier bench (one config_hash per row, no stored "
+            "predictions); compute it again with --overwrite, or use another --results folder"
+        )
     missing = [c for c in REQUIRED if c not in header]
     if missing:
         raise DamagedRuns(f"{path} is damaged: its header lacks {', '.join(missing)}", [1])
+    vocab = vocab or Vocabulary.load(Path(path).parent)
     good, bad = [], []
     for n, line in enumerate(lines[1:], start=2):
         try:
@@ -105,17 +144,18 @@ def check_runs(path: Path) -> tuple[list[str], list[tuple[int, str]], list[tuple
         if len(fields) != len(header):
             bad.append((n, line, f"{len(fields)} fields, the header has {len(header)}"))
             continue
-        why = _row_problem(dict(zip(header, fields)))
+        why = _row_problem(dict(zip(header, fields)), vocab)
         (bad.append((n, line, why)) if why else good.append((n, line)))
     return header, good, bad
 
 
-def read_runs(path: Path) -> pd.DataFrame:
-    """Every row of a valid `runs.csv`; a damaged one is a `DamagedRuns` error."""
+def read_runs(path: Path, vocab: Vocabulary | None = None) -> pd.DataFrame:
+    """Every row of a valid `runs.csv`, checked against `vocab` (default: the vocabulary
+    recorded beside it); a damaged one is a `DamagedRuns` error."""
     path = Path(path)
     if not path.is_file():
         raise BenchError(f"{path} not found: run `bench run` first (or pass --results DIR)")
-    header, good, bad = check_runs(path)
+    header, good, bad = check_runs(path, vocab)
     if bad:
         n, _, why = bad[0]
         raise DamagedRuns(
@@ -139,13 +179,13 @@ def _frame(header: list[str], good: list[tuple[int, str]]) -> pd.DataFrame:
     ).assign(failure=lambda d: d["failure"].fillna(""))
 
 
-def set_aside_damaged(path: Path) -> int:
+def set_aside_damaged(path: Path, vocab: Vocabulary) -> int:
     """Move the damaged rows of `runs.csv` to `runs.damaged.csv` (appended, as they were);
     how many. A file whose header is damaged is set aside whole."""
     path = Path(path)
     aside = path.with_name(DAMAGED)
     try:
-        header, good, bad = check_runs(path)
+        header, good, bad = check_runs(path, vocab)
     except DamagedRuns:
         text = path.read_text(errors="replace")
         write_text_atomic(aside, (aside.read_text() if aside.exists() else "") + text)
@@ -190,12 +230,17 @@ def check_results_dir(results: Path, settings: dict, overwrite: bool) -> None:
             )
 
 
-def bind_results_dir(results: Path, settings: dict, overwrite: bool) -> None:
-    """Bind `results` to these settings (`config.json`) as the first rows are computed;
-    with `overwrite`, the rows and models of other settings go first."""
+def bind_results_dir(results: Path, settings: dict, vocab: Vocabulary, overwrite: bool) -> None:
+    """Bind `results` to these settings (`config.json`) as the first rows are computed, and
+    record the vocabulary of its rows (`vocabulary.json`: this run's, keeping the entries
+    of earlier runs for names it does not declare); with `overwrite`, the rows, models
+    and vocabulary of other settings go first."""
     if overwrite:
-        for name in ("runs.csv", "models", DAMAGED):
+        for name in ("runs.csv", "models", DAMAGED, VOCABULARY_FILE):
             p = results / name
             shutil.rmtree(p) if p.is_dir() else p.unlink(missing_ok=True)
     settings = json.loads(json.dumps(settings))
     write_text_atomic(results / "config.json", json.dumps({"settings": settings}, indent=1))
+    if (results / VOCABULARY_FILE).is_file():
+        vocab = vocab.merged(Vocabulary.load(results))
+    write_text_atomic(results / VOCABULARY_FILE, vocab.to_json())

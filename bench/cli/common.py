@@ -1,0 +1,195 @@
+"""What every command of the command line shares: typed options from dataclass fields
+(their docstrings are the help), `--set section.field=value`, list options, the default
+folders, and errors as one line. Light on purpose: `bench plot` imports no compute stage."""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import dataclasses
+import inspect
+import typing
+from functools import cache
+from pathlib import Path
+
+from bench import ROOT, BenchError
+from bench.console import log
+
+LIST_FORM = "one comma-separated list without spaces"
+LATEST, QUICK, PUBLISHED = Path("results/latest"), Path("results/quick"), Path("results/published")
+"""Default results folders, relative to the current directory. Runs never write to the
+published snapshot; only `bench publish` does."""
+
+
+class Parser(argparse.ArgumentParser):
+    """Usage errors as one line, like every other error of the CLI."""
+
+    def error(self, message: str):
+        if message.startswith("unrecognized arguments"):
+            message += f" (list options take {LIST_FORM}, e.g. --scenes table,facade)"
+        self.exit(2, f"bench: error: {message} (see `{self.prog} --help`)\n")
+
+
+@cache
+def field_docs(cls: type) -> dict[str, str]:
+    """The docstring written under each field of a dataclass, keyed by field name."""
+    docs: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        if not dataclasses.is_dataclass(klass):
+            continue
+        body = ast.parse(inspect.cleandoc("\n" + inspect.getsource(klass))).body[0].body
+        for node, nxt in zip(body, body[1:]):
+            if (
+                isinstance(node, ast.AnnAssign)
+                and isinstance(node.target, ast.Name)
+                and isinstance(nxt, ast.Expr)
+                and isinstance(nxt.value, ast.Constant)
+            ):
+                docs[node.target.id] = " ".join(str(nxt.value.value).split())
+    return docs
+
+
+def add_config_args(parser: argparse.ArgumentParser, cls: type, quick=None, choices=None) -> None:
+    """One `--option` per dataclass field, its docstring as help and its default shown.
+    With a `quick` preset the options default to None (the preset or the class default is
+    chosen later, by --quick) and the help names both defaults."""
+    docs = field_docs(cls)
+    for f in dataclasses.fields(cls):
+        kind = (
+            {"choices": choices[f.name]} if f.name in (choices or {}) else {"type": type(f.default)}
+        )
+        if quick is None:
+            default, shown = f.default, "%(default)s"
+        else:
+            default, shown = None, f"{f.default}, or {getattr(quick, f.name)} with --quick"
+        parser.add_argument(
+            "--" + f.name.replace("_", "-"),
+            dest=f.name,
+            default=default,
+            **kind,
+            help=f"{docs.get(f.name, '')} (default: {shown})",
+        )
+
+
+def config_from_args(cls: type, args: argparse.Namespace):
+    return cls(
+        **{f.name: getattr(args, f.name) for f in dataclasses.fields(cls) if hasattr(args, f.name)}
+    )
+
+
+def parse_list(
+    option: str, text: str, kind: type = str, example: str = "", unique: bool = True
+) -> tuple:
+    """The items of a list option, which has one syntax: `--option a,b,c`. Integer items of
+    `--seeds` may also be inclusive ranges such as 100-119. A repeated item runs once,
+    unless the list is a vector (`unique` False)."""
+    how = f"{option} takes {LIST_FORM}, e.g. {option} {example}"
+    if any(not x.strip() for x in text.split(",")):
+        raise BenchError(f"{how}; got {text!r}")
+    items = []
+    try:
+        for x in text.split(","):
+            lo, dash, hi = (
+                x.partition("-") if option == "--seeds" and x[1:].count("-") else (x, "", "")
+            )
+            if dash and int(hi) < int(lo):
+                raise BenchError(f"{how}; the range {x} is empty (write it low-high)")
+            items += list(range(int(lo), int(hi) + 1)) if dash else [kind(x)]
+    except ValueError:
+        raise BenchError(f"{how}; {text!r} is not a list of {kind.__name__}") from None
+    if not unique:
+        return tuple(items)
+    unique = tuple(dict.fromkeys(items))
+    if len(unique) < len(items):
+        repeated = sorted({str(x) for x in items if items.count(x) > 1})
+        log(f"{option} repeats {', '.join(repeated)}; each runs once (a repeat is not a replicate)")
+    return unique
+
+
+def _value(text: str, hint, path: str):
+    """`text` as a value of the type `hint` (int, float, str, bool, a tuple of them, or
+    optional: `none`)."""
+    args = typing.get_args(hint)
+    if type(None) in args:
+        if text.lower() in ("none", ""):
+            return None
+        hint = next(a for a in args if a is not type(None))
+        args = typing.get_args(hint)
+    wrong = f"--set {path}={text}: expected"
+    if typing.get_origin(hint) is tuple:
+        items = text.split(",")
+        kinds = [args[0]] * len(items) if args[-1] is Ellipsis else list(args)
+        if len(items) != len(kinds):
+            raise BenchError(f"{wrong} {len(kinds)} comma-separated values")
+        return tuple(_value(x, k, path) for x, k in zip(items, kinds))
+    if hint is bool:
+        if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
+            raise BenchError(f"{wrong} true or false")
+        return text.lower() in ("true", "1", "yes")
+    if hint in (int, float, str):
+        try:
+            return hint(text)
+        except ValueError:
+            raise BenchError(f"{wrong} {hint.__name__}") from None
+    raise BenchError(f"--set {path}: a {hint} is not set from the command line")
+
+
+def _assign(obj, parts: list[str], text: str, path: str):
+    """`obj` (a dataclass) with the field at `parts` set from `text`."""
+    if obj is None or not dataclasses.is_dataclass(obj):
+        raise BenchError(
+            f"--set {path}: {'.'.join(path.split('.')[: -len(parts)])} has no settings here"
+        )
+    names = [f.name for f in dataclasses.fields(obj)]
+    if parts[0] not in names:
+        raise BenchError(
+            f"--set {path}: {type(obj).__name__} has no setting {parts[0]!r}; valid: {', '.join(names)}"
+        )
+    current = getattr(obj, parts[0])
+    if len(parts) > 1:
+        value = _assign(current, parts[1:], text, path)
+    elif dataclasses.is_dataclass(current):
+        inner = ", ".join(f"{parts[0]}.{f.name}" for f in dataclasses.fields(current))
+        raise BenchError(f"--set {path}: set its fields ({inner})")
+    else:
+        value = _value(text, typing.get_type_hints(type(obj))[parts[0]], path)
+    return dataclasses.replace(obj, **{parts[0]: value})
+
+
+def apply_settings(config, assignments: list[str]):
+    """`config` with every `section.field=value` of `assignments` applied, in order."""
+    for text in assignments:
+        path, eq, value = text.partition("=")
+        if not eq or not path:
+            raise BenchError(
+                f"--set takes section.field=value, e.g. backend.ratio=0.7; got {text!r}"
+            )
+        config = _assign(config, path.split("."), value, path)
+    return config
+
+
+def settings_help(cls: type, prefix: str = "") -> list[str]:
+    """`section.field` of every setting of a (nested) dataclass, for `--set`'s help."""
+    hints = typing.get_type_hints(cls)
+    out = []
+    for f in dataclasses.fields(cls):
+        inner = [
+            a
+            for a in (hints[f.name], *typing.get_args(hints[f.name]))
+            if dataclasses.is_dataclass(a)
+        ]
+        out += settings_help(inner[0], f"{prefix}{f.name}.") if inner else [f"{prefix}{f.name}"]
+    return out
+
+
+def renders_arg(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--renders",
+        type=Path,
+        default=ROOT / "renders",
+        help=f"render cache directory (default: {ROOT / 'renders'})",
+    )
+
+
+def results_arg(parser: argparse.ArgumentParser, default: Path | None, what: str) -> None:
+    parser.add_argument("--results", type=Path, default=default, help=what)

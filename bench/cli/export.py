@@ -1,0 +1,32 @@
+"""`bench export SCENE`: a rendered scene as a dataset in the COLMAP layout."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from bench.cli.common import add_config_args, config_from_args, renders_arg
+from bench.render.config import VARIANTS, RenderConfig
+
+HELP = "write a rendered scene as a dataset in the COLMAP layout (for `bench run --dataset`)"
+DESCRIPTION = (
+    "Render (or reuse) SCENE at --seed and write OUT/images/, the ground-truth model "
+    "OUT/sparse/ (cameras.txt, images.txt, points3D.txt), the ground-truth point cloud "
+    "OUT/ground_truth/points.ply and per-image OUT/ground_truth/<image>.npz (z, position)."
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scene", metavar="SCENE", help="scene type (see `bench scenes`)")
+    parser.add_argument("--seed", type=int, default=0, help="scene seed (default: %(default)s)")
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="dataset folder")
+    add_config_args(parser, RenderConfig, choices={"variant": VARIANTS})
+    renders_arg(parser)
+
+
+def run(args: argparse.Namespace) -> None:
+    from bench.evaluation.export import export_dataset
+    from bench.render.entry import render_scene
+
+    cfg = config_from_args(RenderConfig, args).validate()
+    print(export_dataset(render_scene(args.scene, args.seed, cfg, args.renders), args.out))

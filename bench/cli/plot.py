@@ -1,0 +1,28 @@
+"""`bench plot`: the tables and figures again, from a results folder alone."""
+
+from __future__ import annotations
+
+import argparse
+
+from bench.cli.common import LATEST, renders_arg, results_arg
+
+HELP = "rebuild the tables and figures from runs.csv (no rendering, no reconstruction)"
+DESCRIPTION = (
+    "Rewrite table1.csv, table1_twoview.csv, table2.csv, paired.csv, paired_sfm.csv, "
+    "table_scenes.csv, frontend_cost.csv, figure3.png/.pdf and figure_budget.png from "
+    "RESULTS/runs.csv and RESULTS/vocabulary.json alone, and figure2.png from them plus an "
+    "exported model and its cached render."
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    results_arg(parser, LATEST, f"results folder (default: ./{LATEST})")
+    renders_arg(parser)
+
+
+def run(args: argparse.Namespace) -> None:
+    from bench.report.write import write_report
+    from bench.results import read_runs
+
+    write_report(read_runs(args.results / "runs.csv"), args.results, args.renders)
+    print(f"tables and figures rewritten in {args.results}")

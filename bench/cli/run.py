@@ -1,0 +1,303 @@
+"""`bench run`: the full benchmark (or a grown grid, or a dataset), then its report."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+
+from bench import BenchError
+from bench.cli.common import (
+    LATEST,
+    LIST_FORM,
+    PUBLISHED,
+    QUICK,
+    add_config_args,
+    apply_settings,
+    field_docs,
+    parse_list,
+    renders_arg,
+    results_arg,
+    settings_help,
+)
+from bench.console import log
+from bench.render.config import QUICK_RENDER, VARIANTS, RenderConfig
+
+HELP = "run the full benchmark: every scene, seed, policy and budget; tables and figures"
+DESCRIPTION = (
+    "Run every (scene, seed, policy, budget) of the grid: render (cached), candidates and "
+    "signals (cached), selection, COLMAP matching and verification, then each task (tri: "
+    "triangulation with the known poses; sfm: incremental mapping with unknown poses) under "
+    "each track protocol, evaluated against ground truth. Each unit's prediction (its "
+    "selections, verified matches and models) is stored in RESULTS/models/ and scored from "
+    "there. Rows go to RESULTS/runs.csv as they finish; an interrupted run resumes where it "
+    "stopped, a grown grid runs only its new rows, and rows whose scoring alone changed are "
+    "scored again from the stored predictions (--reevaluate: all of them). The sfm task's "
+    "selections see the images and the intrinsics only (the geometry their signals need is "
+    "estimated from the images); the tri task's see the rig's poses. Then table1.csv, "
+    "table1_twoview.csv, table2.csv, paired.csv, paired_sfm.csv, table_scenes.csv, "
+    "frontend_cost.csv, figure2.png, figure3.png/.pdf, figure_budget.png, config.json, "
+    "vocabulary.json and manifest.json."
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The grid's lists and the settings, then `_input_arguments` and `_folder_arguments`."""
+    from bench.frontend.policies import PolicyConfig, Weights
+    from bench.harness.config import RunConfig
+    from bench.harness.grid import default_policies
+    from bench.harness.tasks import RUNNERS
+    from bench.scenes.spec import scene_names
+    from bench.vocabulary import PROTOCOLS
+
+    def list_arg(name: str, default: str | None, metavar: str, what: str) -> None:
+        parser.add_argument(
+            f"--{name}",
+            default=default,
+            metavar=metavar,
+            help=f"{what}; {LIST_FORM}" + (f" (default: {default})" if default is not None else ""),
+        )
+
+    list_arg("scenes", None, "S1,S2", f"scene types (default: {','.join(scene_names())})")
+    list_arg("policies", ",".join(default_policies()), "P1,P2", "policies")
+    list_arg(
+        "budget",
+        None,
+        "B1,B2",
+        "features per view (default: 128,256,512, or 256 with --quick; 256 is the headline; "
+        "a whole-pool method such as `all` runs once per scene and seed, as budget 0)",
+    )
+    tasks = "; ".join(f"{n} ({r.spec.doc})" for n, r in RUNNERS.items())
+    list_arg("tasks", ",".join(RUNNERS), "T1,T2", f"reconstruction tasks: {tasks}")
+    list_arg(
+        "protocols",
+        ",".join(PROTOCOLS),
+        "P1,P2",
+        "track protocols, applied to both tasks' triangulation: multiview (tracks of 3+ "
+        "views, the headline) and twoview (two-view tracks kept; its own table)",
+    )
+    list_arg(
+        "seeds", None, "N1,N2", "scene seeds, e.g. 0,1,2 or 0-9 (default: 0,1,2, or 0 with --quick)"
+    )
+    list_arg(
+        "weights",
+        ",".join(str(w) for w in dataclasses.astuple(Weights())),
+        "W1,...,W5",
+        field_docs(PolicyConfig)["weights"].rstrip("."),
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        dest="settings",
+        metavar="SECTION.FIELD=VALUE",
+        help="any setting of the run, applied after the options above and recorded in "
+        "config.json (repeatable; e.g. --set backend.ratio=0.7, --set policy.tiles=8,6, "
+        "--set signals.depth_prior=none); settings: " + ", ".join(settings_help(RunConfig)),
+    )
+    _input_arguments(parser)
+    _folder_arguments(parser)
+
+
+def _input_arguments(parser: argparse.ArgumentParser) -> None:
+    """What the grid runs on: the smoke preset, a dataset, outside policies, the detector,
+    the render settings."""
+    from bench.frontend.features import DETECTORS
+
+    parser.add_argument(
+        "--quick", action="store_true", help="smoke run: tiny renders, one seed, budget 256"
+    )
+    parser.add_argument(
+        "--dataset",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="benchmark on a dataset in the COLMAP layout instead of the rendered scenes: "
+        "DIR/images/, the ground-truth poses in DIR/sparse/ (cameras.txt, images.txt), "
+        "optionally DIR/ground_truth/points.ply (point accuracy) and per-image "
+        "DIR/ground_truth/<image>.npz (tracks, completeness, oracle); results default to "
+        "./results/dataset-<name>",
+    )
+    parser.add_argument(
+        "--policy-module",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="a Python file whose @policy functions are registered (repeatable); see "
+        "examples/my_policy.py",
+    )
+    parser.add_argument(
+        "--detector",
+        default="sift",
+        choices=DETECTORS,
+        help="candidate detector (default: %(default)s)",
+    )
+    add_config_args(parser, RenderConfig, quick=QUICK_RENDER, choices={"variant": VARIANTS})
+
+
+def _folder_arguments(parser: argparse.ArgumentParser) -> None:
+    """Where the run reads and writes, where it runs, and what it does with what the
+    results folder holds."""
+    results_arg(
+        parser,
+        None,
+        f"results folder (default: ./{LATEST}, or ./{QUICK} with --quick; runs never write "
+        f"the published snapshot ./{PUBLISHED}, see `bench publish`)",
+    )
+    renders_arg(parser)
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="Dask workers of a local cluster, one single-threaded process each (default: the "
+        "machine's cores); 1 runs everything in this process, with no cluster",
+    )
+    parser.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="submit the units to an existing Dask cluster (e.g. tcp://host:8786) instead; "
+        "its workers must see the same renders/ and results folder",
+    )
+    parser.add_argument(
+        "--reevaluate",
+        action="store_true",
+        help="score every row of the grid again from its stored prediction (selections, "
+        "verified matches, models) without selecting, matching or mapping again; a unit "
+        "without a current prediction is computed",
+    )
+    parser.add_argument(
+        "--set-aside-damaged",
+        action="store_true",
+        help="move damaged rows of RESULTS/runs.csv to runs.damaged.csv and compute them again "
+        "(without it, a damaged runs.csv is refused)",
+    )
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace results of another configuration in RESULTS",
+    )
+
+
+def weights_arg(text: str):
+    """`--weights wt,wr,wq,wp,wa`: a vector, in the order of `Weights`' fields."""
+    from bench.frontend.policies import Weights
+
+    values = parse_list("--weights", text, float, "0.28,0.27,0.22,0.19,0.20", unique=False)
+    names = [f.name for f in dataclasses.fields(Weights)]
+    if len(values) != len(names):
+        raise BenchError(f"weights must be five numbers (t, r, q, p, a), got {list(values)}")
+    return Weights(**dict(zip(names, values)))
+
+
+def run_config(args: argparse.Namespace):
+    """The run's settings: the --quick preset, then the options, then each --set."""
+    from bench.frontend.features import DetectorConfig
+    from bench.frontend.policies import PolicyConfig
+    from bench.harness.config import RunConfig
+
+    render = QUICK_RENDER if args.quick else RenderConfig()
+    overrides = {
+        f.name: getattr(args, f.name)
+        for f in dataclasses.fields(RenderConfig)
+        if getattr(args, f.name) is not None
+    }
+    render = dataclasses.replace(render, **overrides)
+    if args.dataset is not None:  # a dataset's images are what they are: nothing renders
+        given = [f"--{k.replace('_', '-')}" for k in overrides] + ["--scenes"] * bool(args.scenes)
+        if given:
+            log(f"{', '.join(given)} ignored with --dataset: its images are not rendered")
+        render = None
+    modules = tuple(str(Path(m).resolve()) for m in args.policy_module)
+    run = RunConfig(
+        render=render,
+        detector=DetectorConfig(detector=args.detector),
+        policy=PolicyConfig(weights=weights_arg(args.weights), modules=modules),
+    )
+    return apply_settings(run, args.settings)
+
+
+def dataset_arg(path: Path) -> Path:
+    """A `--dataset` folder, checked: `images/` and a model in `sparse/`."""
+    from bench.frontend.views import Source
+
+    Source.of(path)  # a clear error if it is not a dataset
+    if (Path(path) / "meta.json").is_file():
+        raise BenchError(f"{path} is a render entry; --dataset takes DIR with images/ and sparse/")
+    return Path(path).resolve()
+
+
+def has_pixel_truth(dataset: Path) -> bool:
+    """Whether a dataset has per-pixel ground truth (which the oracle needs)."""
+    from bench.evaluation import groundtruth
+    from bench.frontend.views import read_colmap_model
+
+    names = [n for n, _ in read_colmap_model(dataset / "sparse")]
+    ok = groundtruth.has_pixel_truth(dataset, names)
+    if not ok:
+        log(f"{dataset} has no per-pixel ground truth: the oracle is left out")
+    return ok
+
+
+def run(args: argparse.Namespace) -> None:
+    from bench.harness.execute import Cluster, default_workers
+    from bench.harness.grid import BenchConfig, RunOptions, run_benchmark
+    from bench.report.tables import headline_frame, table1, with_oracle_share
+    from bench.report.write import write_report
+    from bench.results import Workspace
+    from bench.scenes.spec import scene_names
+    from bench.vocabulary import ORACLE, Vocabulary
+
+    if args.scheduler is not None and args.workers is not None:
+        raise BenchError("--workers does not apply with --scheduler: the cluster has its workers")
+    run_cfg = run_config(args)
+    policies = parse_list("--policies", args.policies, str, "texture,adaptive")
+    dataset = None
+    if args.dataset is not None:
+        dataset = dataset_arg(args.dataset)
+        if args.seeds is not None:
+            log("--seeds is ignored with --dataset: a dataset is one scene, recorded as seed 0")
+        scenes, seeds = (dataset.name,), (0,)
+        policies = tuple(p for p in policies if p != ORACLE or has_pixel_truth(dataset))
+    else:
+        seeds = parse_list(
+            "--seeds", args.seeds or ("0" if args.quick else "0,1,2"), int, "0,1,2 or 100-119"
+        )
+        scenes = parse_list("--scenes", args.scenes or ",".join(scene_names()), str, "table,facade")
+    budget = args.budget if args.budget is not None else ("256" if args.quick else "128,256,512")
+    cfg = BenchConfig(
+        scenes=scenes,
+        seeds=seeds,
+        policies=policies,
+        budgets=parse_list("--budget", budget, int, "128,256,512"),
+        tasks=parse_list("--tasks", args.tasks, str, "tri"),
+        protocols=parse_list("--protocols", args.protocols, str, "multiview,twoview"),
+        run=run_cfg,
+        dataset=str(dataset) if dataset is not None else None,
+    )
+    results = args.results or (
+        QUICK if args.quick else LATEST.with_name(f"dataset-{dataset.name}") if dataset else LATEST
+    )
+    if args.workers is not None and args.workers < 1:
+        raise BenchError(f"--workers must be at least 1, got {args.workers}")
+    options = RunOptions(
+        overwrite=args.overwrite,
+        set_aside=args.set_aside_damaged,
+        reevaluate=args.reevaluate,
+        cluster=Cluster(args.workers or default_workers(), args.scheduler),
+    )
+    df = run_benchmark(cfg, Workspace(results, args.renders), options, report=write_report)
+    protocol = "multiview" if "multiview" in cfg.protocols else cfg.protocols[0]
+    vocab = Vocabulary.load(results)
+    t = table1(headline_frame(with_oracle_share(df), vocab, protocol), vocab)
+    print(f"Table 1 ({protocol} protocol; {', '.join(cfg.tasks)}):")
+    cols = ["strategy", "budget", "runs", "acc_completeness_pct", "completeness_vs_oracle_pct"]
+    cols += [
+        "accuracy_pct",
+        "rmse",
+        "median_error",
+        "inlier_pct",
+        "sfm_maa",
+        "sfm_registered_views",
+    ]
+    print(t[[c for c in cols if c in t]].to_string(index=False, float_format=lambda x: f"{x:.3f}"))

@@ -1,0 +1,161 @@
+"""A unit's stored prediction scored against ground truth: one row per job (task, track
+protocol) with the identification, every metric, the seconds of each stage (ms) and a
+failure reason if any.
+
+It reads the prediction `bench.harness.predict` stored (selections, verified matches,
+exported models, seconds) and never selects, matches or maps, so `bench run --reevaluate`
+(or a change to a metric alone) re-scores a grid in seconds per unit. A tri model's point
+errors are written beside it (`point_errors.csv`, for Figure 2).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+
+from bench.evaluation import groundtruth, metrics, poses, truth
+from bench.evaluation.metrics import coverage_pct, match_metrics, model_points, point_error
+from bench.files import atomic_path, source_hash
+from bench.frontend.signals import seconds_of
+from bench.frontend.views import source_key
+from bench.harness import tasks
+from bench.harness.config import RunConfig
+from bench.harness.predict import LoadedScene, prediction_hash, read_record, stored_pairs
+from bench.harness.tasks import RUNNERS
+from bench.results import PREDICTION, Workspace
+from bench.vocabulary import HEADLINE, METHODS, Job, Unit
+
+
+@cache
+def evaluation_hash() -> str:
+    """The `evaluation_hash` of every row: the source of the scoring."""
+    return source_hash(groundtruth, truth, metrics, poses, tasks, sys.modules[__name__])
+
+
+def evaluate(
+    scene: LoadedScene, unit: Unit, jobs: list[Job], cfg: RunConfig, ws: Workspace
+) -> list[dict]:
+    """The rows of `jobs` from the unit's stored prediction (module docstring)."""
+    folder = ws.unit_dir(unit)
+    record = read_record(folder)
+    names = record["names"]
+    shared = {}
+    for grant in {record["jobs"][_key(j)]["grant"] for j in jobs}:
+        shared[grant] = _shared(scene, unit, record, grant, folder)
+    rows = []
+    for job in jobs:
+        done = record["jobs"][_key(job)]
+        metrics_of, seconds = shared[done["grant"]]
+        out = ws.model_dir(unit, job)
+        model = pycolmap.Reconstruction(str(out)) if done["model"] else None
+        t = time.perf_counter()
+        scores = RUNNERS[job.task].evaluate(scene.truth, model, names, job.protocol)
+        if job.task == HEADLINE[0] and model is not None and scene.truth.surface is not None:
+            _write_point_errors(model, scene, out)
+        timing = seconds | {"task": done["task_s"], "evaluate": time.perf_counter() - t}
+        ident = identity(scene.entry, unit, job, cfg)
+        rows.append(make_row(ident, metrics_of | scores, timing, done["failure"], scene.entry))
+    return rows
+
+
+def _key(job: Job) -> str:
+    return f"{job.task}/{job.protocol}"
+
+
+def _shared(scene: LoadedScene, unit: Unit, record: dict, grant: str, folder: Path):
+    """The metrics a grant's jobs share (of the selection and its matches) and the seconds
+    of the stages before the task."""
+    t = time.perf_counter()
+    with np.load(folder / f"{PREDICTION}-{grant}.npz") as arrays:
+        if grant == "peer":
+            keypoints = [arrays[f"keypoints_{v}"] for v in range(len(record["names"]))]
+            peer = record["peer"]
+            cams = scene.truth.cams
+            shared = {
+                "tentative_matches": peer["tentative"],
+                "verified_matches": peer["verified"],
+                "inlier_pct": 100.0 * peer["verified"] / peer["tentative"]
+                if peer["tentative"]
+                else math.nan,
+                "coverage_pct": coverage_pct(keypoints, cams),
+                "keypoints_per_view": float(np.mean([len(k) for k in keypoints])),
+                "ground_truth": scene.truth.kind,
+            }
+            return shared, dict(peer["seconds"])
+        stored = record["grants"][grant]
+        selections = [arrays[f"selection_{v}"] for v in range(len(record["names"]))]
+        pairs = stored_pairs(record, grant, arrays)
+    fe = scene.fronts[grant]
+    reads = METHODS[unit.policy].reads
+    earlier = [(r["selected"], r["pair_tentative"], r["pair_verified"]) for r in stored["rounds"]]
+    shared = match_metrics(scene.truth, fe.pools, selections, pairs, len(reads), earlier)
+    shared["ground_truth"] = scene.truth.kind
+    seconds = {
+        "detect": fe.seconds["detect"],
+        "signals": seconds_of(fe.seconds, reads),
+        **stored["seconds"],
+        "evaluate_matches": time.perf_counter() - t,
+    }
+    return shared, seconds
+
+
+def _write_point_errors(model, scene: LoadedScene, out: Path) -> None:
+    """Each point's distance to the ground-truth surface (`point3D_id,error`)."""
+    ids = list(model.points3D)
+    if not ids:
+        return
+    errors = point_error(model_points(model), scene.truth.surface)
+    with atomic_path(out / "point_errors.csv") as tmp:
+        np.savetxt(
+            tmp,
+            np.c_[ids, errors],
+            fmt=["%d", "%.6g"],
+            delimiter=",",
+            header="point3D_id,error",
+            comments="",
+        )
+
+
+def identity(entry: Path, unit: Unit, job: Job, cfg: RunConfig) -> dict:
+    """The columns that say which run a row is and which code and settings computed it."""
+    return {
+        "scene": unit.scene,
+        "seed": unit.seed,
+        "policy": unit.policy,
+        "budget": unit.budget,
+        "task": job.task,
+        "protocol": job.protocol,
+        "render_key": source_key(entry),
+        "prediction_hash": prediction_hash(cfg, unit.policy),
+        "evaluation_hash": evaluation_hash(),
+    }
+
+
+def make_row(
+    ident: dict, scores: dict, timing: dict[str, float], failure: str | None, entry: Path
+) -> dict:
+    meta = Path(entry) / "meta.json"  # a render entry's; a dataset has none
+    render_s = (
+        float(np.mean(json.loads(meta.read_text())["seconds_per_view"]))
+        if meta.is_file()
+        else math.nan
+    )
+    row = {
+        **ident,
+        **scores,
+        "render_s_per_view": render_s,
+        **{f"{k}_ms": 1000 * v for k, v in timing.items()},
+        "wall_ms": 1000 * sum(v for k, v in timing.items() if not k.startswith("evaluate")),
+        "status": "ok" if failure is None else "failed",
+        "failure": failure or "",
+    }
+    if failure:
+        row["rmse"] = row["median_error"] = math.nan
+    return row

@@ -1,0 +1,270 @@
+"""One unit of work up to its reconstructions, stored as the unit's prediction.
+
+render entry -> front end (cached) under the geometry each task grants -> selection of B
+per view (a policy, or the oracle, which reads ground truth as a reference) -> match ->
+verify -> for each job (task, protocol): reconstruct (COLMAP) -> export the model. The
+jobs of one grant share the selection, matching and verification, so they see exactly
+the same matches; a selection that does not depend on the grant (it reads no geometry)
+is matched once for both. A stock-COLMAP peer extracts, matches and maps on its own.
+
+What a unit predicted is stored in its folder (`Workspace.unit_dir`): the selections and
+verified matches (`prediction-<grant>.npz`, a peer's keypoints in `prediction-peer.npz`),
+the models exported per job, and `prediction.json` (written last: the prediction hash,
+the view names, each stage's seconds, each job's failure). `bench.harness.evaluate`
+scores it; nothing here scores.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+
+from bench.backend import matching, peers, reconstruction
+from bench.backend.matching import PairMatches, match_and_verify, matcher
+from bench.backend.peers import run_peer
+from bench.evaluation import groundtruth, oracle, truth
+from bench.evaluation.oracle import matchable_tracks, oracle_select
+from bench.evaluation.truth import SceneTruth
+from bench.files import atomic_path, content_key, source_hash, temp_dir_beside, write_text_atomic
+from bench.frontend import (
+    features,
+    feedback,
+    geometry,
+    plugins,
+    policies,
+    selection,
+    signals,
+    stage,
+    views,
+)
+from bench.frontend.policies import PolicyInput, weights_file
+from bench.frontend.selection import select_views
+from bench.frontend.stage import FrontEnd
+from bench.frontend.views import Source
+from bench.harness import config, tasks
+from bench.harness.config import RunConfig
+from bench.harness.tasks import RUNNERS, Matched
+from bench.results import PREDICTION, Workspace
+from bench.vocabulary import METHODS, ORACLE, Job, Unit
+
+
+@dataclass(frozen=True)
+class LoadedScene:
+    """One scene and seed as a unit reads it: its render entry (or dataset), its front end
+    under each geometry granted, and its ground truth (the evaluation side's)."""
+
+    entry: Path
+    fronts: dict[str, FrontEnd]
+    truth: SceneTruth
+
+
+@cache
+def prediction_code_hash() -> str:
+    """Hash of the source of every stage from the render to the exported models."""
+    return source_hash(
+        views,
+        features,
+        geometry,
+        signals,
+        policies,
+        feedback,
+        plugins,
+        selection,
+        stage,
+        matching,
+        reconstruction,
+        peers,
+        groundtruth,
+        truth,
+        oracle,
+        tasks,
+        config,
+        sys.modules[__name__],
+    )
+
+
+def prediction_hash(cfg: RunConfig, policy: str) -> str:
+    """The `prediction_hash` of a policy's rows: the settings, the code and the learned
+    weights, and for a policy from a module (`--policy-module`, an entry point) its
+    module's content as well."""
+    plugins.load(cfg.policy.modules)
+    base = content_key(
+        {
+            "settings": cfg.as_dict(),
+            "code": prediction_code_hash(),
+            "inputs": plugins.files_hash([weights_file(cfg.policy.learned_weights)]),
+        }
+    )
+    origin = plugins.ORIGIN.get(policy)
+    return content_key([base, plugins.files_hash([origin])]) if origin else base
+
+
+def select_features(
+    fe: FrontEnd, scene_truth: SceneTruth, unit: Unit, cfg: RunConfig
+) -> tuple[list[np.ndarray], float, list[dict]]:
+    """Every view's selection, the seconds it took, and the feedback loop's rounds."""
+    t = time.perf_counter()
+    if unit.policy == ORACLE:
+        found = matchable_tracks(scene_truth, fe.pools, cfg.backend.ratio)
+        sel = oracle_select(found, [c.response for c in fe.pools], unit.budget)
+        rounds = []
+    else:
+        inputs = [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
+        match = matcher([v.camera for v in fe.views], fe.pools, cfg.backend)
+        sel, rounds = select_views(unit.policy, inputs, unit.budget, unit.seed, cfg.policy, match)
+    return sel, time.perf_counter() - t, rounds
+
+
+MODEL_FILES = ("cameras.txt", "images.txt", "points3D.txt", "rigs.txt", "frames.txt", "points.ply")
+"""The files of an exported model (a unit's folder holds more: its prediction, loop.json,
+the models of its other jobs)."""
+
+
+def export_model(model, out: Path) -> None:
+    """COLMAP text model + points.ply into `out`: written in a temporary folder beside it,
+    then each file renamed into place, the files of an earlier model removed first."""
+    out.mkdir(parents=True, exist_ok=True)
+    scratch = temp_dir_beside(out)
+    try:
+        model.write_text(str(scratch))
+        model.export_PLY(str(scratch / "points.ply"))
+        for name in MODEL_FILES:
+            (out / name).unlink(missing_ok=True)
+        for f in sorted(scratch.iterdir()):
+            with atomic_path(out / f.name) as tmp:
+                shutil.move(f, tmp)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+
+
+def clear_model(out: Path) -> None:
+    """Remove an exported model's files (and its folder, if nothing else is left there)."""
+    for name in MODEL_FILES:
+        (out / name).unlink(missing_ok=True)
+    if out.is_dir() and not any(out.iterdir()):
+        out.rmdir()
+
+
+def _export_or_clear(model, out: Path) -> None:
+    """Export a model; without one, remove what an earlier run left there."""
+    if model is not None:
+        export_model(model, out)
+    else:
+        clear_model(out)
+
+
+def predict(scene: LoadedScene, unit: Unit, jobs: list[Job], cfg: RunConfig, ws: Workspace) -> None:
+    """Compute and store the prediction of `unit` for `jobs` (module docstring)."""
+    folder = ws.unit_dir(unit)
+    folder.mkdir(parents=True, exist_ok=True)
+    record = {"hash": prediction_hash(cfg, unit.policy), "grants": {}, "jobs": {}}
+    earlier = read_record(folder)
+    if earlier.get("hash") == record["hash"]:
+        record |= {k: earlier[k] for k in ("grants", "jobs", "peer") if k in earlier}
+    if METHODS[unit.policy].role == "peer":
+        _predict_peer(scene, unit, jobs, cfg, ws, record)
+    else:
+        _predict_policy(scene, unit, jobs, cfg, ws, record)
+    write_text_atomic(folder / f"{PREDICTION}.json", json.dumps(record, indent=1))
+
+
+def _predict_policy(scene, unit, jobs, cfg, ws, record) -> None:
+    folder, matched = ws.unit_dir(unit), {}
+    for grant in dict.fromkeys(RUNNERS[j.task].spec.grant for j in jobs):
+        fe = scene.fronts[grant]
+        selections, select_s, rounds = select_features(fe, scene.truth, unit, cfg)
+        key = repr(([s.tolist() for s in selections], rounds))
+        xy = [c.xy[s] for c, s in zip(fe.pools, selections)]
+        if key not in matched:
+            desc = [c.descriptors[s] for c, s in zip(fe.pools, selections)]
+            matched[key] = match_and_verify([v.camera for v in fe.views], xy, desc, cfg.backend)
+        pairs, match_s = matched[key]
+        record["names"] = [v.name for v in fe.views]
+        record["grants"][grant] = {
+            "seconds": {"select": select_s, **match_s},
+            "rounds": rounds,
+            "pairs": [{"i": p.i, "j": p.j, "config": p.config} for p in pairs],
+        }
+        arrays = {f"selection_{v}": s for v, s in enumerate(selections)}
+        for k, p in enumerate(pairs):
+            arrays |= {f"tentative_{k}": p.tentative, f"verified_{k}": p.verified}
+        with atomic_path(folder / f"{PREDICTION}-{grant}.npz") as tmp:
+            np.savez(tmp, **arrays)
+        m = Matched(
+            Source.of(scene.entry).images, [v.camera for v in fe.views], record["names"], xy, pairs
+        )
+        grant_jobs = [j for j in jobs if RUNNERS[j.task].spec.grant == grant]
+        for job in grant_jobs:
+            runner = RUNNERS[job.task]
+            rec = runner.reconstruct(m, cfg.backend, job.protocol)
+            model = rec.model
+            if model is None and runner.record is not None:
+                model = runner.record(m)  # the exported model still records the selection
+            _export_or_clear(model, ws.model_dir(unit, job))
+            record["jobs"][_job_key(job)] = {
+                "grant": grant,
+                "failure": rec.failure,
+                "task_s": rec.seconds,
+                "model": model is not None,
+            }
+        if rounds:
+            loop = ws.model_dir(unit, grant_jobs[0])
+            loop.mkdir(parents=True, exist_ok=True)
+            write_text_atomic(loop / "loop.json", json.dumps(rounds, indent=1))
+
+
+def _predict_peer(scene, unit, jobs, cfg, ws, record) -> None:
+    fe = next(iter(scene.fronts.values()))
+    names, cams = [v.name for v in fe.views], [v.camera for v in fe.views]
+    image_dir = Source.of(scene.entry).images
+    run = run_peer(
+        image_dir, names, cams, unit.policy, unit.budget, cfg.backend, [j.protocol for j in jobs]
+    )
+    record["names"] = names
+    record["peer"] = {"tentative": run.tentative, "verified": run.verified, "seconds": run.seconds}
+    with atomic_path(ws.unit_dir(unit) / f"{PREDICTION}-peer.npz") as tmp:
+        np.savez(tmp, **{f"keypoints_{v}": k for v, k in enumerate(run.keypoints)})
+    for job in jobs:
+        rec = run.recs[job.protocol]
+        _export_or_clear(rec.model, ws.model_dir(unit, job))
+        record["jobs"][_job_key(job)] = {
+            "grant": "peer",
+            "failure": rec.failure,
+            "task_s": rec.seconds,
+            "model": rec.model is not None,
+        }
+
+
+def _job_key(job: Job) -> str:
+    return f"{job.task}/{job.protocol}"
+
+
+def read_record(folder: Path) -> dict:
+    """A unit's `prediction.json`, or {} if there is none (or it is unreadable)."""
+    try:
+        return json.loads((folder / f"{PREDICTION}.json").read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def has_prediction(ws: Workspace, unit: Unit, jobs: list[Job], cfg: RunConfig) -> bool:
+    """Whether the unit's folder holds a current prediction of every job in `jobs`."""
+    record = read_record(ws.unit_dir(unit))
+    return record.get("hash") == prediction_hash(cfg, unit.policy) and all(
+        _job_key(j) in record.get("jobs", {}) for j in jobs
+    )
+
+
+def stored_pairs(record: dict, grant: str, arrays) -> list[PairMatches]:
+    """The verified pairs of a grant's stored prediction."""
+    return [
+        PairMatches(p["i"], p["j"], arrays[f"tentative_{k}"], arrays[f"verified_{k}"], p["config"])
+        for k, p in enumerate(record["grants"][grant]["pairs"])
+    ]

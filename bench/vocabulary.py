@@ -1,0 +1,190 @@
+"""The benchmark's vocabulary, in one place: the keys of a row, the track protocols, the
+headline, the units of work, and the registries of methods and tasks.
+
+A method (a selection policy, a reference or a stock-COLMAP peer) is declared where it is
+implemented (`bench.frontend.policies.policy`, the feedback loop, the oracle, the peers),
+with its display label and its role; the display names, the baselines, the default grid
+and the budget-0 rule are derived from these declarations. A task is declared where its
+reconstruction and evaluation are (`bench.harness.tasks`). A results folder records the
+vocabulary its rows were computed under (`vocabulary.json`), and the report reads that
+record: it never imports the stages that compute.
+
+This module imports nothing heavy, so every stage (and the report) may import it.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import NamedTuple
+
+from bench import BenchError
+
+KEY = ("scene", "seed", "policy", "budget", "task", "protocol")
+"""The columns that identify a row of `runs.csv`."""
+UNIT_KEY = KEY[:4]
+"""The columns that identify a unit of work (one selection, matched once per geometry)."""
+PROTOCOLS = {"multiview": 3, "twoview": 2}
+"""Track protocols: the fewest views a point's track may have (`bench.backend.reconstruction`)."""
+HEADLINE = ("tri", "multiview")
+"""The headline task and track protocol."""
+HEADLINE_BUDGET = 256
+HEADLINE_POLICY = "adaptive"
+"""The paper's method, compared with every baseline in `table2.csv` and `paired.csv`."""
+PAIRED_PEER = "colmap-b"
+"""The stock-COLMAP peer held to the same budget, which `paired_sfm.csv` compares with."""
+ORACLE = "oracle"
+"""The ground-truth selection (`bench.evaluation.oracle`): a reference, never a policy."""
+ROLES = ("baseline", "contender", "reference", "peer")
+"""A baseline competes for "best baseline"; a contender is compared with the baselines; a
+reference (`all`, the oracle) and a peer (stock COLMAP) are shown, never ranked as either."""
+GRANTS = ("rig", "images")
+"""What a task's selection may see of the views' geometry: the rig's poses, or the images
+and intrinsics only (`bench.frontend.geometry`)."""
+
+
+@dataclass(frozen=True)
+class Method:
+    """A row's `policy`: how it is shown and what it is for."""
+
+    name: str
+    label: str
+    role: str
+    whole_pool: bool = False
+    """Runs once per scene and seed, as budget 0 (the whole pool, or COLMAP's default)."""
+    reads: tuple[str, ...] = ()
+    """The front-end signals it reads (for its reported cost)."""
+
+
+@dataclass(frozen=True)
+class Task:
+    """A reconstruction task: what its selection may see and what its rows must hold."""
+
+    name: str
+    grant: str
+    """`rig` or `images` (`GRANTS`)."""
+    needs: tuple[str, ...]
+    """The metrics an `ok` row must have."""
+    columns: tuple[str, ...]
+    """Its metrics in Table 1 (a task other than the headline's as `<task>_<metric>`)."""
+    peers: bool = False
+    """Whether the stock-COLMAP peers run it (they have no known-pose mode)."""
+    doc: str = ""
+
+
+@dataclass(frozen=True)
+class Unit:
+    """One unit of work: a policy's selection at a budget in one scene and seed."""
+
+    scene: str
+    seed: int
+    policy: str
+    budget: int
+
+    @property
+    def group(self) -> tuple[str, int]:
+        """(scene, seed): the render entry and front end the unit reads."""
+        return self.scene, self.seed
+
+    def __str__(self) -> str:
+        return f"{self.scene} s{self.seed} {self.policy} b{self.budget}"
+
+
+class Job(NamedTuple):
+    """One row of a unit: a task under a track protocol."""
+
+    task: str
+    protocol: str
+
+
+METHODS: dict[str, Method] = {}
+TASKS: dict[str, Task] = {}
+
+
+def declare_method(method: Method) -> Method:
+    """Register a method under a name no other method has."""
+    if method.role not in ROLES:
+        raise BenchError(
+            f"policy {method.name}: unknown role {method.role!r}; valid: {', '.join(ROLES)}"
+        )
+    if method.name in METHODS:
+        raise BenchError(f"policy name {method.name!r} is taken; give the policy another name")
+    METHODS[method.name] = method
+    return method
+
+
+def declare_task(task: Task) -> Task:
+    if task.grant not in GRANTS:
+        raise BenchError(f"task {task.name}: unknown grant {task.grant!r}")
+    TASKS.setdefault(task.name, task)
+    return task
+
+
+@dataclass(frozen=True)
+class Vocabulary:
+    """The methods and tasks a set of rows was computed under; what the report reads."""
+
+    methods: dict[str, Method] = field(default_factory=dict)
+    tasks: dict[str, Task] = field(default_factory=dict)
+
+    @classmethod
+    def current(cls) -> Vocabulary:
+        """The declarations of this process (the compute stages imported)."""
+        return cls(dict(METHODS), dict(TASKS))
+
+    def label(self, policy: str) -> str:
+        m = self.methods.get(policy)
+        return m.label if m else policy
+
+    def with_role(self, *roles: str) -> list[str]:
+        return [n for n, m in self.methods.items() if m.role in roles]
+
+    def order(self, policy: str) -> tuple[int, int]:
+        """Display order: baselines, contenders, references, peers; then declaration."""
+        names = list(self.methods)
+        if policy not in self.methods:
+            return len(ROLES), 0
+        return ROLES.index(self.methods[policy].role), names.index(policy)
+
+    def merged(self, older: Vocabulary) -> Vocabulary:
+        """This vocabulary, keeping `older`'s entries for names it does not declare."""
+        return Vocabulary(older.methods | self.methods, older.tasks | self.tasks)
+
+    def to_json(self) -> str:
+        return json.dumps(
+            {
+                "methods": {n: asdict(m) for n, m in self.methods.items()},
+                "tasks": {n: asdict(t) for n, t in self.tasks.items()},
+            },
+            indent=1,
+        )
+
+    @classmethod
+    def from_json(cls, text: str) -> Vocabulary:
+        data = json.loads(text)
+        methods = {
+            n: Method(**{**m, "reads": tuple(m["reads"])}) for n, m in data["methods"].items()
+        }
+        tasks = {
+            n: Task(**{**t, "needs": tuple(t["needs"]), "columns": tuple(t["columns"])})
+            for n, t in data["tasks"].items()
+        }
+        return cls(methods, tasks)
+
+    @classmethod
+    def load(cls, results: Path) -> Vocabulary:
+        """The vocabulary recorded in a results folder (`vocabulary.json`)."""
+        path = Path(results) / VOCABULARY_FILE
+        try:
+            return cls.from_json(path.read_text())
+        except FileNotFoundError:
+            raise BenchError(
+                f"{path} not found: these results were not written by this version of "
+                "`bench run`; run it into the folder again"
+            ) from None
+        except (ValueError, KeyError, TypeError) as e:
+            raise BenchError(f"{path} is unreadable ({type(e).__name__}: {e})") from None
+
+
+VOCABULARY_FILE = "vocabulary.json"
