@@ -23,7 +23,10 @@ import csv
 import io
 import json
 import math
+import os
 import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -230,15 +233,36 @@ def check_results_dir(results: Path, settings: dict, overwrite: bool) -> None:
             )
 
 
+@contextmanager
+def models_replaced(results: Path, overwrite: bool) -> Iterator[dict]:
+    """With `overwrite`, the models (and stored predictions) of other settings moved aside
+    before any unit writes its own; when the block ends they are removed if it bound the
+    folder to the new settings (`state["bound"]`), else put back in place of whatever the
+    refused run wrote: a run refused before its first rows loses nothing."""
+    state = {"bound": False}
+    models, aside = results / "models", results / f".models-replaced-{os.getpid()}"
+    if not (overwrite and models.is_dir()):
+        yield state
+        return
+    models.rename(aside)
+    try:
+        yield state
+    finally:
+        if state["bound"]:
+            shutil.rmtree(aside)
+        else:
+            shutil.rmtree(models, ignore_errors=True)
+            aside.rename(models)
+
+
 def bind_results_dir(results: Path, settings: dict, vocab: Vocabulary, overwrite: bool) -> None:
     """Bind `results` to these settings (`config.json`) as the first rows are computed, and
     record the vocabulary of its rows (`vocabulary.json`: this run's, keeping the entries
-    of earlier runs for names it does not declare); with `overwrite`, the rows, models
-    and vocabulary of other settings go first."""
+    of earlier runs for names it does not declare); with `overwrite`, the rows and
+    vocabulary of other settings go first (their models went aside, `models_replaced`)."""
     if overwrite:
-        for name in ("runs.csv", "models", DAMAGED, VOCABULARY_FILE):
-            p = results / name
-            shutil.rmtree(p) if p.is_dir() else p.unlink(missing_ok=True)
+        for name in ("runs.csv", DAMAGED, VOCABULARY_FILE):
+            (results / name).unlink(missing_ok=True)
     settings = json.loads(json.dumps(settings))
     write_text_atomic(results / "config.json", json.dumps({"settings": settings}, indent=1))
     if (results / VOCABULARY_FILE).is_file():

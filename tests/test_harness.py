@@ -953,3 +953,21 @@ def test_every_setting_is_reachable_with_set_and_recorded():
     assert run.as_dict()["backend"]["ratio"] == 0.7  # what config.json records
     names = settings_help(RunConfig)
     assert "backend.ratio" in names and "policy.weights.texture" in names and len(names) > 25
+
+
+def test_a_refused_overwrite_keeps_the_stored_predictions_and_a_bound_one_replaces_them(
+    quick_results, renders_dir, tmp_path
+):
+    """--overwrite moves the old models and predictions aside before any unit writes (the
+    workers of the new run write beside them), puts them back if the run is refused before
+    its first rows, and removes them once the folder is bound to the new settings."""
+    r = tmp_path / "r"
+    shutil.copytree(quick_results, r)
+    stored = sorted(p.relative_to(r) for p in (r / "models").rglob("prediction.json"))
+    with pytest.raises(BenchError, match="exceeds every candidate pool"):
+        bench_run(dataclasses.replace(SMALL, budgets=(10**6,)), r, renders_dir, overwrite=True)
+    assert sorted(p.relative_to(r) for p in (r / "models").rglob("prediction.json")) == stored
+    one = dataclasses.replace(SMALL, scenes=("table",), policies=("texture",), tasks=("tri",))
+    bench_run(one, r, renders_dir, overwrite=True)
+    assert [p.parent.name for p in (r / "models").rglob("prediction.json")] == ["texture-b64"]
+    assert not list(r.glob(".models-replaced-*")) and len(read_runs(r / "runs.csv")) == 2

@@ -41,6 +41,7 @@ from bench.results import (
     Workspace,
     bind_results_dir,
     check_results_dir,
+    models_replaced,
     read_runs,
     set_aside_damaged,
 )
@@ -251,30 +252,16 @@ def _run_in(
             bar.set_postfix_str(f"{sc} seed {sd}")
             bar.update()
     plan = Plan(entries, work, cfg.budgets)
-    t_runs, bound = time.perf_counter(), False
-    with progress("frontend", len(groups)) as fbar, progress("runs", len(work)) as bar:
-
-        def scene_ready(group, info):
-            scene, seed = group
-            stage_s["frontend"] += info["seconds"]
-            fbar.set_postfix_str(f"{scene} seed {seed}")
-            fbar.update()
-
-        for new in execute(plan, cfg.run, ws, options.cluster, scene_ready):
-            if not bound:  # the folder is bound by the first rows it gets, not before
-                bind_results_dir(
-                    ws.results, cfg.run.as_dict(), Vocabulary.current(), options.overwrite
-                )
-                bound = True
-            _add_seconds(stage_s, new)
+    t_runs = time.perf_counter()
+    with models_replaced(ws.results, options.overwrite) as state:
+        for new in _computed(plan, cfg.run, ws, options.cluster, stage_s):
+            if not state["bound"]:  # the folder is bound by the first rows it gets
+                vocab = Vocabulary.current()
+                bind_results_dir(ws.results, cfg.run.as_dict(), vocab, options.overwrite)
+                state["bound"] = True
             rows += [r | {"invocation": invocation["id"]} for r in new]
             table = pd.DataFrame(rows).sort_values(list(KEY), kind="stable")
             write_text_atomic(ws.runs_csv, table.to_csv(index=False))
-            first = new[0]
-            bar.set_postfix_str(
-                f"{first['scene']} s{first['seed']} {first['policy']} b{first['budget']}"
-            )
-            bar.update()
     stage_s["runs_wall"] = time.perf_counter() - t_runs
     out = read_runs(ws.runs_csv)
     if report is not None:
@@ -288,6 +275,27 @@ def _run_in(
         f"results in {ws.results}"
     )
     return out
+
+
+def _computed(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, stage_s: dict):
+    """The rows of each unit as it finishes, with progress bars; the stage seconds added
+    to `stage_s`."""
+    with progress("frontend", len(plan.entries)) as fbar, progress("runs", len(plan.work)) as bar:
+
+        def scene_ready(group, info):
+            scene, seed = group
+            stage_s["frontend"] += info["seconds"]
+            fbar.set_postfix_str(f"{scene} seed {seed}")
+            fbar.update()
+
+        for new in execute(plan, cfg, ws, cluster, scene_ready):
+            _add_seconds(stage_s, new)
+            yield new
+            first = new[0]
+            bar.set_postfix_str(
+                f"{first['scene']} s{first['seed']} {first['policy']} b{first['budget']}"
+            )
+            bar.update()
 
 
 def _add_seconds(stage_s: dict[str, float], new: list[dict]) -> None:
