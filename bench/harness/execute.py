@@ -31,7 +31,7 @@ from pathlib import Path
 from bench import BenchError
 from bench.evaluation.truth import load_truth
 from bench.frontend.geometry import RIG
-from bench.frontend.stage import front_end
+from bench.frontend.stage import FrontEnd, front_end
 from bench.frontend.views import load_views
 from bench.harness.config import RunConfig
 from bench.harness.evaluate import evaluate, identity
@@ -76,13 +76,16 @@ class Cluster:
     scheduler: str | None = None
 
 
+def _front_ends(entry: Path, cfg: RunConfig, renders: Path, grants) -> dict[str, FrontEnd]:
+    """The front end of an entry under each geometry granted, computed or read from its cache."""
+    return {g: front_end(entry, cfg.detector, cfg.signals, renders / "frontend", g) for g in grants}
+
+
 def _scene(entry: Path, cfg: RunConfig, renders: Path, grants) -> LoadedScene:
     key = (str(entry), repr(cfg), tuple(grants))
     if _HELD.get("key") != key:
         _HELD.clear()  # let the previous scene go before loading the next
-        fronts = {
-            g: front_end(entry, cfg.detector, cfg.signals, renders / "frontend", g) for g in grants
-        }
+        fronts = _front_ends(entry, cfg, renders, grants)
         # the evaluation side may read the poses: the rig's front end holds them
         posed = fronts[RIG].views if RIG in fronts else load_views(entry)
         cams, names = [v.camera for v in posed], [v.name for v in posed]
@@ -96,9 +99,7 @@ def scene_task(group: tuple, entry: Path, cfg: RunConfig, renders: Path, plan: P
     granted, computed or read from their cache, checked against the budgets; returns their
     seconds and the largest pool."""
     t = time.perf_counter()
-    fronts = {
-        g: front_end(entry, cfg.detector, cfg.signals, renders / "frontend", g) for g in plan.grants
-    }
+    fronts = _front_ends(entry, cfg, renders, plan.grants)
     largest = max(len(p) for p in next(iter(fronts.values())).pools)
     scene, seed = group
     if largest == 0:
