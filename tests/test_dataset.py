@@ -4,21 +4,29 @@
 from __future__ import annotations
 
 import json
+import shutil
+from dataclasses import replace
 
 import cv2
 import numpy as np
 import pandas as pd
 import pycolmap
 import pytest
+from scipy.spatial import cKDTree
 
 from bench import BenchError
 from bench.backend.database import SelectRequest, select_to_database
 from bench.cli import main
 from bench.evaluation.export import export_dataset
-from bench.frontend.views import load_image_folder, read_colmap_model
+from bench.frontend.colmap_model import read_model
+from bench.frontend.features import DetectorConfig, detect
+from bench.frontend.geometry import RIG, SignalConfig
+from bench.frontend.stage import front_end
+from bench.frontend.views import load_image_folder, load_views, source_key
 from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig
-from bench.vocabulary import KEY
+from bench.report.transfer import transfer
+from bench.vocabulary import KEY, Vocabulary
 from tests.conftest import MEDIUM, bench_run
 
 GRID = dict(seeds=(0,), policies=("texture", "adaptive", "oracle", "colmap-b"), budgets=(64,))
@@ -34,20 +42,22 @@ def test_export_has_the_colmap_layout_and_reads_back(dataset, medium_entry):
     assert sorted(p.name for p in (dataset / "images").iterdir()) == [
         f"view_{k:02d}.png" for k in range(6)
     ]
-    names = [n for n, _ in read_colmap_model(dataset / "sparse")]
-    assert names == [n for n, _ in read_colmap_model(medium_entry("table"))]
+    names = [n for n, _ in read_model(dataset / "sparse")]
+    assert names == [n for n, _ in read_model(medium_entry("table"))]
     assert (dataset / "ground_truth" / "points.ply").is_file()
     with pytest.raises(BenchError, match="not an earlier export"):
         export_dataset(medium_entry("table"), dataset / "images")
 
 
-def test_dataset_run_gives_the_metrics_of_the_rendered_path(dataset, renders_dir, tmp_path):
+def test_dataset_run_gives_the_metrics_and_the_ranking_of_the_rendered_path(
+    dataset, renders_dir, tmp_path
+):
     run = RunConfig(render=MEDIUM)
     rendered = bench_run(
         BenchConfig(scenes=("table",), run=run, **GRID), tmp_path / "r", renders_dir, workers=1
     )
     data = bench_run(
-        BenchConfig(scenes=(dataset.name,), run=run, dataset=str(dataset), **GRID),
+        BenchConfig(scenes=(dataset.name,), run=run, datasets=(str(dataset),), **GRID),
         tmp_path / "d",
         renders_dir,
         workers=1,
@@ -59,13 +69,18 @@ def test_dataset_run_gives_the_metrics_of_the_rendered_path(dataset, renders_dir
     b = data[cols].sort_values(list(KEY[2:]), ignore_index=True)
     pd.testing.assert_frame_equal(a, b, check_exact=False, rtol=1e-6, check_dtype=False)
     assert a["acc_completeness_pct"].notna().any() and a["maa"].notna().any()
+    # the export of a render ranks the methods as the render does
+    summary, ranks = transfer(data, Vocabulary.load(tmp_path / "d"), tmp_path / "r")
+    assert set(summary["metric"]) == {"sfm mAA", "tri completeness"}
+    assert (ranks["rank_shift"] == 0).all() and len(ranks) == 3 + 4
+    tau = summary["kendall_tau"].dropna()
+    assert len(tau) and np.allclose(tau, 1.0)
+    assert (summary["winner_dataset"] == summary["winner_rendered"]).all()
 
 
 def test_dataset_without_pixel_truth_scores_poses_and_leaves_the_rest_nan(
     dataset, renders_dir, tmp_path, capsys
 ):
-    import shutil
-
     bare = tmp_path / "bare"
     shutil.copytree(dataset / "images", bare / "images")
     shutil.copytree(dataset / "sparse", bare / "sparse")
@@ -217,11 +232,123 @@ def test_image_folders_of_several_sizes_and_a_bad_file(dataset, tmp_path, capsys
         db.close()
 
 
+def _copy(dataset, to, model_to="sparse"):
+    """A dataset's images and text model copied (the model into `model_to`)."""
+    shutil.copytree(dataset / "images", to / "images")
+    shutil.copytree(dataset / "sparse", to / model_to)
+    return to
+
+
+def test_binary_models_in_sparse_0_read_as_their_text_model(dataset, tmp_path):
+    text = load_views(dataset)
+    binary = tmp_path / "bin"
+    _copy(dataset, binary, "text")
+    pycolmap.Reconstruction(str(binary / "text")).write_binary(str(_mkdir(binary / "sparse/0")))
+    shutil.rmtree(binary / "text")
+    assert sorted(p.name for p in (binary / "sparse" / "0").iterdir())[:2] == [
+        "cameras.bin",
+        "frames.bin",
+    ]
+    views = load_views(binary)
+    assert [v.name for v in views] == [v.name for v in text]
+    for a, b in zip(views, text):
+        assert np.allclose(a.camera.K, b.camera.K, atol=1e-9)
+        assert np.allclose(a.camera.R, b.camera.R, atol=1e-12)
+        assert np.allclose(a.camera.t, b.camera.t, atol=1e-12)
+    assert source_key(binary) != source_key(dataset)  # another model file: another key
+
+
+def _mkdir(path):
+    path.mkdir(parents=True)
+    return path
+
+
+@pytest.mark.parametrize(
+    "damage, message",
+    [
+        ("drop_point_lines", "images.txt line 5: expected the 2D points of image view_00.png"),
+        ("word_for_number", "images.txt line 4: 'abc' is not a number"),
+        ("camera_params", "cameras.txt line 1: PINHOLE has 4 parameters, found 3"),
+        ("truncate_binary", "images.bin record 6 of 6: truncated"),
+    ],
+)
+def test_a_malformed_model_is_refused_in_one_line_naming_file_and_line(
+    dataset, tmp_path, damage, message
+):
+    ds = _copy(dataset, tmp_path / "ds")
+    images, cameras = ds / "sparse" / "images.txt", ds / "sparse" / "cameras.txt"
+    lines = images.read_text().splitlines()
+    data = [i for i, ln in enumerate(lines) if ln and not ln.startswith("#")]
+    if damage == "drop_point_lines":
+        images.write_text("\n".join(ln for ln in lines if ln.strip()) + "\n")
+    elif damage == "word_for_number":
+        first = lines[data[0]].split()
+        lines[data[0]] = " ".join([first[0], "abc", *first[2:]])
+        images.write_text("\n".join(lines) + "\n")
+    elif damage == "camera_params":
+        cameras.write_text("1 PINHOLE 320 240 300 300 160\n")
+    else:
+        pycolmap.Reconstruction(str(ds / "sparse")).write_binary(str(_mkdir(ds / "bin")))
+        shutil.rmtree(ds / "sparse")
+        (ds / "bin").rename(ds / "sparse")
+        blob = (ds / "sparse" / "images.bin").read_bytes()
+        (ds / "sparse" / "images.bin").write_bytes(blob[:-30])
+    with pytest.raises(BenchError, match="malformed COLMAP model") as err:
+        load_views(ds)
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_model_poses_exactly_the_images_of_the_dataset(dataset, tmp_path):
+    ds = _copy(dataset, tmp_path / "ds")
+    (ds / "images" / "view_05.png").rename(ds / "view_05.png")
+    with pytest.raises(BenchError, match=r"1 image\(s\) of the model .* not in .*view_05.png"):
+        load_views(ds)
+    (ds / "view_05.png").rename(ds / "images" / "extra.png")
+    (ds / "images" / "view_05.png").symlink_to(ds / "images" / "extra.png")
+    with pytest.raises(BenchError, match="does not pose .*extra.png"):
+        load_views(ds)
+
+
+def test_a_large_view_is_detected_downscaled_and_keeps_full_resolution_keypoints(dataset, tmp_path):
+    """A dataset upscaled 2x, detected at max_image_size = the original size: its
+    candidates are the original's at twice their coordinates (the resampling adds and
+    moves some, but those found again sit where they should, with no half-pixel shift)."""
+    big = tmp_path / "big"
+    _copy(dataset, big)
+    for f in (big / "images").iterdir():
+        img = cv2.imread(str(f))
+        cv2.imwrite(str(f), cv2.resize(img, None, fx=2, fy=2, interpolation=cv2.INTER_LINEAR))
+    rec = pycolmap.Reconstruction(str(big / "sparse"))
+    for cam in rec.cameras.values():
+        cam.rescale(2.0)
+    rec.write_text(str(big / "sparse"))
+    det, sig = DetectorConfig(), SignalConfig()
+    small = front_end(dataset, det, sig, tmp_path / "fe", RIG)
+    large = front_end(big, replace(det, max_image_size=320), sig, tmp_path / "fe", RIG)
+    assert large.views[0].image.shape[:2] == (480, 640)
+    for a, b in zip(small.pools, large.pools):
+        d, nn = cKDTree(a.xy * 2).query(b.xy)
+        near = d < 2
+        offset = (b.xy - 2 * a.xy[nn])[near].mean(0)
+        assert 0.7 < len(b) / len(a) < 1.5 and np.mean(near) > 0.45
+        assert np.abs(offset).max() < 0.1 and np.median(d[near]) < 0.3
+        assert b.xy.max(0)[0] <= 640 and b.xy.max(0)[1] <= 480
+        assert np.median(b.size) == pytest.approx(2 * np.median(a.size), rel=0.2)
+
+
+def test_max_features_keeps_the_strongest_candidates(dataset):
+    view = load_views(dataset)[0]
+    every = detect(view, DetectorConfig())
+    some = detect(view, DetectorConfig(max_features=50))
+    assert len(some) == 50 and len(every) > 50
+    assert np.sort(some.response)[0] >= np.sort(every.response)[-50]
+
+
 def test_distorted_camera_models_are_refused_in_one_line(tmp_path):
     (tmp_path / "cameras.txt").write_text("1 OPENCV 640 480 500 500 320 240 0.1 0 0 0\n")
     (tmp_path / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
     with pytest.raises(BenchError, match="distortion is not supported; undistort"):
-        read_colmap_model(tmp_path)
+        read_model(tmp_path)
 
 
 def test_a_dataset_whose_contents_changed_is_computed_again(
@@ -243,3 +370,45 @@ def test_a_dataset_whose_contents_changed_is_computed_again(
     again = pd.read_csv(tmp_path / "r" / "runs.csv")
     assert len(again) == 1 and again["render_key"][0] != first["render_key"][0]
     assert again["reconstructable"][0] != first["reconstructable"][0]
+
+
+def test_several_datasets_run_at_once_with_tables_per_dataset_and_a_transfer_table(
+    medium_entry, renders_dir, tmp_path
+):
+    sets = tmp_path / "sets"
+    export_dataset(medium_entry("table"), sets / "table-ds")
+    export_dataset(medium_entry("facade"), sets / "facade-ds")
+    grid = ["--policies", "random,texture,adaptive", "--budget", "64", "--tasks", "tri"]
+    grid += ["--protocols", "multiview", "--workers", "1", "--renders", str(renders_dir)]
+    medium = ["--width", "320", "--height", "240", "--spp", "16", "--max-depth", "2"]
+    assert (
+        main(
+            [
+                "run",
+                "--scenes",
+                "table",
+                "--seeds",
+                "0",
+                *grid,
+                *medium,
+                "--results",
+                str(tmp_path / "r"),
+            ]
+        )
+        == 0
+    )
+    argv = ["run", "--dataset", str(sets), *grid, "--results", str(tmp_path / "d")]
+    assert main([*argv, "--rendered", str(tmp_path / "r")]) == 0
+    out = tmp_path / "d"
+    assert set(pd.read_csv(out / "runs.csv")["scene"]) == {"table-ds", "facade-ds"}
+    for name in ("table-ds", "facade-ds"):
+        assert set(pd.read_csv(out / f"table1-{name}.csv")["policy"]) == {
+            "random",
+            "texture",
+            "adaptive",
+        }
+    summary, ranks = pd.read_csv(out / "transfer.csv"), pd.read_csv(out / "transfer_ranks.csv")
+    assert set(summary["dataset"]) == {"table-ds", "facade-ds"}
+    assert set(summary["metric"]) == {"tri completeness"} and (summary["methods"] == 3).all()
+    assert (ranks.loc[ranks["dataset"] == "table-ds", "rank_shift"] == 0).all()
+    assert (out / "figure_transfer.png").is_file()

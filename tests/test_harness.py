@@ -11,6 +11,7 @@ import shutil
 import stat
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pycolmap
 import pytest
@@ -469,6 +470,19 @@ def test_paired_bootstrap_on_known_differences():
     )
     assert mixed["mean_diff"] == 0 and -1 <= mixed["lo"] < 0 < mixed["hi"] <= 1
     assert (mixed["wins"], mixed["ties"], mixed["losses"]) == (1, 1, 1)
+
+
+def test_kendall_tau_and_its_interval_on_hand_made_rankings():
+    from bench.report.transfer import kendall_tau, tau_interval
+
+    assert kendall_tau([1, 2, 3, 4], [10, 20, 30, 40]) == 1
+    assert kendall_tau([1, 2, 3, 4], [4, 3, 2, 1]) == -1
+    assert kendall_tau([1, 2, 3, 4], [1, 3, 2, 4]) == pytest.approx(4 / 6)  # 5 of 6 agree
+    assert kendall_tau([1, 1, 2], [1, 2, 3]) == pytest.approx(2 / math.sqrt(2 * 3))  # tau-b
+    assert math.isnan(kendall_tau([1, 1, 1], [1, 2, 3]))
+    assert tau_interval(np.arange(6.0), np.arange(6.0)) == (1.0, 1.0)
+    lo, hi = tau_interval(np.arange(6.0), np.array([0, 2, 1, 3, 5, 4.0]))
+    assert -1 <= lo < kendall_tau(np.arange(6.0), np.array([0, 2, 1, 3, 5, 4.0])) < hi <= 1
 
 
 def test_bootstrap_interval_stays_within_the_metric_range():

@@ -3,26 +3,37 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
-from bench.cli.common import LATEST, renders_arg, results_arg
+from bench.cli.common import LATEST, PUBLISHED, renders_arg, results_arg
 
 HELP = "rebuild the tables and figures from runs.csv (no rendering, no reconstruction)"
 DESCRIPTION = (
     "Rewrite table1.csv, table1_twoview.csv, table2.csv, paired.csv, paired_sfm.csv, "
     "table_scenes.csv, frontend_cost.csv, figure3.png/.pdf and figure_budget.png from "
     "RESULTS/runs.csv and RESULTS/vocabulary.json alone, and figure2.png from them plus an "
-    "exported model and its cached render."
+    "exported model and its cached render. A results folder of datasets also gets "
+    "transfer.csv, transfer_ranks.csv and figure_transfer.png (its ranking against a rendered "
+    "results folder's) and, with several datasets, table1-<dataset>.csv."
 )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     results_arg(parser, LATEST, f"results folder (default: ./{LATEST})")
     renders_arg(parser)
+    parser.add_argument(
+        "--rendered",
+        type=Path,
+        default=PUBLISHED,
+        metavar="DIR",
+        help="for a results folder of datasets: the rendered results whose ranking "
+        "transfer.csv compares with theirs (default: %(default)s)",
+    )
 
 
 def run(args: argparse.Namespace) -> None:
     from bench.report.write import write_report
     from bench.results import read_runs
 
-    write_report(read_runs(args.results / "runs.csv"), args.results, args.renders)
+    write_report(read_runs(args.results / "runs.csv"), args.results, args.renders, args.rendered)
     print(f"tables and figures rewritten in {args.results}")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+from functools import partial
 from pathlib import Path
 
 from bench import BenchError
@@ -110,13 +111,24 @@ def _input_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--dataset",
         type=Path,
+        action="append",
         default=None,
         metavar="DIR",
-        help="benchmark on a dataset in the COLMAP layout instead of the rendered scenes: "
-        "DIR/images/, the ground-truth poses in DIR/sparse/ (cameras.txt, images.txt), "
-        "optionally DIR/ground_truth/points.ply (point accuracy) and per-image "
-        "DIR/ground_truth/<image>.npz (tracks, completeness, oracle); results default to "
-        "./results/dataset-<name>",
+        help="benchmark on a dataset in the COLMAP layout instead of the rendered scenes "
+        "(repeatable; DIR may also be a folder of datasets): DIR/images/, the ground-truth "
+        "poses in DIR/sparse/0/ or DIR/sparse/ (text or binary model), optionally "
+        "DIR/ground_truth/points.ply (point accuracy) and per-image "
+        "DIR/ground_truth/<image>.npz (tracks, completeness, oracle); each dataset is one "
+        "scene named by its folder; results default to ./results/dataset-<name>, or "
+        "./results/datasets for several",
+    )
+    parser.add_argument(
+        "--rendered",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="with --dataset: the rendered results whose ranking transfer.csv compares with "
+        f"the datasets' (default: ./{PUBLISHED})",
     )
     parser.add_argument(
         "--policy-module",
@@ -203,7 +215,7 @@ def run_config(args: argparse.Namespace):
         if getattr(args, f.name) is not None
     }
     render = dataclasses.replace(render, **overrides)
-    if args.dataset is not None:  # a dataset's images are what they are: nothing renders
+    if args.dataset:  # a dataset's images are what they are: nothing renders
         given = [f"--{k.replace('_', '-')}" for k in overrides] + ["--scenes"] * bool(args.scenes)
         if given:
             log(f"{', '.join(given)} ignored with --dataset: its images are not rendered")
@@ -217,22 +229,36 @@ def run_config(args: argparse.Namespace):
     return apply_settings(run, args.settings)
 
 
-def dataset_arg(path: Path) -> Path:
-    """A `--dataset` folder, checked: `images/` and a model in `sparse/`."""
+def datasets_arg(paths: list[Path]) -> tuple[Path, ...]:
+    """The `--dataset` folders, checked: each a dataset (`images/` and a COLMAP model), or
+    a folder whose sub-folders are datasets."""
     from bench.frontend.views import Source
 
-    Source.of(path)  # a clear error if it is not a dataset
-    if (Path(path) / "meta.json").is_file():
-        raise BenchError(f"{path} is a render entry; --dataset takes DIR with images/ and sparse/")
-    return Path(path).resolve()
+    out = []
+    for path in map(Path, paths):
+        if (path / "meta.json").is_file():
+            raise BenchError(
+                f"{path} is a render entry; --dataset takes DIR with images/ and sparse/"
+            )
+        if not (path / "images").is_dir() and path.is_dir():
+            inner = sorted(p for p in path.iterdir() if (p / "images").is_dir())
+            for p in inner:
+                Source.of(p)
+                out.append(p.resolve())
+            if inner:
+                continue
+        Source.of(path)  # a clear error if it is not a dataset
+        out.append(path.resolve())
+    return tuple(dict.fromkeys(out))
 
 
 def has_pixel_truth(dataset: Path) -> bool:
     """Whether a dataset has per-pixel ground truth (which the oracle needs)."""
     from bench.evaluation import groundtruth
-    from bench.frontend.views import read_colmap_model
+    from bench.frontend.colmap_model import read_model
+    from bench.frontend.views import Source
 
-    names = [n for n, _ in read_colmap_model(dataset / "sparse")]
+    names = [n for n, _ in read_model(Source.of(dataset).model)]
     ok = groundtruth.has_pixel_truth(dataset, names)
     if not ok:
         log(f"{dataset} has no per-pixel ground truth: the oracle is left out")
@@ -252,13 +278,15 @@ def run(args: argparse.Namespace) -> None:
         raise BenchError("--workers does not apply with --scheduler: the cluster has its workers")
     run_cfg = run_config(args)
     policies = parse_list("--policies", args.policies, str, "texture,adaptive")
-    dataset = None
-    if args.dataset is not None:
-        dataset = dataset_arg(args.dataset)
+    datasets = datasets_arg(args.dataset) if args.dataset else ()
+    if args.rendered is not None and not datasets:
+        log("--rendered is ignored without --dataset: it is what datasets are compared with")
+    if datasets:
         if args.seeds is not None:
             log("--seeds is ignored with --dataset: a dataset is one scene, recorded as seed 0")
-        scenes, seeds = (dataset.name,), (0,)
-        policies = tuple(p for p in policies if p != ORACLE or has_pixel_truth(dataset))
+        scenes, seeds = tuple(d.name for d in datasets), (0,)
+        truth = ORACLE in policies and all([has_pixel_truth(d) for d in datasets])
+        policies = tuple(p for p in policies if p != ORACLE or truth)
     else:
         seeds = parse_list(
             "--seeds", args.seeds or ("0" if args.quick else "0,1,2"), int, "0,1,2 or 100-119"
@@ -273,10 +301,14 @@ def run(args: argparse.Namespace) -> None:
         tasks=parse_list("--tasks", args.tasks, str, "tri"),
         protocols=parse_list("--protocols", args.protocols, str, "multiview,twoview"),
         run=run_cfg,
-        dataset=str(dataset) if dataset is not None else None,
+        datasets=tuple(map(str, datasets)),
     )
     results = args.results or (
-        QUICK if args.quick else LATEST.with_name(f"dataset-{dataset.name}") if dataset else LATEST
+        QUICK
+        if args.quick
+        else LATEST.with_name(f"dataset-{datasets[0].name}" if len(datasets) == 1 else "datasets")
+        if datasets
+        else LATEST
     )
     if args.workers is not None and args.workers < 1:
         raise BenchError(f"--workers must be at least 1, got {args.workers}")
@@ -286,7 +318,8 @@ def run(args: argparse.Namespace) -> None:
         reevaluate=args.reevaluate,
         cluster=Cluster(args.workers or default_workers(), args.scheduler),
     )
-    df = run_benchmark(cfg, Workspace(results, args.renders), options, report=write_report)
+    report = partial(write_report, rendered=args.rendered or PUBLISHED)
+    df = run_benchmark(cfg, Workspace(results, args.renders), options, report=report)
     protocol = "multiview" if "multiview" in cfg.protocols else cfg.protocols[0]
     vocab = Vocabulary.load(results)
     t = table1(headline_frame(with_oracle_share(df), vocab, protocol), vocab)

@@ -20,7 +20,7 @@ from bench import BenchError
 from bench.console import log
 from bench.evaluation.groundtruth import CLOUD, TRUTH_DIR, load_ground_truth, write_ply_points
 from bench.files import atomic_dir, locked
-from bench.frontend.views import read_colmap_model
+from bench.frontend.colmap_model import read_model
 
 
 def export_dataset(entry: Path, out: Path) -> Path:
@@ -35,7 +35,7 @@ def export_dataset(entry: Path, out: Path) -> Path:
         except (OSError, ValueError, KeyError, TypeError):
             log(f"replacing the earlier export in {out}")
     out.parent.mkdir(parents=True, exist_ok=True)
-    names = [n for n, _ in read_colmap_model(entry)]
+    names = [n for n, _ in read_model(entry)]
     gts = load_ground_truth(entry)
     with locked(out), atomic_dir(out) as tmp:
         for sub in ("images", "sparse", TRUTH_DIR):

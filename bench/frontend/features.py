@@ -6,7 +6,8 @@ OpenCV's keypoints have it at (0, 0), so 0.5 is added once, here.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -30,10 +31,19 @@ class DetectorConfig:
     """ORB: number of keypoints to keep."""
     akaze_threshold: float = 0.0002
     """AKAZE detector response threshold."""
+    max_image_size: int = 3200
+    """Longest image side the front end works at, px (COLMAP's max_image_size): a larger
+    photograph is detected, and its signals computed, on a copy downscaled to it, and its
+    keypoints are kept in full-resolution pixels."""
+    max_features: int = 8192
+    """Most candidates per view: the strongest by detector response (COLMAP's
+    max_num_features); bounds the front end's memory on large photographs."""
 
     def validate(self) -> DetectorConfig:
         if self.detector not in DETECTORS:
             raise BenchError(f"unknown detector {self.detector!r}; valid: {', '.join(DETECTORS)}")
+        if self.max_image_size < 64 or self.max_features < 1:
+            raise BenchError("detector.max_image_size must be >= 64 and max_features >= 1")
         return self
 
     def create(self):
@@ -68,6 +78,11 @@ class Candidates:
     def __len__(self) -> int:
         return len(self.xy)
 
+    def scaled(self, sx: float, sy: float) -> Candidates:
+        """The same candidates in an image scaled by (sx, sy) (COLMAP's pixel convention
+        scales with the image: its origin is the image's corner)."""
+        return replace(self, xy=self.xy * [sx, sy], size=self.size * math.sqrt(sx * sy))
+
 
 def keypoint_arrays(kps) -> tuple[np.ndarray, ...]:
     xy = np.array([k.pt for k in kps], float).reshape(-1, 2) + 0.5
@@ -80,8 +95,13 @@ def keypoint_arrays(kps) -> tuple[np.ndarray, ...]:
 
 
 def detect(view: View, cfg: DetectorConfig) -> Candidates:
-    """Detect and describe one view's candidates."""
+    """Detect and describe one view's candidates (the `max_features` strongest, in the
+    detector's order)."""
     kps, desc = cfg.create().detectAndCompute(view.gray, None)
+    if len(kps) > cfg.max_features:
+        order = np.argsort([-k.response for k in kps], kind="stable")
+        keep = np.sort(order[: cfg.max_features])
+        kps, desc = [kps[k] for k in keep], desc[keep]
     xy, size, angle, response = keypoint_arrays(kps)
     if desc is None:
         desc = np.zeros((0, 32 if cfg.binary else 128), np.uint8 if cfg.binary else np.float32)

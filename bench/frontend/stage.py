@@ -2,6 +2,10 @@
 their signals, under the geometry a task grants (RIG: the views with their poses; IMAGES:
 the views without them, the geometry estimated from the images).
 
+A view larger than `DetectorConfig.max_image_size` is detected, and its signals computed,
+on a downscaled copy (so every pixel threshold of the signals means what it means on the
+rendered views); its candidates are returned in full-resolution pixels.
+
 Cached (npz beside the render cache) by the render entry, the geometry granted, the
 detector and signal settings and the code that computes them; the seconds measured when it was computed are stored with
 it, so reported front-end times do not depend on whether the cache was warm.
@@ -72,10 +76,12 @@ def front_end(
         except (OSError, ValueError, KeyError):
             log(f"damaged front-end cache {path.name}; computing it again")
     t = time.perf_counter()
-    pools = [features.detect(v, det) for v in views]
+    work = [v.scale_to(det.max_image_size) for v in views]
+    pools = [features.detect(v, det) for v, _, _ in work]
     seconds = {"detect": time.perf_counter() - t}
-    sigs, sig_seconds = compute_signals(views, pools, det, sig)
+    sigs, sig_seconds = compute_signals([v for v, _, _ in work], pools, det, sig)
     seconds.update(sig_seconds)
+    pools = [c.scaled(1 / sx, 1 / sy) for c, (_, sx, sy) in zip(pools, work)]
     arrays = {f"{f}_{v}": getattr(c, f) for v, c in enumerate(pools) for f in _CAND}
     arrays |= {f"{s}_{v}": getattr(g, s) for v, g in enumerate(sigs) for s in SIGNALS}
     arrays |= {f"seconds_{k}": np.float64(s) for k, s in seconds.items()}

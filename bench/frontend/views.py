@@ -3,8 +3,9 @@
 Three sources give the same list of `View`s:
 
 * a render entry (`renders/<scene>-s<seed>-<key>/`): its images and its COLMAP rig;
-* a dataset in the COLMAP layout, `DIR/images/` and a model `DIR/sparse/` (`cameras.txt`,
-  `images.txt`): the views of the model, posed;
+* a dataset in the COLMAP layout, `DIR/images/` and a model in `DIR/sparse/0/` or
+  `DIR/sparse/` (text or binary, `bench.frontend.colmap_model`): the views of the model,
+  posed;
 * a folder of images without poses (`bench select`): every JPEG or PNG in it, with a camera
   from a COLMAP model when one is given, else from the focal-length prior (EXIF's 35 mm
   equivalent focal length, or COLMAP's default 1.2 x max(width, height)).
@@ -21,11 +22,11 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from bench import BenchError
 from bench.camera import Camera
 from bench.files import checksum, content_key, entry_problem
+from bench.frontend.colmap_model import check_images, find_model, read_model
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 DEFAULT_FOCAL_FACTOR = 1.2
@@ -49,6 +50,19 @@ class View:
     def gray(self) -> np.ndarray:
         return cv2.cvtColor(self.image, cv2.COLOR_RGB2GRAY)
 
+    def scale_to(self, max_size: int) -> tuple[View, float, float]:
+        """The view downscaled so that its longer side is at most `max_size` px (itself
+        when it is no larger), and the scale factors (sx, sy) from this view to it."""
+        c = self.camera
+        s = max_size / max(c.width, c.height)
+        if s >= 1:
+            return self, 1.0, 1.0
+        w, h = max(1, round(c.width * s)), max(1, round(c.height * s))
+        sx, sy = w / c.width, h / c.height
+        img = cv2.resize(self.image, (w, h), interpolation=cv2.INTER_AREA)
+        cam = Camera(w, h, c.fx * sx, c.fy * sy, c.cx * sx, c.cy * sy, c.R, c.t)
+        return replace(self, image=img, camera=cam), sx, sy
+
     def without_pose(self) -> View:
         """The same image and intrinsics with the pose removed (identity, `posed` False):
         what a task that grants no poses hands to the front end."""
@@ -63,6 +77,8 @@ class Source:
 
     images: Path
     model: Path | None
+    dataset: bool = False
+    """A dataset's folder: the model must pose exactly the images in `images`."""
 
     @staticmethod
     def of(path: Path) -> Source:
@@ -73,17 +89,19 @@ class Source:
             if problem:
                 raise BenchError(f"render entry {path} is not usable: {problem}")
             return Source(path, path)
-        if (path / "images").is_dir() and (path / "sparse" / "images.txt").is_file():
-            return Source(path / "images", path / "sparse")
+        model = find_model(path)
+        if (path / "images").is_dir() and model is not None:
+            return Source(path / "images", model, dataset=True)
         raise BenchError(
-            f"{path} is neither a render entry nor a dataset (images/ and sparse/images.txt)"
+            f"{path} is neither a render entry nor a dataset (images/ and a COLMAP model in "
+            "sparse/ or sparse/0/)"
         )
 
 
 def source_key(path: Path) -> str:
     """What a set of views is, by content: a render entry's name (its key hashes what made
-    its pixels); a dataset's folder name and a hash of its model and every image, so a
-    dataset whose contents change is computed again."""
+    its pixels); for a dataset, a hash of its model and every image (not its folder's
+    name), so a dataset whose contents change is computed again."""
     path = Path(path)
     src = Source.of(path)
     if src.model == path and (path / "meta.json").is_file():
@@ -91,7 +109,7 @@ def source_key(path: Path) -> str:
     files = sorted(p for p in src.model.iterdir() if p.is_file())
     files += sorted(p for p in src.images.rglob("*") if p.is_file())
     stats = tuple((str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in files)
-    return f"{path.name}-{_contents_key(path, stats)}"
+    return f"dataset-{_contents_key(path, stats)}"
 
 
 @cache
@@ -108,49 +126,6 @@ def read_image(path: Path) -> np.ndarray:
     if img is None:
         raise BenchError(f"cannot read image {path}")
     return img[..., ::-1].copy()
-
-
-_ZERO_DISTORTION = {"SIMPLE_PINHOLE": 3, "PINHOLE": 4, "SIMPLE_RADIAL": 4, "RADIAL": 4, "OPENCV": 4}
-"""Camera models accepted, and how many parameters precede their distortion ones."""
-
-
-def _intrinsics(model: str, w: int, h: int, p: list[float], where: Path) -> tuple:
-    if model not in _ZERO_DISTORTION or any(p[_ZERO_DISTORTION[model] :]):
-        raise BenchError(
-            f"{where}: camera model {model} with distortion is not supported; undistort the "
-            "images first (colmap image_undistorter)"
-        )
-    if model in ("PINHOLE", "OPENCV"):  # fx, fy, cx, cy
-        return w, h, *p[:4]
-    return w, h, p[0], p[0], p[1], p[2]  # f, cx, cy
-
-
-def read_colmap_model(model: Path) -> list[tuple[str, Camera]]:
-    """(image name, camera) of every image of a COLMAP text model, in name order."""
-    model = Path(model)
-    try:
-        cam_lines = (model / "cameras.txt").read_text().splitlines()
-        img_lines = [
-            ln for ln in (model / "images.txt").read_text().splitlines() if not ln.startswith("#")
-        ]
-        intr = {}
-        for line in cam_lines:
-            if line.strip() and not line.startswith("#"):
-                cid, kind, w, h, *p = line.split()
-                intr[cid] = _intrinsics(kind, int(w), int(h), [float(x) for x in p], model)
-        out = []
-        for line in img_lines[::2]:
-            if not line.strip():
-                continue
-            _, qw, qx, qy, qz, tx, ty, tz, cid, name = line.split(maxsplit=9)
-            R = Rotation.from_quat([float(qx), float(qy), float(qz), float(qw)]).as_matrix()
-            t = np.array([float(tx), float(ty), float(tz)])
-            out.append((name.strip(), Camera(*intr[cid], R=R, t=t)))
-    except (OSError, ValueError, KeyError) as e:
-        raise BenchError(f"cannot read the COLMAP model in {model}: {e}") from e
-    if not out:
-        raise BenchError(f"the COLMAP model in {model} has no images")
-    return sorted(out, key=lambda nc: nc[0])
 
 
 def focal_prior(path: Path, width: int, height: int) -> float:
@@ -170,8 +145,11 @@ def focal_prior(path: Path, width: int, height: int) -> float:
 def load_views(source: Path | Source) -> list[View]:
     """The calibrated, posed views of a render entry or a dataset (see the module docstring)."""
     src = source if isinstance(source, Source) else Source.of(source)
+    model = read_model(src.model)
+    if src.dataset:
+        check_images([n for n, _ in model], image_files(src.images), src.model, src.images)
     views = []
-    for i, (name, cam) in enumerate(read_colmap_model(src.model)):
+    for i, (name, cam) in enumerate(model):
         img = read_image(src.images / name)
         if img.shape[:2] != (cam.height, cam.width):
             raise BenchError(

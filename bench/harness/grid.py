@@ -67,17 +67,24 @@ class BenchConfig:
     tasks: tuple[str, ...] = field(default_factory=lambda: tuple(RUNNERS))
     protocols: tuple[str, ...] = tuple(PROTOCOLS)
     run: RunConfig = field(default_factory=RunConfig)
-    dataset: str | None = None
-    """A dataset folder (`bench run --dataset`) instead of rendered scenes: its one scene
-    is the folder's name, with seed 0."""
+    datasets: tuple[str, ...] = ()
+    """Dataset folders (`bench run --dataset`) instead of rendered scenes: each is one
+    scene, named by its folder, with seed 0."""
 
     def validate(self) -> BenchConfig:
-        if self.dataset is None:
+        if self.datasets:
+            names = [Path(d).name for d in self.datasets]
+            twice = sorted({n for n in names if names.count(n) > 1})
+            if twice:
+                raise BenchError(f"two datasets are named {twice[0]!r}; rename one folder")
+            if sorted(self.scenes) != sorted(names):
+                raise BenchError("the scenes of a dataset run are its datasets' names")
+        else:
             for s in self.scenes:
                 load_spec(s)
         plugins.load(self.run.policy.modules)
         check_policies(self.policies)
-        if "learned" in self.policies and self.dataset is None:
+        if "learned" in self.policies and not self.datasets:
             trained = set(learned_weights(self.run.policy.learned_weights)["seeds"])
             shared = sorted(trained & set(self.seeds))
             if shared:
@@ -98,13 +105,17 @@ class BenchConfig:
             raise BenchError(f"seeds must be non-negative integers, got {list(self.seeds)}")
         if not self.budgets or min(self.budgets) <= 0:
             raise BenchError(f"budget must be positive integers, got {list(self.budgets)}")
-        if self.dataset is None:
+        if not self.datasets:
             self.run.render.validate()
         self.run.validate()
         return self
 
     def as_dict(self) -> dict:
         return json.loads(json.dumps(asdict(self)))  # tuples as lists, as stored
+
+    def dataset(self, scene: str) -> Path | None:
+        """The folder of a dataset scene (None: a rendered scene)."""
+        return next((Path(d) for d in self.datasets if Path(d).name == scene), None)
 
     def units(self) -> list[Unit]:
         """Every unit of the grid that has a job; a whole-pool method (`all`, `colmap`)
@@ -189,11 +200,12 @@ def _current_rows(
         log(
             f"{int(stale.sum())} row(s) were computed by other code or settings; computing them again"
         )
-    if cfg.dataset is not None:
-        changed = ~stale & (df["render_key"] != source_key(Path(cfg.dataset)))
+    for scene in set(df["scene"]) & {Path(d).name for d in cfg.datasets}:
+        folder = cfg.dataset(scene)
+        changed = ~stale & (df["scene"] == scene) & (df["render_key"] != source_key(folder))
         if changed.any():
             log(
-                f"the contents of {cfg.dataset} changed since {int(changed.sum())} row(s) were "
+                f"the contents of {folder} changed since {int(changed.sum())} row(s) were "
                 "computed; computing them again"
             )
         stale |= changed
@@ -243,11 +255,7 @@ def _run_in(
     with progress("render", len(groups)) as bar:
         for sc, sd in groups:
             t = time.perf_counter()
-            entries[sc, sd] = (
-                Path(cfg.dataset)
-                if cfg.dataset is not None
-                else render_scene(sc, sd, cfg.run.render, ws.renders)
-            )
+            entries[sc, sd] = cfg.dataset(sc) or render_scene(sc, sd, cfg.run.render, ws.renders)
             stage_s["render"] += time.perf_counter() - t
             bar.set_postfix_str(f"{sc} seed {sd}")
             bar.update()

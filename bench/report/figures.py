@@ -220,3 +220,31 @@ def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | 
     fig.tight_layout()
     save(fig, out, ("png",))
     return None
+
+
+def figure_transfer(ranks: pd.DataFrame, summary: pd.DataFrame, budget: int, out: Path) -> None:
+    """Rendered rank against dataset rank at one budget, a panel per dataset and metric."""
+    panels = summary[summary["budget"] == budget]
+    fig, axes = plt.subplots(
+        1, len(panels), figsize=(4.2 * len(panels), 4.2), squeeze=False, constrained_layout=True
+    )
+    for ax, (_, s) in zip(axes[0], panels.iterrows()):
+        r = ranks[
+            (ranks["dataset"] == s["dataset"])
+            & (ranks["metric"] == s["metric"])
+            & (ranks["budget"] == budget)
+        ]
+        n = len(r)
+        ax.plot([1, n], [1, n], color="0.8", lw=1)
+        ax.scatter(r["rank_rendered"], r["rank_dataset"], s=18)
+        for _, p in r.iterrows():
+            ax.annotate(p["policy"], (p["rank_rendered"], p["rank_dataset"]), fontsize=7)
+        ax.set(
+            xlabel="rank on the rendered benchmark",
+            ylabel=f"rank on {s['dataset']}",
+            title=f"{s['metric']}, B = {budget}\ntau {s['kendall_tau']:.2f} "
+            f"[{s['tau_lo']:.2f}, {s['tau_hi']:.2f}]",
+        )
+        ax.invert_xaxis()
+        ax.invert_yaxis()
+    save(fig, out, ("png",))

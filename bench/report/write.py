@@ -5,12 +5,16 @@ reconstructs, and nothing here imports the stages that do.
 Written files: `table1.csv` (headline task and protocol), `table1_twoview.csv`,
 `table2.csv`, `paired.csv`, `paired_sfm.csv`, `table_scenes.csv`, `frontend_cost.csv`
 (`bench.report.tables`), `figure3.png/.pdf`, `figure_budget.png` (with several budgets)
-and `figure2.png` (`bench.report.figures`). A figure that cannot be drawn from these
-rows is removed, never left stale.
+and `figure2.png` (`bench.report.figures`). A results folder of datasets also gets
+`table1-<dataset>.csv` per dataset when it holds several, and `transfer.csv`,
+`transfer_ranks.csv` and `figure_transfer.png` against a rendered results folder
+(`bench.report.transfer`). A table or figure that cannot be drawn from these rows is
+removed, never left stale.
 """
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -18,7 +22,7 @@ import pandas as pd
 
 from bench.console import log
 from bench.files import atomic_path, write_text_atomic
-from bench.report.figures import figure2, figure3, figure_budget
+from bench.report.figures import figure2, figure3, figure_budget, figure_transfer, headline_budget
 from bench.report.tables import (
     frontend_cost,
     headline_frame,
@@ -29,6 +33,7 @@ from bench.report.tables import (
     table_scenes,
     with_oracle_share,
 )
+from bench.report.transfer import transfer
 from bench.results import read_runs
 from bench.vocabulary import VOCABULARY_FILE, Vocabulary
 
@@ -38,14 +43,29 @@ def _drop(*paths: Path) -> None:
         p.unlink(missing_ok=True)
 
 
-def write_report(df: pd.DataFrame, results: Path, renders: Path) -> None:
+def is_dataset_run(results: Path) -> bool:
+    """Whether `results` holds runs on datasets (its settings render nothing)."""
+    try:
+        return json.loads((Path(results) / "config.json").read_text())["settings"]["render"] is None
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+
+
+def write_report(
+    df: pd.DataFrame, results: Path, renders: Path, rendered: Path | None = None
+) -> None:
     """Every table and figure of `results` from the rows `df`, under the vocabulary
-    recorded in `results`."""
+    recorded in `results`; for a results folder of datasets, the transfer tables against
+    the rendered results folder `rendered`."""
     results = Path(results)
     vocab = Vocabulary.load(results)
     df = with_oracle_share(df)
     frame = headline_frame(df, vocab)
     t1, pairs = table1(frame, vocab), paired(frame, vocab)
+    datasets = is_dataset_run(results)
+    _write_tables(results, _per_dataset(frame, vocab, results) if datasets else {})
+    if datasets:
+        _write_transfer(df, vocab, results, rendered)
     tables = {
         "table1.csv": t1,
         "table1_twoview.csv": table1(headline_frame(df, vocab, "twoview"), vocab),
@@ -55,11 +75,7 @@ def write_report(df: pd.DataFrame, results: Path, renders: Path) -> None:
         "table_scenes.csv": table_scenes(frame, vocab) if len(frame) else pd.DataFrame(),
         "frontend_cost.csv": frontend_cost(df, vocab),
     }
-    for name, t in tables.items():
-        if t.empty:
-            _drop(results / name)
-        else:
-            write_text_atomic(results / name, t.to_csv(index=False, float_format="%.6g"))
+    _write_tables(results, tables)
     if t1.empty:
         _drop(results / "figure3.png", results / "figure3.pdf", results / "figure_budget.png")
         log("no run of the headline task and protocol: no Table 1 and no figures")
@@ -73,6 +89,40 @@ def write_report(df: pd.DataFrame, results: Path, renders: Path) -> None:
     if why:
         _drop(results / "figure2.png")
         log(f"figure2.png not drawn (and any older one removed): {why}")
+
+
+def _write_tables(results: Path, tables: dict[str, pd.DataFrame]) -> None:
+    for name, t in tables.items():
+        if t.empty:
+            _drop(results / name)
+        else:
+            write_text_atomic(results / name, t.to_csv(index=False, float_format="%.6g"))
+
+
+def _per_dataset(frame: pd.DataFrame, vocab: Vocabulary, results: Path) -> dict:
+    """`table1-<dataset>.csv` per dataset when there are several (the old ones dropped)."""
+    scenes = list(dict.fromkeys(frame["scene"]))
+    tables = {p.name: pd.DataFrame() for p in results.glob("table1-*.csv")}
+    if len(scenes) > 1:
+        tables |= {f"table1-{s}.csv": table1(frame[frame["scene"] == s], vocab) for s in scenes}
+    return tables
+
+
+def _write_transfer(df: pd.DataFrame, vocab: Vocabulary, results: Path, rendered: Path | None):
+    """transfer.csv, transfer_ranks.csv and figure_transfer.png, or why not (logged)."""
+    names = ("transfer.csv", "transfer_ranks.csv")
+    if rendered is None or not (Path(rendered) / "runs.csv").is_file():
+        _drop(*(results / n for n in (*names, "figure_transfer.png")))
+        log(f"no transfer.csv: no rendered results in {rendered} (give one with --rendered)")
+        return
+    summary, ranks = transfer(df, vocab, Path(rendered))
+    _write_tables(results, dict(zip(names, (summary, ranks))))
+    if summary.empty:
+        _drop(results / "figure_transfer.png")
+        log("no transfer.csv: the datasets and the rendered results share no ranked budget")
+        return
+    budget = headline_budget(summary)
+    figure_transfer(ranks, summary, budget, results / "figure_transfer")
 
 
 PUBLISHED_FILES = ("runs.csv", "config.json", VOCABULARY_FILE, "manifest.json", "scenes.png")

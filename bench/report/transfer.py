@@ -1,0 +1,121 @@
+"""Whether the rendered ranking holds on photographs: `transfer.csv`,
+`transfer_ranks.csv` and `figure_transfer.png` of a results folder of datasets.
+
+For each dataset, budget and ranking metric (the `sfm` task's mAA; the `tri` task's
+completeness where the dataset has per-pixel truth), the budgeted methods that both
+results folders hold are ranked by their mean, best first, on the dataset and on the
+rendered benchmark (all its scenes and seeds pooled, at the same budget, under the headline
+protocol); tied means share their mean rank. `transfer.csv` has Kendall's tau-b between the
+two rankings with a 95% percentile bootstrap interval (the methods resampled with
+replacement, `DRAWS` draws, seed 0), the winner on each side and the methods whose rank
+moves most; `transfer_ranks.csv` has every method's values and ranks.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from bench.report.tables import headline_frame
+from bench.results import read_runs
+from bench.vocabulary import Vocabulary
+
+RANKED = {"sfm_maa": "sfm mAA", "acc_completeness_pct": "tri completeness"}
+"""The ranking metrics (columns of `headline_frame`), higher is better."""
+DRAWS = 2000
+MOVERS = 2
+
+
+def kendall_tau(x: np.ndarray, y: np.ndarray) -> float:
+    """Kendall's tau-b of two paired samples (NaN when either is constant)."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    iu = np.triu_indices(len(x), 1)
+    dx = np.sign(x[:, None] - x[None, :])[iu]
+    dy = np.sign(y[:, None] - y[None, :])[iu]
+    untied_x, untied_y = np.count_nonzero(dx), np.count_nonzero(dy)
+    if not untied_x or not untied_y:
+        return math.nan
+    return float((dx * dy).sum() / math.sqrt(untied_x * untied_y))
+
+
+def tau_interval(x: np.ndarray, y: np.ndarray, seed: int = 0) -> tuple[float, float]:
+    """95% percentile bootstrap interval of `kendall_tau`, the pairs resampled."""
+    rng = np.random.default_rng(seed)
+    draws = [kendall_tau(x[i], y[i]) for i in rng.integers(0, len(x), (DRAWS, len(x)))]
+    draws = np.array([d for d in draws if not math.isnan(d)])
+    if not len(draws):
+        return math.nan, math.nan
+    lo, hi = np.percentile(draws, [2.5, 97.5])
+    return float(lo), float(hi)
+
+
+def _means(frame: pd.DataFrame, metric: str) -> pd.DataFrame:
+    """Mean of `metric` per budget and budgeted method (budget 0, a whole-pool method, has
+    no budget to rank at)."""
+    rows = frame[(frame["budget"] > 0) & frame[metric].notna()]
+    return rows.groupby(["budget", "policy"])[metric].mean().unstack("policy")
+
+
+def transfer(
+    dataset_rows: pd.DataFrame, vocab: Vocabulary, rendered: Path
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(`transfer.csv`, `transfer_ranks.csv`) of a dataset folder's rows (under their
+    vocabulary) against the rendered results folder `rendered` (module docstring)."""
+    mine = headline_frame(dataset_rows, vocab)
+    theirs = headline_frame(read_runs(Path(rendered) / "runs.csv"), Vocabulary.load(rendered))
+    summary, ranks = [], []
+    for dataset, rows in mine.groupby("scene", sort=False):
+        for metric, label in RANKED.items():
+            if metric not in rows or metric not in theirs:
+                continue
+            real, ref = _means(rows, metric), _means(theirs, metric)
+            for budget in real.index.intersection(ref.index):
+                a, b = real.loc[budget].dropna(), ref.loc[budget].dropna()
+                methods = [m for m in a.index if m in b.index]
+                if len(methods) < 3:
+                    continue
+                x, y = a[methods].to_numpy(), b[methods].to_numpy()
+                rank_x = pd.Series(-x, index=methods).rank(method="average")
+                rank_y = pd.Series(-y, index=methods).rank(method="average")
+                shift = rank_x - rank_y
+                movers = shift.abs().sort_values(ascending=False, kind="stable").index[:MOVERS]
+                lo, hi = tau_interval(x, y)
+                summary.append(
+                    {
+                        "dataset": dataset,
+                        "metric": label,
+                        "budget": int(budget),
+                        "methods": len(methods),
+                        "kendall_tau": kendall_tau(x, y),
+                        "tau_lo": lo,
+                        "tau_hi": hi,
+                        "winner_dataset": _winner(rank_x),
+                        "winner_rendered": _winner(rank_y),
+                        "biggest_movers": "; ".join(
+                            f"{m} {rank_y[m]:g} -> {rank_x[m]:g}" for m in movers if shift[m]
+                        ),
+                    }
+                )
+                for m in methods:
+                    ranks.append(
+                        {
+                            "dataset": dataset,
+                            "metric": label,
+                            "budget": int(budget),
+                            "policy": m,
+                            "value_dataset": a[m],
+                            "value_rendered": b[m],
+                            "rank_dataset": rank_x[m],
+                            "rank_rendered": rank_y[m],
+                            "rank_shift": shift[m],
+                        }
+                    )
+    return pd.DataFrame(summary), pd.DataFrame(ranks)
+
+
+def _winner(rank: pd.Series) -> str:
+    """The best-ranked method(s), ties joined with '='."""
+    return "=".join(rank[rank == rank.min()].index)
