@@ -218,7 +218,8 @@ def read_model(folder: Path) -> list[tuple[str, Camera]]:
     out = []
     for image in rec.images.values():
         cam = rec.cameras[image.camera_id]
-        intr = intrinsics(cam.model.name, cam.width, cam.height, list(cam.params), folder)
+        params = [float(x) for x in cam.params]
+        intr = intrinsics(cam.model.name, int(cam.width), int(cam.height), params, folder)
         pose = image.cam_from_world()
         R, t = np.asarray(pose.rotation.matrix()), np.asarray(pose.translation)
         out.append((image.name, Camera(*intr, R=R, t=t)))
