@@ -34,6 +34,14 @@ HEADLINE_POLICY = "adaptive"
 """The paper's method, compared with every baseline in `table2.csv` and `paired.csv`."""
 PAIRED_PEER = "colmap-b"
 """The stock-COLMAP peer held to the same budget, which `paired_sfm.csv` compares with."""
+REFERENCE_PEER = "colmap"
+"""Stock COLMAP with all its features: a (scene, seed) it does not map in the sfm task
+measures nothing, so it is marked (`REFERENCE_MAPS`) and left out of the sfm means."""
+REFERENCE_MAPS = "reference_maps"
+"""The `runs.csv` column saying whether `REFERENCE_PEER` maps the row's (scene, seed) in
+the sfm task: 1 if it registers every view with pose mAA of at least `REFERENCE_MIN_MAA`,
+0 if not (views registered with wrong poses are not a map), empty where it did not run."""
+REFERENCE_MIN_MAA = 0.5
 ORACLE = "oracle"
 """The ground-truth selection (`bench.evaluation.oracle`): a reference, never a policy."""
 ROLES = ("baseline", "contender", "reference", "peer")

@@ -472,6 +472,35 @@ def test_paired_bootstrap_on_known_differences():
     assert (mixed["wins"], mixed["ties"], mixed["losses"]) == (1, 1, 1)
 
 
+def test_cells_stock_colmap_cannot_map_are_marked_and_left_out_of_the_sfm_means():
+    from bench.harness.grid import mark_reference
+    from bench.report.tables import headline_frame, paired_sfm, table1, table_scenes
+
+    rows = []
+    # stock COLMAP maps seed 0; seed 1 it registers in part, seed 2 with wrong poses
+    for seed, ref, ref_maa in ((0, 6, 1.0), (1, 2, 0.3), (2, 6, 0.1)):
+        cell = dict(scene="s", seed=seed, task="sfm", protocol="multiview", views=6, status="ok")
+        rows.append(cell | dict(policy="colmap", budget=0, registered_views=ref, maa=ref_maa))
+        for policy, maa in (("texture", 0.5), ("adaptive", 0.7), ("colmap-b", 0.4)):
+            maa += 0.2 * seed
+            rows.append(cell | dict(policy=policy, budget=64, registered_views=6, maa=maa))
+    table = mark_reference(pd.DataFrame(rows))
+    maps = table.groupby("seed")["reference_maps"].agg(set).to_dict()
+    assert maps == {0: {1}, 1: {0}, 2: {0}}
+    vocab = vocabulary.Vocabulary.current()
+    frame = headline_frame(table, vocab)
+    t1 = table1(frame, vocab).set_index("policy")
+    assert t1.loc["texture", "sfm_maa"] == 0.5 and t1.loc["texture", "runs"] == 3
+    assert t1.loc["texture", "sfm_excluded_runs"] == 2
+    pairs = paired_sfm(frame, vocab).set_index(["scene", "policy", "baseline", "metric"])
+    vs_texture = pairs.loc[("all scenes", "adaptive", "texture", "sfm_maa")]
+    assert vs_texture["n"] == 1 and vs_texture["mean_diff"] == pytest.approx(0.2)
+    assert pairs.loc[("s", "texture", "colmap-b", "sfm_maa"), "mean_diff"] == pytest.approx(0.1)
+    scenes = table_scenes(frame, vocab).set_index(["policy", "budget"])
+    assert scenes.loc[("texture", 64), "sfm_excluded_seeds"] == 2
+    assert scenes.loc[("texture", 64), "sfm_maa"] == 0.5
+
+
 def test_kendall_tau_and_its_interval_on_hand_made_rankings():
     from bench.report.transfer import kendall_tau, tau_interval
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -21,9 +22,26 @@ from tests.conftest import TINY
 
 @pytest.mark.parametrize("scene", scene_names())
 def test_ground_truth_projects_onto_its_pixels(tiny_entry, scene):
-    entry = tiny_entry(scene)
+    assert_ground_truth_projects(tiny_entry(scene), TINY.views)
+
+
+def test_views_sets_the_rig_and_enters_the_render_key(tiny_entry, renders_dir):
+    three = render.render_scene("facade", 0, replace(TINY, views=3), renders_dir)
+    assert three.name != tiny_entry("facade").name
+    assert json.loads((three / "meta.json").read_text())["views"] == 3
+    assert_ground_truth_projects(three, 3)
+    path = [c.center for c in read_colmap_rig(three)]
+    six = [c.center for c in read_colmap_rig(tiny_entry("facade"))]
+    np.testing.assert_allclose([path[0], path[-1]], [six[0], six[-1]])  # the same path
+    with pytest.raises(BenchError, match="views must be at least 2"):
+        render.render_scene("facade", 0, replace(TINY, views=1), renders_dir)
+
+
+def assert_ground_truth_projects(entry, views: int) -> None:
+    """Every view's single-surface pixels project back onto themselves, and its range and
+    z-depth agree with its intrinsics."""
     cams = read_colmap_rig(entry)
-    assert len(cams) == 6
+    assert len(cams) == views
     for v, cam in enumerate(cams):
         gt = np.load(entry / f"gt_{v:02d}.npz")
         si = gt["shape_index"]
@@ -56,7 +74,7 @@ def test_mitsuba_sensor_is_the_only_conversion():
 @pytest.mark.parametrize("scene", scene_names())
 def test_same_seed_same_scene_other_seed_differs(scene):
     spec = load_spec(scene)
-    a, b, c = (build_scene(spec, s, 64, 48) for s in (3, 3, 4))
+    a, b, c = (build_scene(spec, s, 64, 48, 6) for s in (3, 3, 4))
 
     def fingerprint(d):
         return [

@@ -68,7 +68,7 @@ def test_facade_descriptors_have_more_near_duplicates_than_table(sift_entries):
 
 def test_wind_moves_leaves_between_views_and_not_the_ground():
     spec = load_spec("vegetation")
-    windy = build_scene(spec, 0, 64, 48)
+    windy = build_scene(spec, 0, 64, 48, 6)
     leaves = [m for m in windy.meshes if m.name.startswith("leaves")]
     assert leaves and all(m.motion is not None for m in leaves)
     moved = np.linalg.norm(leaves[0].vertices_in_view(1) - leaves[0].vertices_in_view(0), axis=1)
@@ -77,7 +77,7 @@ def test_wind_moves_leaves_between_views_and_not_the_ground():
         if not m.name.startswith("leaves"):
             assert np.array_equal(m.vertices_in_view(0), m.vertices_in_view(5)), m.name
     still = build_scene(
-        type(spec)(spec.name, spec.description, {**spec.params, "wind": 0.0}), 0, 64, 48
+        type(spec)(spec.name, spec.description, {**spec.params, "wind": 0.0}), 0, 64, 48, 6
     )
     for m in still.meshes:
         assert np.array_equal(m.vertices_in_view(0), m.vertices_in_view(3))

@@ -80,7 +80,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "views, the headline) and twoview (two-view tracks kept; its own table)",
     )
     list_arg(
-        "seeds", None, "N1,N2", "scene seeds, e.g. 0,1,2 or 0-9 (default: 0,1,2, or 0 with --quick)"
+        "seeds", None, "N1,N2", "scene seeds, e.g. 0,1,2 or 0-9 (default: 0-4, or 0 with --quick)"
     )
     list_arg(
         "weights",
@@ -291,7 +291,7 @@ def run(args: argparse.Namespace) -> None:
         policies = tuple(p for p in policies if p != ORACLE or truth)
     else:
         seeds = parse_list(
-            "--seeds", args.seeds or ("0" if args.quick else "0,1,2"), int, "0,1,2 or 100-119"
+            "--seeds", args.seeds or ("0" if args.quick else "0-4"), int, "0,1,2 or 100-119"
         )
         scenes = parse_list("--scenes", args.scenes or ",".join(scene_names()), str, "table,facade")
     budget = args.budget if args.budget is not None else ("256" if args.quick else "128,256,512")
@@ -334,5 +334,6 @@ def run(args: argparse.Namespace) -> None:
         "inlier_pct",
         "sfm_maa",
         "sfm_registered_views",
+        "sfm_excluded_runs",
     ]
     print(t[[c for c in cols if c in t]].to_string(index=False, float_format=lambda x: f"{x:.3f}"))

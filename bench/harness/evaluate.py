@@ -23,8 +23,9 @@ import pycolmap
 from bench.evaluation import groundtruth, metrics, poses, truth
 from bench.evaluation.metrics import coverage_pct, match_metrics, model_points, point_error
 from bench.files import atomic_path, source_hash
+from bench.frontend.colmap_model import read_model
 from bench.frontend.signals import seconds_of
-from bench.frontend.views import source_key
+from bench.frontend.views import Source, source_key
 from bench.harness import tasks
 from bench.harness.config import RunConfig
 from bench.harness.predict import LoadedScene, prediction_hash, read_record, stored_pairs
@@ -133,6 +134,7 @@ def identity(entry: Path, unit: Unit, job: Job, cfg: RunConfig) -> dict:
         "task": job.task,
         "protocol": job.protocol,
         "render_key": source_key(entry),
+        "views": len(read_model(Source.of(entry).model)),
         "prediction_hash": prediction_hash(cfg, unit.policy),
         "evaluation_hash": evaluation_hash(),
     }

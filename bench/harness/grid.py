@@ -46,7 +46,19 @@ from bench.results import (
     set_aside_damaged,
 )
 from bench.scenes.spec import load_spec, scene_names
-from bench.vocabulary import KEY, METHODS, PROTOCOLS, Job, Unit, Vocabulary
+from bench.vocabulary import (
+    HEADLINE,
+    KEY,
+    METHODS,
+    PROTOCOLS,
+    REFERENCE_MAPS,
+    REFERENCE_MIN_MAA,
+    REFERENCE_PEER,
+    TASKS,
+    Job,
+    Unit,
+    Vocabulary,
+)
 
 
 def default_policies() -> tuple[str, ...]:
@@ -61,7 +73,7 @@ class BenchConfig:
     """The benchmark grid and the configuration of every run in it."""
 
     scenes: tuple[str, ...] = field(default_factory=lambda: tuple(scene_names()))
-    seeds: tuple[int, ...] = (0, 1, 2)
+    seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
     policies: tuple[str, ...] = field(default_factory=default_policies)
     budgets: tuple[int, ...] = (128, 256, 512)
     tasks: tuple[str, ...] = field(default_factory=lambda: tuple(RUNNERS))
@@ -268,7 +280,7 @@ def _run_in(
                 bind_results_dir(ws.results, cfg.run.as_dict(), vocab, options.overwrite)
                 state["bound"] = True
             rows += [r | {"invocation": invocation["id"]} for r in new]
-            table = pd.DataFrame(rows).sort_values(list(KEY), kind="stable")
+            table = mark_reference(pd.DataFrame(rows).sort_values(list(KEY), kind="stable"))
             write_text_atomic(ws.runs_csv, table.to_csv(index=False))
     stage_s["runs_wall"] = time.perf_counter() - t_runs
     out = read_runs(ws.runs_csv)
@@ -283,6 +295,26 @@ def _run_in(
         f"results in {ws.results}"
     )
     return out
+
+
+def mark_reference(table: pd.DataFrame) -> pd.DataFrame:
+    """`REFERENCE_MAPS` on every row: whether stock COLMAP with all features maps the row's
+    (scene, seed) in the task that admits peers (headline protocol; see the vocabulary)."""
+    if not {"views", "registered_views", "maa"} <= set(table):
+        return table
+    peers = [t for t, task in TASKS.items() if task.peers]
+    ref = table[
+        (table["policy"] == REFERENCE_PEER)
+        & table["task"].isin(peers)
+        & (table["protocol"] == HEADLINE[1])
+    ]
+    maps = {
+        (r.scene, r.seed): int(r.registered_views >= r.views and r.maa >= REFERENCE_MIN_MAA)
+        for r in ref.itertuples()
+        if pd.notna(r.registered_views)
+    }
+    cells = zip(table["scene"], table["seed"])
+    return table.assign(**{REFERENCE_MAPS: [maps.get(c) for c in cells]})
 
 
 def _computed(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, stage_s: dict):

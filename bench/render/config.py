@@ -11,6 +11,9 @@ VARIANTS = ("auto", "cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
 class RenderConfig:
     """How a scene is rendered; every field changes pixels, so all enter the cache key."""
 
+    views: int = 6
+    """Cameras per scene, evenly on the scene's camera path (`bench scenes` describes each
+    path): more views, longer tracks and more pairs, at more render and run time."""
     width: int = 640
     """Image width in pixels."""
     height: int = 480
@@ -27,6 +30,8 @@ class RenderConfig:
     def validate(self) -> RenderConfig:
         from bench import BenchError
 
+        if self.views < 2:
+            raise BenchError(f"views must be at least 2, got {self.views}")
         for name in ("width", "height", "spp", "max_depth"):
             if getattr(self, name) <= 0:
                 raise BenchError(f"{name} must be positive, got {getattr(self, name)}")

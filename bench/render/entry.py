@@ -21,7 +21,7 @@ from bench.render.mitsuba import AOVS, GT_LAYERS, MITSUBA_FROM_OPENCV, render_vi
 from bench.render.variant import resolve_variant
 from bench.scenes import generators, shapes, textures
 from bench.scenes import spec as scene_spec
-from bench.scenes.spec import N_VIEWS, SceneSpec, build_scene, load_spec
+from bench.scenes.spec import SceneSpec, build_scene, load_spec
 
 
 def render_key(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -> str:
@@ -35,6 +35,7 @@ def render_key(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -> s
             "scene": spec.name,
             "params": spec.params,
             "seed": seed,
+            "views": cfg.views,
             "width": cfg.width,
             "height": cfg.height,
             "spp": cfg.spp,
@@ -87,25 +88,26 @@ def render_scene(
             return entry
         if problem:
             log(f"damaged cache entry {entry.name} ({problem}); rendering it again")
-        desc = build_scene(spec, seed, cfg.width, cfg.height)
+        desc = build_scene(spec, seed, cfg.width, cfg.height, cfg.views)
         with files.atomic_dir(entry) as tmp:
             seconds, names = [], None
-            for v in range(N_VIEWS):
+            for v in range(cfg.views):
                 t0 = time.perf_counter()
                 rgb, gt, names = render_view(desc, v, cfg, variant)
                 cv2.imwrite(str(tmp / f"view_{v:02d}.png"), srgb8(rgb)[..., ::-1])
                 np.savez(tmp / f"gt_{v:02d}.npz", **gt)
                 seconds.append(time.perf_counter() - t0)
                 log(
-                    f"rendered {name} seed {seed} view {v + 1}/{N_VIEWS} in {seconds[-1]:.1f} s ({variant})"
+                    f"rendered {name} seed {seed} view {v + 1}/{cfg.views} in {seconds[-1]:.1f} s ({variant})"
                 )
-            write_colmap_rig(desc.cameras, tmp, [f"view_{v:02d}.png" for v in range(N_VIEWS)])
+            write_colmap_rig(desc.cameras, tmp, [f"view_{v:02d}.png" for v in range(cfg.views)])
             files.write_meta(
                 tmp,
                 {
                     "scene": name,
                     "seed": seed,
                     "params": spec.params,
+                    "views": cfg.views,
                     "width": cfg.width,
                     "height": cfg.height,
                     "spp": cfg.spp,

@@ -1,14 +1,14 @@
-"""A contact sheet of every scene's six views, so a person can see the scenes at a glance."""
+"""A contact sheet of every scene's views, so a person can see the scenes at a glance."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from bench.files import atomic_path
-from bench.scenes.spec import N_VIEWS
 
 
 def write_gallery(entries: dict[str, Path], out: Path, thumb_width: int = 320) -> Path:
@@ -16,7 +16,7 @@ def write_gallery(entries: dict[str, Path], out: Path, thumb_width: int = 320) -
     rows = []
     for name, entry in entries.items():
         thumbs = []
-        for v in range(N_VIEWS):
+        for v in range(len(json.loads((entry / "meta.json").read_text())["cameras"])):
             img = cv2.imread(str(entry / f"view_{v:02d}.png"))
             h = round(img.shape[0] * thumb_width / img.shape[1])
             thumbs.append(cv2.resize(img, (thumb_width, h), interpolation=cv2.INTER_AREA))

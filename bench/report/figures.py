@@ -36,8 +36,11 @@ LOG_SCALE = {"runtime_proxy", "rmse"}
 
 
 def headline_budget(t1: pd.DataFrame) -> int:
-    """256 when the table has it, else its middle budget."""
+    """256 when the table has it, else its middle budget (0 when it has whole-pool methods
+    only)."""
     budgets = sorted(b for b in t1["budget"].unique() if b > 0)
+    if not budgets:
+        return 0
     return HEADLINE_BUDGET if HEADLINE_BUDGET in budgets else budgets[len(budgets) // 2]
 
 

@@ -13,9 +13,16 @@
   baseline (random, texture, grid and the field's selectors response, ssc, quadtree; never
   a reference) for each headline metric, with the paired difference to that baseline.
   `paired.csv`: adaptive against every other policy that is not a reference, per scene
-  and pooled, for every headline metric. `paired_sfm.csv`: every budgeted policy (and
-  the oracle) against stock COLMAP held to B keypoints (`colmap-b`) in the sfm task's
-  mAA and registered views, per scene and pooled.
+  and pooled, for every headline metric. `paired_sfm.csv`: in the sfm task's mAA and
+  registered views, per scene and pooled, every budgeted policy (and the oracle) against
+  stock COLMAP held to B keypoints (`colmap-b`), and every contender (and the oracle)
+  against every baseline.
+* A (scene, seed) cell that stock COLMAP with all its features (`colmap`) does not map
+  (it registers fewer than all views, or with pose mAA below 0.5; `reference_maps` is 0
+  in `runs.csv`) measures
+  nothing in the sfm task: its units are left out of every sfm mean and paired sfm
+  difference, and `sfm_excluded_runs` (Table 1) and `sfm_excluded_seeds`
+  (`table_scenes.csv`) count them.
 * `table_scenes.csv`: per scene, policy and budget, the mean over seeds of the headline
   metrics and the sfm task's mAA and registered views.
 * `frontend_cost.csv`: per policy, the measured front-end time of a run (detection, the
@@ -36,7 +43,15 @@ import numpy as np
 import pandas as pd
 
 from bench.report.stats import LOWER_IS_BETTER, bootstrap_mean, paired_difference
-from bench.vocabulary import HEADLINE, HEADLINE_POLICY, ORACLE, PAIRED_PEER, UNIT_KEY, Vocabulary
+from bench.vocabulary import (
+    HEADLINE,
+    HEADLINE_POLICY,
+    ORACLE,
+    PAIRED_PEER,
+    REFERENCE_MAPS,
+    UNIT_KEY,
+    Vocabulary,
+)
 
 PAIRED_METRICS = ("acc_completeness_pct", "accuracy_pct", "rmse", "median_error", "sfm_maa")
 """The headline metrics that paired statistics compare."""
@@ -50,14 +65,33 @@ def headline_frame(
     task's columns, and every other task's as `<task>_<name>` (a unit without one of the
     tasks has NaN for it)."""
     rows = df[df["protocol"] == protocol]
-    frame = rows[rows["task"] == HEADLINE[0]]
+    frame = rows[rows["task"] == HEADLINE[0]].drop(columns=REFERENCE_MAPS, errors="ignore")
     for task in (t for t in vocab.tasks if t != HEADLINE[0]):
         cols = [c for c in (*vocab.tasks[task].columns, "status") if c in df]
         part = rows[rows["task"] == task][UNIT + cols]
         frame = frame.merge(
             part.rename(columns={c: f"{task}_{c}" for c in cols}), on=UNIT, how="outer"
         )
+    if REFERENCE_MAPS in df:  # a property of the (scene, seed): on every unit of it
+        cells = df.dropna(subset=[REFERENCE_MAPS]).groupby(["scene", "seed"])[REFERENCE_MAPS]
+        maps = cells.first()
+        frame[REFERENCE_MAPS] = [maps.get(k) for k in zip(frame["scene"], frame["seed"])]
     return frame
+
+
+def solvable(rows: pd.DataFrame, metric: str) -> pd.DataFrame:
+    """The rows that count for `metric`: for an sfm metric, those of (scene, seed) cells
+    that stock COLMAP with all features maps (a cell it does not map measures nothing)."""
+    if not metric.startswith("sfm_") or REFERENCE_MAPS not in rows:
+        return rows
+    return rows[rows[REFERENCE_MAPS].ne(0)]
+
+
+def unsolved_cells(rows: pd.DataFrame) -> int:
+    """How many (scene, seed) cells stock COLMAP with all features does not map."""
+    if REFERENCE_MAPS not in rows:
+        return 0
+    return int(rows[rows[REFERENCE_MAPS].eq(0)][["scene", "seed"]].drop_duplicates().shape[0])
 
 
 def with_oracle_share(df: pd.DataFrame) -> pd.DataFrame:
@@ -83,9 +117,12 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
         row["failed_runs"] = int((g["status"] == "failed").sum())
         for t in (t for t in others if f"{t}_status" in g):
             row[f"{t}_failed_runs"] = int((g[f"{t}_status"] == "failed").sum())
+        if REFERENCE_MAPS in g:
+            row["sfm_excluded_runs"] = int(g[REFERENCE_MAPS].eq(0).sum())
         for m in metrics:
             if m in g:
-                row[m], row[f"{m}_lo"], row[f"{m}_hi"] = bootstrap_mean(g[m].astype(float))
+                x = solvable(g, m)[m].astype(float)
+                row[m], row[f"{m}_lo"], row[f"{m}_hi"] = bootstrap_mean(x)
         out.append(row)
     t = pd.DataFrame(out)
     if t.empty:
@@ -110,7 +147,8 @@ def _paired(rows: pd.DataFrame, pairs: list[tuple[str, str]], metrics) -> pd.Dat
             part = rows if scope == "all scenes" else rows[rows["scene"] == scope]
             for policy, base in pairs:
                 for m in (m for m in metrics if m in part):
-                    a, b = _units(part, policy, budget, m), _units(part, base, budget, m)
+                    counted = solvable(part, m)
+                    a, b = _units(counted, policy, budget, m), _units(counted, base, budget, m)
                     strata = pd.Series(a.index.get_level_values("scene"), index=a.index)
                     res = paired_difference(a, b, strata, m)  # n = 0 when either is missing
                     out.append(
@@ -135,14 +173,19 @@ def paired(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
 
 
 def paired_sfm(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
-    """Every budgeted policy (and the oracle) minus the peer held to the budget,
-    `colmap-b`, in the sfm task's mAA and registered views, per scene and pooled, per
-    budget (`rows`: `headline_frame`)."""
-    if PAIRED_PEER not in set(rows["policy"]):
-        return pd.DataFrame()
+    """In the sfm task's mAA and registered views, per scene and pooled, per budget
+    (`rows`: `headline_frame`): every budgeted policy (and the oracle) minus the peer
+    held to the budget, `colmap-b`, and every contender (and the oracle) minus every
+    baseline. Cells stock COLMAP does not map are left out (`solvable`)."""
+    present = list(pd.unique(rows["policy"]))
     ranked = {*vocab.with_role("baseline", "contender"), ORACLE}
-    policies = [p for p in pd.unique(rows["policy"]) if p in ranked]
-    return _paired(rows, [(p, PAIRED_PEER) for p in policies], ("sfm_maa", "sfm_registered_views"))
+    policies = [p for p in present if p in ranked]
+    pairs = [(p, PAIRED_PEER) for p in policies] if PAIRED_PEER in present else []
+    bases = [p for p in present if p in vocab.with_role("baseline")]
+    pairs += [(p, b) for p in policies if p not in bases for b in bases]
+    if not pairs:
+        return pd.DataFrame()
+    return _paired(rows, pairs, ("sfm_maa", "sfm_registered_views"))
 
 
 def table2(rows: pd.DataFrame, pairs: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
@@ -154,7 +197,13 @@ def table2(rows: pd.DataFrame, pairs: pd.DataFrame, vocab: Vocabulary) -> pd.Dat
         for scope in [*pd.unique(rows["scene"]), "all scenes"]:
             part = rows[rows["budget"] == budget]
             part = part if scope == "all scenes" else part[part["scene"] == scope]
-            means = part.groupby("policy")[[m for m in PAIRED_METRICS if m in part]].mean()
+            means = pd.DataFrame(
+                {
+                    m: solvable(part, m).groupby("policy")[m].mean()
+                    for m in PAIRED_METRICS
+                    if m in part
+                }
+            )
             row = {"scene": scope, "budget": budget}
             for m in (m for m in PAIRED_METRICS if m in means):
                 row[f"adaptive_{m}"] = means[m].get(HEADLINE_POLICY, math.nan)
@@ -193,8 +242,13 @@ SCENE_METRICS = ("acc_completeness_pct", "accuracy_pct", "rmse", "points", "cove
 def table_scenes(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     """Per scene, policy and budget: means over seeds (`rows`: `headline_frame`)."""
     cols = [m for m in (*SCENE_METRICS, "sfm_maa", "sfm_registered_views") if m in rows]
-    t = rows.groupby(["scene", "policy", "budget"], sort=False)[cols].mean().reset_index()
-    t.insert(3, "seeds", rows.groupby(["scene", "policy", "budget"], sort=False).size().values)
+    keys = ["scene", "policy", "budget"]
+    t = pd.DataFrame({m: solvable(rows, m).groupby(keys, sort=False)[m].mean() for m in cols})
+    t = t.reindex(rows.groupby(keys, sort=False).size().index).reset_index()
+    t.insert(3, "seeds", rows.groupby(keys, sort=False).size().values)
+    if REFERENCE_MAPS in rows:
+        excluded = rows[REFERENCE_MAPS].eq(0).groupby([rows[k] for k in keys], sort=False)
+        t.insert(4, "sfm_excluded_seeds", excluded.sum().astype(int).values)
     order = t.apply(lambda r: (r["scene"], r["budget"], vocab.order(r["policy"])), axis=1)
     return t.loc[order.sort_values().index].reset_index(drop=True)
 

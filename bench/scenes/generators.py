@@ -1,5 +1,6 @@
 """The procedural scene types. Each builder turns its `scenes/<name>.toml` parameters and
-a seeded generator into meshes, a sun (or None) and the six-camera rig."""
+a seeded generator into meshes, a sun (or None) and the rig: `views` cameras on the scene's
+camera path (documented in its `scenes/<name>.toml` description)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import numpy as np
 from bench.camera import Camera, look_at
 from bench.scenes import shapes, textures
 from bench.scenes.shapes import Geom
-from bench.scenes.spec import N_VIEWS, Material, Mesh, generator
+from bench.scenes.spec import Material, Mesh, generator
 
 
 def _mesh(name: str, g: Geom, material: Material, motion=None) -> Mesh:
@@ -22,9 +23,11 @@ def _mesh(name: str, g: Geom, material: Material, motion=None) -> Mesh:
     )
 
 
-def _arc_rig(p: dict, target, width: int, height: int, start_deg: float = -90.0) -> list[Camera]:
-    """Six cameras evenly on an arc of `arc_deg` around `target`, centred at `start_deg`."""
-    az = np.radians(start_deg + np.linspace(-p["arc_deg"] / 2, p["arc_deg"] / 2, N_VIEWS))
+def _arc_rig(
+    p: dict, target, width: int, height: int, views: int, start_deg: float = -90.0
+) -> list[Camera]:
+    """`views` cameras evenly on an arc of `arc_deg` around `target`, centred at `start_deg`."""
+    az = np.radians(start_deg + np.linspace(-p["arc_deg"] / 2, p["arc_deg"] / 2, views))
     tx, ty, _ = target
     eyes = [
         (tx + p["radius"] * np.cos(a), ty + p["radius"] * np.sin(a), p["cam_height"]) for a in az
@@ -65,7 +68,7 @@ def _room(rng, size: float, height: float, light: float, wall_tex, floor_tex) ->
 
 
 @generator("table")
-def table(p: dict, rng: np.random.Generator, width: int, height: int):
+def table(p: dict, rng: np.random.Generator, width: int, height: int, views: int):
     top_z = 1.5
     wall = textures.tint(textures.noise(rng, 256, (4, 16)), (0.55, 0.52, 0.48), (0.65, 0.62, 0.58))
     floor = textures.tint(
@@ -108,7 +111,7 @@ def table(p: dict, rng: np.random.Generator, width: int, height: int):
                 f"object_{k:02d}_{kind}", g, Material(textures.contrast(tex, p["texture_contrast"]))
             )
         )
-    rig = _arc_rig(p, (0.0, 0.0, 1.9), width, height)
+    rig = _arc_rig(p, (0.0, 0.0, 1.9), width, height, views)
     return meshes, rig, None
 
 
@@ -129,7 +132,7 @@ def _sun(irradiance: float, direction) -> dict:
 
 
 @generator("corridor")
-def corridor(p: dict, rng: np.random.Generator, width: int, height: int):
+def corridor(p: dict, rng: np.random.Generator, width: int, height: int, views: int):
     L, W, H, c = p["length"], p["width"], p["ceiling"], p["texture_contrast"]
     y0, y1 = -W / 2, W / 2
     paint = textures.contrast(
@@ -195,18 +198,18 @@ def corridor(p: dict, rng: np.random.Generator, width: int, height: int):
         yw = side * (W / 2 - 0.01)
         g = shapes.quad((x - w / 2 * side, yw, 1.0), (w * side, 0, 0), (0, 0, h))
         meshes.append(_mesh(f"poster_{k}", g, Material(textures.label(rng))))
-    eyes = [(p["start"] + i * p["step"], 0.08 * (-1) ** i, p["cam_height"]) for i in range(N_VIEWS)]
-    rig = [
-        look_at(
-            e, (L, 0.0, 0.95 * p["cam_height"]), width=width, height=height, fov_x_deg=p["fov_deg"]
-        )
-        for e in eyes
-    ]
+    # forward along the corridor, a few centimetres from side to side, every camera
+    # looking at the far end: points near the vanishing point have little parallax
+    target = (L, 0.0, 0.95 * p["cam_height"])
+    rig = []
+    for i, u in enumerate(np.linspace(0.0, 1.0, views)):
+        eye = (p["start"] + u * p["travel"], p["sway"] * (-1) ** i, p["cam_height"])
+        rig.append(look_at(eye, target, width=width, height=height, fov_x_deg=p["fov_deg"]))
     return meshes, rig, None
 
 
 @generator("facade")
-def facade(p: dict, rng: np.random.Generator, width: int, height: int):
+def facade(p: dict, rng: np.random.Generator, width: int, height: int, views: int):
     cols, floors, per, rec, c = (
         int(p["columns"]),
         int(p["floors"]),
@@ -281,8 +284,8 @@ def facade(p: dict, rng: np.random.Generator, width: int, height: int):
     meshes.append(_sky_dome(90.0, p["sky"]))
     D = p["street_distance"]
     rig = []
-    for i, t in enumerate(np.linspace(-1, 1, N_VIEWS)):
-        eye = ((i - (N_VIEWS - 1) / 2) * p["step"], -D, p["cam_height"])
+    for t in np.linspace(-1, 1, views):
+        eye = (t * p["span"] / 2, -D, p["cam_height"])
         yaw = np.radians(p["yaw_deg"]) * -t
         rig.append(
             look_at(
@@ -297,7 +300,7 @@ def facade(p: dict, rng: np.random.Generator, width: int, height: int):
 
 
 @generator("vegetation")
-def vegetation(p: dict, rng: np.random.Generator, width: int, height: int):
+def vegetation(p: dict, rng: np.random.Generator, width: int, height: int, views: int):
     c = p["texture_contrast"]
     earth = [(0.35, 0.25, 0.15), (0.2, 0.15, 0.1), (0.5, 0.45, 0.35), (0.25, 0.35, 0.12)]
     soil = textures.speckle(rng, 1024, 2400, earth) * np.float32([0.9, 0.8, 0.6])
@@ -330,7 +333,7 @@ def vegetation(p: dict, rng: np.random.Generator, width: int, height: int):
     meshes.append(_mesh("branches", shapes.merge(branches), Material(bark)))
     for k, group in enumerate(leaves):
         g = shapes.merge(group)
-        per_leaf = rng.normal(0, p["wind"], (N_VIEWS, len(group), 3))
+        per_leaf = rng.normal(0, p["wind"], (views, len(group), 3))
         motion = np.repeat(per_leaf, len(group[0].vertices), axis=1).astype(
             np.float32
         )  # six vertices a leaf
@@ -338,4 +341,8 @@ def vegetation(p: dict, rng: np.random.Generator, width: int, height: int):
             _mesh(f"leaves_{k}", g, Material(textures.contrast(textures.leaf(rng), c)), motion)
         )
     meshes.append(_sky_dome(90.0, p["sky"]))
-    return meshes, _arc_rig(p, (0.0, 0.0, 0.8), width, height), _sun(p["sun"], (0.3, 0.5, -0.8))
+    return (
+        meshes,
+        _arc_rig(p, (0.0, 0.0, 0.8), width, height, views),
+        _sun(p["sun"], (0.3, 0.5, -0.8)),
+    )

@@ -17,7 +17,6 @@ from bench import ROOT, BenchError
 from bench.camera import Camera
 
 SCENES_DIR = ROOT / "scenes"
-N_VIEWS = 6
 
 
 @dataclass
@@ -73,14 +72,14 @@ class SceneSpec:
 
 
 Generator = Callable[
-    [dict, np.random.Generator, int, int], tuple[list[Mesh], list[Camera], dict | None]
+    [dict, np.random.Generator, int, int, int], tuple[list[Mesh], list[Camera], dict | None]
 ]
 _GENERATORS: dict[str, Generator] = {}
 
 
 def generator(name: str) -> Callable[[Generator], Generator]:
-    """Register the builder of scene type `name`: (params, rng, width, height) -> (meshes,
-    cameras, sun)."""
+    """Register the builder of scene type `name`: (params, rng, width, height, views) ->
+    (meshes, cameras, sun), with `views` cameras on the scene's camera path."""
 
     def register(fn: Generator) -> Generator:
         _GENERATORS[name] = fn
@@ -110,8 +109,11 @@ def load_spec(name: str) -> SceneSpec:
     return SceneSpec(name, data.get("description", ""), dict(data.get("params", {})), docs)
 
 
-def build_scene(spec: SceneSpec, seed: int, width: int, height: int) -> SceneDescription:
-    """Generate the scene deterministically from its parameters and seed."""
+def build_scene(
+    spec: SceneSpec, seed: int, width: int, height: int, views: int
+) -> SceneDescription:
+    """Generate the scene deterministically from its parameters and seed, seen by `views`
+    cameras."""
     rng = np.random.default_rng([seed, int.from_bytes(spec.name.encode()[:8], "little")])
-    meshes, cameras, sun = _GENERATORS[spec.name](spec.params, rng, width, height)
+    meshes, cameras, sun = _GENERATORS[spec.name](spec.params, rng, width, height, views)
     return SceneDescription(spec.name, seed, dict(spec.params), meshes, cameras, sun)
