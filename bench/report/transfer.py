@@ -5,7 +5,7 @@ For each dataset, budget and ranking metric (the `sfm` task's mAA; the `tri` tas
 completeness where the dataset has per-pixel truth), the budgeted methods that both
 results folders hold are ranked by their mean, best first, on the dataset and on the
 rendered benchmark (all its scenes and seeds pooled, at the same budget, under the headline
-protocol); tied means share their mean rank. `transfer.csv` has Kendall's tau-b between the
+protocol; for sfm, without the cells stock COLMAP does not map); tied means share their mean rank. `transfer.csv` has Kendall's tau-b between the
 two rankings with a 95% percentile bootstrap interval (the methods resampled with
 replacement, `DRAWS` draws, seed 0), the winner on each side and the methods whose rank
 moves most; `transfer_ranks.csv` has every method's values and ranks.
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench.report.tables import headline_frame
+from bench.report.tables import headline_frame, solvable
 from bench.results import read_runs
 from bench.vocabulary import Vocabulary
 
@@ -53,8 +53,9 @@ def tau_interval(x: np.ndarray, y: np.ndarray, seed: int = 0) -> tuple[float, fl
 
 
 def _means(frame: pd.DataFrame, metric: str) -> pd.DataFrame:
-    """Mean of `metric` per budget and budgeted method (budget 0, a whole-pool method, has
-    no budget to rank at)."""
+    """Mean of `metric` per budget and budgeted method over the cells that count for it
+    (`solvable`; budget 0, a whole-pool method, has no budget to rank at)."""
+    frame = solvable(frame, metric)
     rows = frame[(frame["budget"] > 0) & frame[metric].notna()]
     return rows.groupby(["budget", "policy"])[metric].mean().unstack("policy")
 
