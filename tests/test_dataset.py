@@ -298,6 +298,14 @@ def test_a_malformed_model_is_refused_in_one_line_naming_file_and_line(
     assert message in str(err.value) and "\n" not in str(err.value)
 
 
+def test_a_text_model_with_points_reads(dataset, tmp_path):
+    ds = _copy(dataset, tmp_path / "ds")
+    (ds / "sparse" / "points3D.txt").write_text(
+        "# a point with its reprojection error\n7 0.5 1.5 2.5 10 20 30 0.8731\n"
+    )
+    assert len(load_views(ds)) == 6
+
+
 def test_the_model_poses_exactly_the_images_of_the_dataset(dataset, tmp_path):
     ds = _copy(dataset, tmp_path / "ds")
     (ds / "images" / "view_05.png").rename(ds / "view_05.png")

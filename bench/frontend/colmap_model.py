@@ -122,7 +122,7 @@ def check_text_model(folder: Path) -> None:
         if tok and (len(tok) < 8 or (len(tok) - 8) % 2):
             raise _problem(path, n, "expected POINT3D_ID X Y Z R G B ERROR TRACK[]")
         if tok:
-            _numbers(tok, "iffffiiif" + "i" * (len(tok) - 8), path, n)
+            _numbers(tok, "ifffiiif" + "i" * (len(tok) - 8), path, n)
 
 
 def _binary_problem(folder: Path) -> str | None:
