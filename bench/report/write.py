@@ -5,7 +5,8 @@ reconstructs, and nothing here imports the stages that do.
 Written files: `table1.csv` (headline task and protocol), `table1_twoview.csv`,
 `table2.csv`, `paired.csv`, `paired_sfm.csv`, `table_scenes.csv`, `frontend_cost.csv`
 (`bench.report.tables`), `figure3.png/.pdf`, `figure_budget.png` (with several budgets)
-and `figure2.png` (`bench.report.figures`). A results folder of datasets also gets
+and `figure2.png` (`bench.report.figures`), and last the folder's page, `README.md`
+(`bench.report.page`). A results folder of datasets also gets
 `table1-<dataset>.csv` per dataset when it holds several, and `transfer.csv`,
 `transfer_ranks.csv` and `figure_transfer.png` against a rendered results folder
 (`bench.report.transfer`). A table or figure that cannot be drawn from these rows is
@@ -23,6 +24,7 @@ import pandas as pd
 from bench.console import log
 from bench.files import atomic_path, write_text_atomic
 from bench.report.figures import figure2, figure3, figure_budget, figure_transfer, headline_budget
+from bench.report.page import PAGE, results_page
 from bench.report.tables import (
     frontend_cost,
     headline_frame,
@@ -56,16 +58,27 @@ def write_report(
 ) -> None:
     """Every table and figure of `results` from the rows `df`, under the vocabulary
     recorded in `results`; for a results folder of datasets, the transfer tables against
-    the rendered results folder `rendered`."""
+    the rendered results folder `rendered`; last, the folder's page."""
     results = Path(results)
     vocab = Vocabulary.load(results)
     df = with_oracle_share(df)
+    t1 = write_tables(df, results, vocab)
+    if is_dataset_run(results):
+        _write_transfer(df, vocab, results, rendered)
+    if t1.empty:
+        _drop(results / "figure3.png", results / "figure3.pdf", results / "figure_budget.png")
+        log("no run of the headline task and protocol: no Table 1 and no figures")
+    else:
+        _write_figures(df, t1, results, Path(renders))
+    write_text_atomic(results / PAGE, results_page(results))
+
+
+def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> pd.DataFrame:
+    """Every table of `results` from the rows `df` (with the oracle share); Table 1."""
     frame = headline_frame(df, vocab)
     t1, pairs = table1(frame, vocab), paired(frame, vocab)
-    datasets = is_dataset_run(results)
-    _write_tables(results, _per_dataset(frame, vocab, results) if datasets else {})
-    if datasets:
-        _write_transfer(df, vocab, results, rendered)
+    if is_dataset_run(results):
+        _write_tables(results, _per_dataset(frame, vocab, results))
     tables = {
         "table1.csv": t1,
         "table1_twoview.csv": table1(headline_frame(df, vocab, "twoview"), vocab),
@@ -76,16 +89,16 @@ def write_report(
         "frontend_cost.csv": frontend_cost(df, vocab),
     }
     _write_tables(results, tables)
-    if t1.empty:
-        _drop(results / "figure3.png", results / "figure3.pdf", results / "figure_budget.png")
-        log("no run of the headline task and protocol: no Table 1 and no figures")
-        return
+    return t1
+
+
+def _write_figures(df: pd.DataFrame, t1: pd.DataFrame, results: Path, renders: Path) -> None:
     figure3(t1, results / "figure3")
     if (t1["budget"] > 0).sum() and t1.loc[t1["budget"] > 0, "budget"].nunique() > 1:
         figure_budget(t1, results / "figure_budget")
     else:
         _drop(results / "figure_budget.png")
-    why = figure2(df, results, Path(renders), results / "figure2")
+    why = figure2(df, results, renders, results / "figure2")
     if why:
         _drop(results / "figure2.png")
         log(f"figure2.png not drawn (and any older one removed): {why}")
@@ -134,6 +147,7 @@ REPORT_FILES = (
     "paired_sfm.csv",
     "table_scenes.csv",
     "frontend_cost.csv",
+    PAGE,
 )
 FIGURES = ("figure2.png", "figure3.png", "figure3.pdf", "figure_budget.png")
 

@@ -1,0 +1,245 @@
+"""The results page: `README.md` of a results folder, written by `bench plot` (and so by
+`bench run`) from the files the report wrote beside it. Every number on it is read from
+those files: the tables (computed from `runs.csv` alone), `manifest.json` (the run's
+machine, versions and seconds) and `config.json` (its settings). Nothing on it is typed
+by hand, so it never disagrees with its folder; `bench publish` copies it with the rest.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pandas as pd
+
+from bench.vocabulary import HEADLINE, HEADLINE_BUDGET, HEADLINE_POLICY, PAIRED_PEER, Vocabulary
+
+PAGE = "README.md"
+POOLED = ("all", "all scenes")
+"""How the tables name the pooled rows."""
+PAGE_METRICS = ("acc_completeness_pct", "sfm_maa")
+"""The paired metrics the page shows (the CSVs have every headline metric)."""
+TASK_COLUMNS = 3
+"""How many of a task's Table 1 columns (its first, in the task registry's order) the
+page shows; the CSV has them all."""
+FIGURES = {
+    "figure3.png": "Headline metrics per method at the headline budget, 95% intervals",
+    "figure_budget.png": "Each headline metric against the budget",
+    "figure2.png": "Figure 2: the adaptive selection and its points coloured by error",
+    "figure_transfer.png": "The rendered ranking against each dataset's",
+}
+
+
+def _read(results: Path, name: str) -> pd.DataFrame:
+    path = results / name
+    return pd.read_csv(path) if path.is_file() else pd.DataFrame()
+
+
+def _json(results: Path, name: str) -> dict:
+    path = results / name
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def _num(x) -> str:
+    """A number as the page shows it: 3 significant digits, integers whole, n/a if missing."""
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "n/a"
+    x = float(x)
+    if x == int(x) and abs(x) < 1e6:
+        return str(int(x))
+    return f"{x:.3g}" if abs(x) < 1000 else f"{x:,.0f}"
+
+
+def _text(x) -> str:
+    return x if isinstance(x, str) else "n/a"
+
+
+def _interval(row: pd.Series, col: str) -> str:
+    """`mean [lo, hi]`, or the mean alone where the table has no interval."""
+    mean = _num(row.get(col))
+    lo, hi = row.get(f"{col}_lo"), row.get(f"{col}_hi")
+    if lo is None or hi is None or pd.isna(lo) or pd.isna(hi):
+        return mean
+    return f"{mean} [{_num(lo)}, {_num(hi)}]"
+
+
+def _table(header: list[str], rows: list[list[str]]) -> list[str]:
+    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return out + ["| " + " | ".join(r) + " |" for r in rows]
+
+
+def _run_section(manifest: dict, runs: pd.DataFrame) -> list[str]:
+    host = manifest.get("host", {})
+    versions = ", ".join(f"{k} {v}" for k, v in manifest.get("versions", {}).items())
+    commits = ", ".join(c[:7] for c in manifest.get("git_commit", []))
+    out = ["## The run", ""]
+    out.append(f"- rows: {len(runs)} ({(runs.get('status') == 'failed').sum()} failed)")
+    out.append(f"- commit: {commits or 'n/a'}; render variant: {manifest.get('variant', 'n/a')}")
+    out.append(f"- machine: {host.get('platform', 'n/a')}, {host.get('cpus', 'n/a')} CPUs")
+    out.append(f"- versions: {versions or 'n/a'}")
+    seconds = manifest.get("seconds", {})
+    if seconds:
+        out += ["", "Seconds per stage (summed over the invocations that computed these rows):", ""]
+        out += _table(list(seconds), [[_num(round(v)) for v in seconds.values()]])
+    return out
+
+
+def _grid_section(runs: pd.DataFrame, config: dict) -> list[str]:
+    out = ["## Grid and settings", ""]
+    for col in ("scene", "seed", "policy", "budget", "task", "protocol"):
+        values = sorted(set(runs[col].astype(str)), key=lambda v: (len(v), v))
+        out.append(f"- {col}: {', '.join(values)}")
+    settings = config.get("settings") or {}
+    if settings:
+        out += ["", "<details><summary>Settings (config.json)</summary>", "", "```"]
+        out += [json.dumps(settings, indent=1, sort_keys=True), "```", "</details>"]
+    return out
+
+
+def _table1_section(t1: pd.DataFrame, vocab: Vocabulary, title: str) -> list[str]:
+    if t1.empty:
+        return []
+    out = [f"## {title}", ""]
+    for task in vocab.tasks.values():
+        prefix = "" if task.name == HEADLINE[0] else f"{task.name}_"
+        cols = [prefix + c for c in task.columns[:TASK_COLUMNS] if prefix + c in t1]
+        rows = t1.dropna(subset=cols, how="all") if cols else t1.iloc[0:0]
+        if rows.empty:
+            continue
+        header = ["method", "budget", "runs", *cols]
+        body = {
+            b: [
+                [str(r["strategy"]), _num(r["budget"]), _num(r["runs"])]
+                + [_interval(r, c) for c in cols]
+                for _, r in at.iterrows()
+            ]
+            for b, at in rows.groupby("budget")
+        }
+        main = [r for b, rs in body.items() if b in (0, HEADLINE_BUDGET) for r in rs]
+        rest = [r for b, rs in body.items() if b not in (0, HEADLINE_BUDGET) for r in rs]
+        out += [f"### `{task.name}`: {task.doc}", ""] + _table(header, main or rest) + [""]
+        if main and rest:
+            out += ["<details><summary>Other budgets</summary>", ""]
+            out += _table(header, rest) + ["", "</details>", ""]
+    return out
+
+
+def _table2_section(t2: pd.DataFrame) -> list[str]:
+    """One row per scene and metric at the headline budget (every budget is in the CSV)."""
+    if t2.empty:
+        return []
+    metrics = [
+        c[len("diff_") : -len("_lo")] for c in t2 if c.startswith("diff_") and c.endswith("_lo")
+    ]
+    at = t2[t2["budget"] == HEADLINE_BUDGET] if (t2["budget"] == HEADLINE_BUDGET).any() else t2
+    header = ["scene", "metric", HEADLINE_POLICY, "best baseline", "difference [95%]", "w/t/l"]
+    body = []
+    for _, r in at.iterrows():
+        for m in metrics:
+            best = r.get(
+                f"best_baseline_{m}_policy", r.get(f"best_baseline_{m.removesuffix('_pct')}_policy")
+            )
+            body.append(
+                [
+                    str(r["scene"]),
+                    m,
+                    _num(r.get(f"{HEADLINE_POLICY}_{m}")),
+                    f"{_num(r.get(f'best_baseline_{m}'))} ({_text(best)})",
+                    _interval(r, f"diff_{m}"),
+                    _text(r.get(f"diff_{m}_wtl")),
+                ]
+            )
+    title = f"## Table 2: {HEADLINE_POLICY} against the best baseline, budget {_num(at['budget'].iloc[0])}"
+    return [title, ""] + _table(header, body) + [""]
+
+
+def _paired_section(paired: pd.DataFrame, title: str, baseline: str | None) -> list[str]:
+    """The pooled rows (all scenes) at the headline budget in the headline metrics, against
+    `baseline` if given."""
+    if paired.empty:
+        return []
+    pooled = paired["scene"].isin(POOLED) & (paired["budget"] == HEADLINE_BUDGET)
+    rows = paired[pooled & paired["metric"].isin(PAGE_METRICS)]
+    if baseline is not None:
+        rows = rows[rows["baseline"] == baseline]
+    if rows.empty:
+        return []
+    header = ["method", "baseline", "metric", "n", "mean difference [95%]", "w/t/l"]
+    body = [
+        [
+            str(r["policy"]),
+            str(r["baseline"]),
+            str(r["metric"]),
+            _num(r["n"]),
+            f"{_num(r['mean_diff'])} [{_num(r['lo'])}, {_num(r['hi'])}]",
+            f"{_num(r['wins'])}/{_num(r['ties'])}/{_num(r['losses'])}",
+        ]
+        for _, r in rows.iterrows()
+    ]
+    return [f"## {title}", ""] + _table(header, body) + [""]
+
+
+def _transfer_section(transfer: pd.DataFrame) -> list[str]:
+    if transfer.empty:
+        return []
+    shown = [c for c in transfer.columns if not c.startswith("top_")]
+    body = [[_num(v) if not isinstance(v, str) else v for v in r] for r in transfer[shown].values]
+    return ["## Transfer: the rendered ranking on each dataset", ""] + _table(shown, body) + [""]
+
+
+def _exclusions(runs: pd.DataFrame, t1: pd.DataFrame) -> list[str]:
+    out = ["## What was excluded or failed, and why", ""]
+    failed = runs[runs["status"] == "failed"]
+    if failed.empty:
+        out.append("- no row failed")
+    else:
+        reasons = failed["failure"].fillna("").str.split(":").str[0].value_counts()
+        out += [f"- {n} rows failed: {why}" for why, n in reasons.items()]
+    if "sfm_excluded_runs" in t1 and t1["sfm_excluded_runs"].fillna(0).sum():
+        n = int(t1.groupby("policy")["sfm_excluded_runs"].max().max())
+        out.append(
+            f"- up to {n} runs per method left out of the sfm means: their (scene, seed) "
+            "is not mapped by stock COLMAP with all its features (`reference_maps` 0)"
+        )
+    return out + [""]
+
+
+def results_page(results: Path) -> str:
+    """The page of a results folder, from its files."""
+    results = Path(results)
+    runs = pd.read_csv(results / "runs.csv")
+    vocab = Vocabulary.load(results)
+    t1 = _read(results, "table1.csv")
+    out = [
+        f"# Results: `{results.name}`",
+        "",
+        "Written by `bench plot` from this folder's `runs.csv`, `manifest.json` and "
+        "`config.json`; every number below is in those files or the tables beside them. "
+        "Do not edit: the next `bench plot` rewrites it.",
+        "",
+    ]
+    out += _run_section(_json(results, "manifest.json"), runs) + [""]
+    out += _grid_section(runs, _json(results, "config.json")) + [""]
+    out += _table1_section(t1, vocab, "Table 1: means over runs, 95% intervals")
+    out += _table2_section(_read(results, "table2.csv"))
+    out += _paired_section(
+        _read(results, "paired.csv"),
+        f"Paired: {HEADLINE_POLICY} against every method, all scenes",
+        None,
+    )
+    out += _paired_section(
+        _read(results, "paired_sfm.csv"),
+        f"Paired sfm: every method against `{PAIRED_PEER}`, all scenes",
+        PAIRED_PEER,
+    )
+    out += _transfer_section(_read(results, "transfer.csv"))
+    figures = [(n, t) for n, t in FIGURES.items() if (results / n).is_file()]
+    if figures:
+        out += ["## Figures", ""] + [f"![{t}]({n})" + "\n" for n, t in figures]
+    out += _exclusions(runs, t1)
+    out.append(
+        "Every table is a CSV beside this page with every column; the definitions are in "
+        "the project's `docs/protocol.md`."
+    )
+    return "\n".join(out) + "\n"
