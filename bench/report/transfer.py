@@ -65,7 +65,7 @@ def transfer(
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(`transfer.csv`, `transfer_ranks.csv`) of a dataset folder's rows (under their
     vocabulary) against the rendered results folder `rendered` (module docstring)."""
-    mine = headline_frame(dataset_rows, vocab)
+    mine = headline_frame(dataset_rows, vocab, dataset=True)
     theirs = headline_frame(read_runs(Path(rendered) / "runs.csv"), Vocabulary.load(rendered))
     summary, ranks = [], []
     for dataset, rows in mine.groupby("scene", sort=False):

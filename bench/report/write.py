@@ -24,6 +24,7 @@ from bench.console import log
 from bench.files import atomic_path, write_text_atomic
 from bench.report.figures import figure2, figure3, figure_budget, figure_transfer, headline_budget
 from bench.report.tables import (
+    SFM_RULE,
     frontend_cost,
     headline_frame,
     paired,
@@ -60,15 +61,17 @@ def write_report(
     results = Path(results)
     vocab = Vocabulary.load(results)
     df = with_oracle_share(df)
-    frame = headline_frame(df, vocab)
-    t1, pairs = table1(frame, vocab), paired(frame, vocab)
     datasets = is_dataset_run(results)
+    frame = headline_frame(df, vocab, dataset=datasets)
+    t1, pairs = table1(frame, vocab), paired(frame, vocab)
+    if SFM_RULE in frame:
+        log(f"sfm exclusion rule (cells stock COLMAP does not map): {frame[SFM_RULE].iloc[0]}")
     _write_tables(results, _per_dataset(frame, vocab, results) if datasets else {})
     if datasets:
         _write_transfer(df, vocab, results, rendered)
     tables = {
         "table1.csv": t1,
-        "table1_twoview.csv": table1(headline_frame(df, vocab, "twoview"), vocab),
+        "table1_twoview.csv": table1(headline_frame(df, vocab, "twoview", datasets), vocab),
         "table2.csv": table2(frame, pairs, vocab),
         "paired.csv": pairs,
         "paired_sfm.csv": paired_sfm(frame, vocab),
@@ -113,7 +116,11 @@ def _write_transfer(df: pd.DataFrame, vocab: Vocabulary, results: Path, rendered
     names = ("transfer.csv", "transfer_ranks.csv")
     if rendered is None or not (Path(rendered) / "runs.csv").is_file():
         _drop(*(results / n for n in (*names, "figure_transfer.png")))
-        log(f"no transfer.csv: no rendered results in {rendered} (give one with --rendered)")
+        where = "none given" if rendered is None else f"{Path(rendered) / 'runs.csv'} is missing"
+        log(
+            f"no transfer.csv: no rendered results to compare with ({where}; give a rendered "
+            "results folder with --rendered DIR)"
+        )
         return
     summary, ranks = transfer(df, vocab, Path(rendered))
     _write_tables(results, dict(zip(names, (summary, ranks))))
