@@ -5,7 +5,9 @@ For each dataset, budget and ranking metric (the `sfm` task's mAA; the `tri` tas
 completeness where the dataset has per-pixel truth), the budgeted methods that both
 results folders hold are ranked by their mean, best first, on the dataset and on the
 rendered benchmark (all its scenes and seeds pooled, at the same budget, under the headline
-protocol; for sfm, without the cells stock COLMAP does not map); tied means share their mean rank. `transfer.csv` has Kendall's tau-b between the
+protocol; for sfm, without the cells stock COLMAP does not map where that rule holds,
+`bench.report.tables.sfm_rule`; a dataset's cells are never left out); tied means share
+their mean rank. `transfer.csv` has Kendall's tau-b between the
 two rankings with a 95% percentile bootstrap interval (the methods resampled with
 replacement, `DRAWS` draws, seed 0), the winner on each side and the methods whose rank
 moves most; `transfer_ranks.csv` has every method's values and ranks.

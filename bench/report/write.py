@@ -64,7 +64,7 @@ def write_report(
     datasets = is_dataset_run(results)
     frame = headline_frame(df, vocab, dataset=datasets)
     t1, pairs = table1(frame, vocab), paired(frame, vocab)
-    if SFM_RULE in frame:
+    if SFM_RULE in frame and len(frame):
         log(f"sfm exclusion rule (cells stock COLMAP does not map): {frame[SFM_RULE].iloc[0]}")
     _write_tables(results, _per_dataset(frame, vocab, results) if datasets else {})
     if datasets:
