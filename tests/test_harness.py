@@ -36,7 +36,6 @@ from bench.harness.grid import BenchConfig
 from bench.harness.predict import LoadedScene, export_model
 from bench.render import entry as render
 from bench.report import figures
-from bench.report.stats import bootstrap_mean, paired_difference
 from bench.report.write import publish, write_report
 from bench.results import Workspace, read_runs
 from bench.vocabulary import KEY, Job, Unit, Vocabulary
@@ -452,26 +451,6 @@ def test_version_names_the_distribution(capsys):
 # --- statistics -----------------------------------------------------------------------
 
 
-def test_paired_bootstrap_on_known_differences():
-    units = pd.MultiIndex.from_tuples([(s, k) for s in ("a", "b") for k in range(3)])
-    strata = pd.Series(units.get_level_values(0), index=units)
-    base = pd.Series(10.0, index=units)
-    # a constant difference per scene (+1 in a, +5 in b): resampling seeds within each
-    # scene keeps the pooled mean at exactly 3, so the interval is [3, 3]
-    better = base + pd.Series([1, 1, 1, 5, 5, 5], index=units, dtype=float)
-    r = paired_difference(better, base, strata, "acc_completeness_pct")
-    assert (r["n"], r["mean_diff"], r["lo"], r["hi"]) == (6, 3.0, 3.0, 3.0)
-    assert (r["wins"], r["ties"], r["losses"]) == (6, 0, 0)
-    # for rmse lower is better: the same differences are six losses
-    assert paired_difference(better, base, strata, "rmse")["losses"] == 6
-    # differences -1, 0, +1 in one scene: mean 0, interval inside [-1, 1], one of each
-    mixed = paired_difference(
-        base.iloc[:3] + [-1.0, 0.0, 1.0], base.iloc[:3], strata.iloc[:3], "accuracy_pct"
-    )
-    assert mixed["mean_diff"] == 0 and -1 <= mixed["lo"] < 0 < mixed["hi"] <= 1
-    assert (mixed["wins"], mixed["ties"], mixed["losses"]) == (1, 1, 1)
-
-
 def test_cells_stock_colmap_cannot_map_are_marked_and_left_out_of_the_sfm_means():
     from bench.harness.grid import mark_reference
     from bench.report.tables import headline_frame, paired_sfm, table1, table_scenes
@@ -512,12 +491,6 @@ def test_kendall_tau_and_its_interval_on_hand_made_rankings():
     assert tau_interval(np.arange(6.0), np.arange(6.0)) == (1.0, 1.0)
     lo, hi = tau_interval(np.arange(6.0), np.array([0, 2, 1, 3, 5, 4.0]))
     assert -1 <= lo < kendall_tau(np.arange(6.0), np.array([0, 2, 1, 3, 5, 4.0])) < hi <= 1
-
-
-def test_bootstrap_interval_stays_within_the_metric_range():
-    mean, lo, hi = bootstrap_mean([0.0, 0.0, 0.0, 0.0, 100.0])
-    assert mean == 20.0 and 0.0 <= lo <= mean <= hi <= 100.0
-    assert math.isnan(bootstrap_mean([5.0])[1])  # one run: no interval, not a zero-width one
 
 
 def test_a_budget_above_every_pool_is_refused_in_one_line(tmp_path, capsys):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from bench import ROOT
 from bench.cli.common import LATEST, PUBLISHED, renders_arg, results_arg
 
 HELP = "rebuild the tables and figures from runs.csv (no rendering, no reconstruction)"
@@ -24,7 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--rendered",
         type=Path,
-        default=PUBLISHED,
+        default=ROOT / PUBLISHED,
         metavar="DIR",
         help="for a results folder of datasets: the rendered results whose ranking "
         "transfer.csv compares with theirs (default: %(default)s)",

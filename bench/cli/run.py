@@ -7,7 +7,7 @@ import dataclasses
 from functools import partial
 from pathlib import Path
 
-from bench import BenchError
+from bench import ROOT, BenchError
 from bench.cli.common import (
     LATEST,
     LIST_FORM,
@@ -130,7 +130,7 @@ def _input_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="DIR",
         help="with --dataset: the rendered results whose ranking transfer.csv compares with "
-        f"the datasets' (default: ./{PUBLISHED})",
+        f"the datasets' (default: the package's snapshot, {ROOT / PUBLISHED})",
     )
     parser.add_argument(
         "--policy-module",
@@ -269,7 +269,7 @@ def has_pixel_truth(dataset: Path) -> bool:
 
 def run(args: argparse.Namespace) -> None:
     from bench.harness.execute import Cluster, default_workers
-    from bench.harness.grid import BenchConfig, RunOptions, run_benchmark
+    from bench.harness.grid import BenchConfig, RunOptions, run_benchmark, with_reference
     from bench.report.tables import headline_frame, table1, with_oracle_share
     from bench.report.write import write_report
     from bench.results import Workspace
@@ -281,6 +281,7 @@ def run(args: argparse.Namespace) -> None:
     run_cfg = run_config(args)
     policies = parse_list("--policies", args.policies, str, "texture,adaptive")
     datasets = datasets_arg(args.dataset) if args.dataset else ()
+    tasks = parse_list("--tasks", args.tasks, str, "tri")
     if args.rendered is not None and not datasets:
         log("--rendered is ignored without --dataset: it is what datasets are compared with")
     if datasets:
@@ -294,13 +295,14 @@ def run(args: argparse.Namespace) -> None:
             "--seeds", args.seeds or ("0" if args.quick else "0-4"), int, "0,1,2 or 100-119"
         )
         scenes = parse_list("--scenes", args.scenes or ",".join(scene_names()), str, "table,facade")
+        policies = with_reference(policies, tasks)
     budget = args.budget if args.budget is not None else ("256" if args.quick else "128,256,512")
     cfg = BenchConfig(
         scenes=scenes,
         seeds=seeds,
         policies=policies,
         budgets=parse_list("--budget", budget, int, "128,256,512"),
-        tasks=parse_list("--tasks", args.tasks, str, "tri"),
+        tasks=tasks,
         protocols=parse_list("--protocols", args.protocols, str, "multiview,twoview"),
         run=run_cfg,
         datasets=tuple(map(str, datasets)),
@@ -320,11 +322,11 @@ def run(args: argparse.Namespace) -> None:
         reevaluate=args.reevaluate,
         cluster=Cluster(args.workers or default_workers(), args.scheduler),
     )
-    report = partial(write_report, rendered=args.rendered or PUBLISHED)
+    report = partial(write_report, rendered=args.rendered or ROOT / PUBLISHED)
     df = run_benchmark(cfg, Workspace(results, args.renders), options, report=report)
     protocol = "multiview" if "multiview" in cfg.protocols else cfg.protocols[0]
     vocab = Vocabulary.load(results)
-    t = table1(headline_frame(with_oracle_share(df), vocab, protocol), vocab)
+    t = table1(headline_frame(with_oracle_share(df), vocab, protocol, bool(datasets)), vocab)
     print(f"Table 1 ({protocol} protocol; {', '.join(cfg.tasks)}):")
     cols = ["strategy", "budget", "runs", "acc_completeness_pct", "completeness_vs_oracle_pct"]
     cols += [

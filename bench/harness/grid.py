@@ -68,6 +68,16 @@ def default_policies() -> tuple[str, ...]:
     return tuple(sorted(names, key=vocab.order))
 
 
+def with_reference(policies: tuple[str, ...], tasks: tuple[str, ...]) -> tuple[str, ...]:
+    """`policies`, with stock COLMAP with all features (`REFERENCE_PEER`) added when the
+    grid runs a task that admits peers (sfm) on rendered scenes: the sfm means leave out
+    the cells it does not map, and the rule holds only when it ran in every cell."""
+    if REFERENCE_PEER in policies or not any(RUNNERS[t].spec.peers for t in tasks if t in RUNNERS):
+        return policies
+    log(f"{REFERENCE_PEER} added to the grid: the sfm means leave out the cells it does not map")
+    return (*policies, REFERENCE_PEER)
+
+
 @dataclass(frozen=True)
 class BenchConfig:
     """The benchmark grid and the configuration of every run in it."""

@@ -1,8 +1,8 @@
 """Figures from the tables (Figure 2 also reads the exported model and the cached render).
 
-Intervals are the tables' bootstrap percentile intervals, so they stay within each
-metric's range; a value that is missing (no run, or n = 1 for an interval) is drawn as
-missing ("n/a", no error bar), never as a zero-height bar.
+Intervals are the tables' (`bench.report.stats`); a value that is missing (no run, or
+no interval: a scene with one seed) is drawn as missing ("n/a", no error bar), never as a
+zero-height bar.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ def _errors(t: pd.DataFrame, m: str) -> np.ndarray:
 
 def figure3(t1: pd.DataFrame, out: Path, title: str = "") -> None:
     """Aggregate metrics per strategy at the headline budget (references included), with
-    95% bootstrap intervals; bars are labelled by policy id (the display names are long)."""
+    95% intervals; bars are labelled by policy id (the display names are long)."""
     b = headline_budget(t1)
     t = t1[(t1["budget"] == b) | (t1["budget"] == 0)].reset_index(drop=True)
     fig, axes = plt.subplots(3, 3, figsize=(max(15, len(t)), 11))
@@ -81,8 +81,7 @@ def figure3(t1: pd.DataFrame, out: Path, title: str = "") -> None:
         if m in LOG_SCALE and (values[ok] > 0).any():
             ax.set_yscale("log")
     fig.suptitle(
-        title
-        or f"Aggregate metrics per strategy (budget {b}; mean and 95% bootstrap interval over runs)"
+        title or f"Aggregate metrics per strategy (budget {b}; mean and 95% interval over runs)"
     )
     fig.tight_layout()
     save(fig, out, ("png", "pdf"))
@@ -90,7 +89,7 @@ def figure3(t1: pd.DataFrame, out: Path, title: str = "") -> None:
 
 def figure_budget(t1: pd.DataFrame, out: Path) -> None:
     """Each headline metric against the budget per policy (oracle included), with 95%
-    bootstrap bands; the `all` reference as a dashed line."""
+    interval bands; the `all` reference as a dashed line."""
     fig, axes = plt.subplots(3, 3, figsize=(15, 11))
     budgets = sorted(b for b in t1["budget"].unique() if b > 0)
     for ax, (m, label) in zip(axes.ravel(), PANELS):
@@ -129,7 +128,7 @@ def figure_budget(t1: pd.DataFrame, out: Path) -> None:
     fig.legend(
         entries.values(), entries.keys(), loc="lower center", ncol=5, fontsize=8, frameon=False
     )
-    fig.suptitle("Headline metrics against the budget (mean and 95% bootstrap band over runs)")
+    fig.suptitle("Headline metrics against the budget (mean and 95% interval band over runs)")
     fig.tight_layout(rect=(0, 0.07, 1, 1))  # the legend below the panels, over no curve
     save(fig, out, ("png",))
 

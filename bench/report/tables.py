@@ -2,8 +2,9 @@
 
 * `table1.csv`: per strategy and budget, the headline task and protocol (`tri`,
   `multiview`) and beside it the `sfm` task's metrics (prefixed `sfm_`: mAA, registered
-  views, ...): the mean of every metric over runs with a 95% bootstrap interval
-  (`<metric>_lo`, `<metric>_hi`; `bench.report.stats`). The stock-COLMAP peers have sfm
+  views, ...): the mean of every metric over runs with a 95% interval (`<metric>_lo`,
+  `<metric>_hi`; a stratified t-interval over scenes, `bench.report.stats`; `note` says
+  why a row has none, e.g. `n/a (1 seed)`). The stock-COLMAP peers have sfm
   columns only. `table1_twoview.csv`: both tasks under the `twoview` track protocol, never
   mixed into the headline.
 * `completeness_vs_oracle_pct`: a run's completeness as a percentage of the oracle's in the
@@ -22,7 +23,9 @@
   in `runs.csv`) measures
   nothing in the sfm task: its units are left out of every sfm mean and paired sfm
   difference, and `sfm_excluded_runs` (Table 1) and `sfm_excluded_seeds`
-  (`table_scenes.csv`) count them.
+  (`table_scenes.csv`) count them. The rule holds for all cells or none (`sfm_rule`,
+  Table 1's `sfm_exclusion`): it is not applied where `colmap` did not run in every cell
+  of the sfm task, nor on datasets, whose poses are the truth.
 * `table_scenes.csv`: per scene, policy and budget, the mean over seeds of the headline
   metrics and the sfm task's mAA and registered views.
 * `frontend_cost.csv`: per policy, the measured front-end time of a run (detection, the
@@ -42,13 +45,14 @@ import math
 import numpy as np
 import pandas as pd
 
-from bench.report.stats import LOWER_IS_BETTER, bootstrap_mean, paired_difference
+from bench.report.stats import LOWER_IS_BETTER, paired_difference, stratified_interval
 from bench.vocabulary import (
     HEADLINE,
     HEADLINE_POLICY,
     ORACLE,
     PAIRED_PEER,
     REFERENCE_MAPS,
+    REFERENCE_PEER,
     UNIT_KEY,
     Vocabulary,
 )
@@ -56,14 +60,32 @@ from bench.vocabulary import (
 PAIRED_METRICS = ("acc_completeness_pct", "accuracy_pct", "rmse", "median_error", "sfm_maa")
 """The headline metrics that paired statistics compare."""
 UNIT = list(UNIT_KEY)
+SFM_RULE = "sfm_exclusion"
+"""The `headline_frame` column (and Table 1's) saying whether the sfm exclusion rule is
+applied (`sfm_rule`)."""
+
+
+def sfm_rule(df: pd.DataFrame, dataset: bool = False) -> str:
+    """Whether the sfm exclusion rule is applied to the rows `df` ("applied") or why not:
+    on a dataset (its poses are the truth), or where stock COLMAP with all features did
+    not run in every (scene, seed) cell of the sfm task (the rule is all or nothing, so
+    that a mean never depends on which cells it ran in)."""
+    if dataset:
+        return "not applied: a dataset's poses are the truth"
+    cells = df[df["task"] == "sfm"].drop_duplicates(["scene", "seed"])
+    known = cells[REFERENCE_MAPS].notna().sum() if REFERENCE_MAPS in cells else 0
+    if known < len(cells):
+        return f"not applied: {REFERENCE_PEER} did not run in {len(cells) - known} of {len(cells)} cells"
+    return "applied"
 
 
 def headline_frame(
-    df: pd.DataFrame, vocab: Vocabulary, protocol: str = HEADLINE[1]
+    df: pd.DataFrame, vocab: Vocabulary, protocol: str = HEADLINE[1], dataset: bool = False
 ) -> pd.DataFrame:
     """One row per (scene, seed, policy, budget) under a track protocol: the headline
     task's columns, and every other task's as `<task>_<name>` (a unit without one of the
-    tasks has NaN for it)."""
+    tasks has NaN for it); with the sfm task, `SFM_RULE` and, where the rule is applied,
+    `REFERENCE_MAPS` (`dataset`: the rows are of datasets)."""
     rows = df[df["protocol"] == protocol]
     frame = rows[rows["task"] == HEADLINE[0]].drop(columns=REFERENCE_MAPS, errors="ignore")
     for task in (t for t in vocab.tasks if t != HEADLINE[0]):
@@ -72,7 +94,10 @@ def headline_frame(
         frame = frame.merge(
             part.rename(columns={c: f"{task}_{c}" for c in cols}), on=UNIT, how="outer"
         )
-    if REFERENCE_MAPS in df:  # a property of the (scene, seed): on every unit of it
+    rule = sfm_rule(df, dataset) if (df["task"] == "sfm").any() else None
+    if rule is not None:
+        frame[SFM_RULE] = rule
+    if rule == "applied":  # a property of the (scene, seed): on every unit of it
         cells = df.dropna(subset=[REFERENCE_MAPS]).groupby(["scene", "seed"])[REFERENCE_MAPS]
         maps = cells.first()
         frame[REFERENCE_MAPS] = [maps.get(k) for k in zip(frame["scene"], frame["seed"])]
@@ -105,8 +130,8 @@ def with_oracle_share(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
-    """Per strategy and budget: every metric's mean and 95% bootstrap interval over runs
-    (`rows`: `headline_frame`, or the rows of one task and protocol)."""
+    """Per strategy and budget: every metric's mean and 95% interval over runs, the scenes
+    as strata (`rows`: `headline_frame`, or the rows of one task and protocol)."""
     out = []
     others = [t for t in vocab.tasks if t != HEADLINE[0]]
     metrics = [*vocab.tasks[HEADLINE[0]].columns]
@@ -117,12 +142,19 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
         row["failed_runs"] = int((g["status"] == "failed").sum())
         for t in (t for t in others if f"{t}_status" in g):
             row[f"{t}_failed_runs"] = int((g[f"{t}_status"] == "failed").sum())
+        if SFM_RULE in g:
+            row[SFM_RULE] = g[SFM_RULE].iloc[0]
         if REFERENCE_MAPS in g:
             row["sfm_excluded_runs"] = int(g[REFERENCE_MAPS].eq(0).sum())
+        notes = []
         for m in metrics:
             if m in g:
-                x = solvable(g, m)[m].astype(float)
-                row[m], row[f"{m}_lo"], row[f"{m}_hi"] = bootstrap_mean(x)
+                x = solvable(g, m)
+                row[m], row[f"{m}_lo"], row[f"{m}_hi"], note = stratified_interval(
+                    x[m].astype(float), x["scene"]
+                )
+                notes += [note] if note and x[m].notna().any() else []
+        row["note"] = "; ".join(dict.fromkeys(notes))
         out.append(row)
     t = pd.DataFrame(out)
     if t.empty:
@@ -224,6 +256,7 @@ def table2(rows: pd.DataFrame, pairs: pd.DataFrame, vocab: Vocabulary) -> pd.Dat
                 row[f"diff_{m}"] = r.get("mean_diff", math.nan)
                 row[f"diff_{m}_lo"] = r.get("lo", math.nan)
                 row[f"diff_{m}_hi"] = r.get("hi", math.nan)
+                row[f"diff_{m}_note"] = r.get("note", "")
                 row[f"diff_{m}_wtl"] = f"{r['wins']}/{r['ties']}/{r['losses']}" if len(p) else ""
             row["oracle_acc_completeness_pct"] = means["acc_completeness_pct"].get(ORACLE, math.nan)
             out.append(row)

@@ -5,7 +5,9 @@ For each dataset, budget and ranking metric (the `sfm` task's mAA; the `tri` tas
 completeness where the dataset has per-pixel truth), the budgeted methods that both
 results folders hold are ranked by their mean, best first, on the dataset and on the
 rendered benchmark (all its scenes and seeds pooled, at the same budget, under the headline
-protocol; for sfm, without the cells stock COLMAP does not map); tied means share their mean rank. `transfer.csv` has Kendall's tau-b between the
+protocol; for sfm, without the cells stock COLMAP does not map where that rule holds,
+`bench.report.tables.sfm_rule`; a dataset's cells are never left out); tied means share
+their mean rank. `transfer.csv` has Kendall's tau-b between the
 two rankings with a 95% percentile bootstrap interval (the methods resampled with
 replacement, `DRAWS` draws, seed 0), the winner on each side and the methods whose rank
 moves most; `transfer_ranks.csv` has every method's values and ranks.
@@ -65,7 +67,7 @@ def transfer(
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(`transfer.csv`, `transfer_ranks.csv`) of a dataset folder's rows (under their
     vocabulary) against the rendered results folder `rendered` (module docstring)."""
-    mine = headline_frame(dataset_rows, vocab)
+    mine = headline_frame(dataset_rows, vocab, dataset=True)
     theirs = headline_frame(read_runs(Path(rendered) / "runs.csv"), Vocabulary.load(rendered))
     summary, ranks = [], []
     for dataset, rows in mine.groupby("scene", sort=False):

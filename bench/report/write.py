@@ -26,6 +26,7 @@ from bench.files import atomic_path, write_text_atomic
 from bench.report.figures import figure2, figure3, figure_budget, figure_transfer, headline_budget
 from bench.report.page import PAGE, results_page
 from bench.report.tables import (
+    SFM_RULE,
     frontend_cost,
     headline_frame,
     paired,
@@ -75,13 +76,16 @@ def write_report(
 
 def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> pd.DataFrame:
     """Every table of `results` from the rows `df` (with the oracle share); Table 1."""
-    frame = headline_frame(df, vocab)
+    datasets = is_dataset_run(results)
+    frame = headline_frame(df, vocab, dataset=datasets)
     t1, pairs = table1(frame, vocab), paired(frame, vocab)
-    if is_dataset_run(results):
+    if SFM_RULE in frame and len(frame):
+        log(f"sfm exclusion rule (cells stock COLMAP does not map): {frame[SFM_RULE].iloc[0]}")
+    if datasets:
         _write_tables(results, _per_dataset(frame, vocab, results))
     tables = {
         "table1.csv": t1,
-        "table1_twoview.csv": table1(headline_frame(df, vocab, "twoview"), vocab),
+        "table1_twoview.csv": table1(headline_frame(df, vocab, "twoview", datasets), vocab),
         "table2.csv": table2(frame, pairs, vocab),
         "paired.csv": pairs,
         "paired_sfm.csv": paired_sfm(frame, vocab),
@@ -126,7 +130,11 @@ def _write_transfer(df: pd.DataFrame, vocab: Vocabulary, results: Path, rendered
     names = ("transfer.csv", "transfer_ranks.csv")
     if rendered is None or not (Path(rendered) / "runs.csv").is_file():
         _drop(*(results / n for n in (*names, "figure_transfer.png")))
-        log(f"no transfer.csv: no rendered results in {rendered} (give one with --rendered)")
+        where = "none given" if rendered is None else f"{Path(rendered) / 'runs.csv'} is missing"
+        log(
+            f"no transfer.csv: no rendered results to compare with ({where}; give a rendered "
+            "results folder with --rendered DIR)"
+        )
         return
     summary, ranks = transfer(df, vocab, Path(rendered))
     _write_tables(results, dict(zip(names, (summary, ranks))))

@@ -1,0 +1,197 @@
+"""The tables' statistics: intervals that do not overstate, and the sfm exclusion rule
+applied the same way whatever the grid holds."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats as scipy_stats
+
+from bench.cli import main
+from bench.evaluation.export import export_dataset
+from bench.harness.config import RunConfig
+from bench.harness.grid import BenchConfig, mark_reference, with_reference
+from bench.report.stats import paired_difference, stratified_interval
+from bench.report.tables import SFM_RULE, headline_frame, paired, paired_sfm, table1
+from bench.vocabulary import Vocabulary
+from tests.conftest import MEDIUM, bench_run
+
+# --- intervals ---------------------------------------------------------------------
+
+
+def _tri_rows(seeds, scenes=("a", "b", "c", "d")) -> pd.DataFrame:
+    """Headline rows of adaptive and texture, adaptive ahead by 2 to 3.5 points."""
+    rows = []
+    for i, scene in enumerate(scenes):
+        for seed in seeds:
+            cell = dict(scene=scene, seed=seed, budget=64, task="tri", protocol="multiview")
+            ahead = 2.5 + 0.5 * (seed % 2) + 0.5 * i
+            for policy, value in (
+                ("texture", 40.0 + i + seed),
+                ("adaptive", 40 + i + seed + ahead),
+            ):
+                rows.append(cell | dict(policy=policy, acc_completeness_pct=value, status="ok"))
+    return pd.DataFrame(rows)
+
+
+def test_a_one_seed_table_shows_no_interval_and_says_why():
+    """One seed per scene: resampling within a scene of one unit gave a zero-width,
+    'significant' interval (-2.773 [-2.773, -2.773]); now there is none."""
+    vocab = Vocabulary.current()
+    frame = headline_frame(_tri_rows(seeds=[0]), vocab)
+    pairs = paired(frame, vocab)
+    row = pairs[(pairs["baseline"] == "texture") & (pairs["metric"] == "acc_completeness_pct")]
+    for _, r in row.iterrows():  # per scene and pooled
+        assert r["mean_diff"] > 0 and math.isnan(r["lo"]) and math.isnan(r["hi"])
+        assert r["note"] == "n/a (1 seed)"
+    t1 = table1(frame, vocab).set_index("policy")
+    assert math.isnan(t1.loc["adaptive", "acc_completeness_pct_lo"])
+    assert t1.loc["adaptive", "note"] == "n/a (1 seed)"
+    # with two seeds every scene has a spread: an interval, and no note
+    pairs = paired(headline_frame(_tri_rows(seeds=[0, 1]), vocab), vocab)
+    pooled = pairs[(pairs["scene"] == "all scenes") & (pairs["baseline"] == "texture")].iloc[0]
+    assert pooled["lo"] < pooled["mean_diff"] < pooled["hi"] and pooled["note"] == ""
+
+
+def test_the_interval_is_the_stratified_t_interval_of_a_hand_made_case():
+    # one scene, 1..5: mean 3, sd sqrt(2.5), 4 degrees of freedom
+    mean, lo, hi, note = stratified_interval([1.0, 2.0, 3.0, 4.0, 5.0])
+    half = scipy_stats.t.ppf(0.975, 4) * math.sqrt(2.5 / 5)
+    assert (mean, note) == (3.0, "") and (lo, hi) == pytest.approx((3 - half, 3 + half))
+    assert (lo, hi) == pytest.approx((1.0367568, 4.9632432))
+    # two scenes of unequal spread: variance (1/2)^2 (s_a^2 / 2 + s_b^2 / 4), Welch df
+    a, b = np.array([0.0, 2.0]), np.array([10.0, 11.0, 12.0, 13.0])
+    x, strata = np.r_[a, b], ["a"] * 2 + ["b"] * 4
+    va, vb = (2 / 6) ** 2 * a.var(ddof=1) / 2, (4 / 6) ** 2 * b.var(ddof=1) / 4
+    dof = (va + vb) ** 2 / (va**2 / 1 + vb**2 / 3)
+    half = scipy_stats.t.ppf(0.975, dof) * math.sqrt(va + vb)
+    mean, lo, hi, _ = stratified_interval(x, strata)
+    assert mean == pytest.approx(x.mean()) and (lo, hi) == pytest.approx((mean - half, mean + half))
+    # no spread within any scene: nothing to measure it by, so no interval
+    assert stratified_interval([1.0, 1.0, 5.0, 5.0], ["a", "a", "b", "b"])[3] == "n/a (no spread)"
+
+
+def test_the_interval_covers_a_known_mean_difference_at_the_grid_shape():
+    """4 scenes x 5 seeds of paired differences with scene effects: the 95% interval holds
+    the mean over the scenes about 95% of the time (the percentile bootstrap it replaced:
+    about 90%); `benchmarks/interval_coverage.py` measures more noise models."""
+    rng = np.random.default_rng(0)
+    strata = np.repeat(np.arange(4), 5)
+    hits = 0
+    for _ in range(400):
+        effect = 0.3 + rng.normal(0, 1, 4)
+        d = effect[strata] + rng.normal(0, 0.5, 20)
+        _, lo, hi, _ = stratified_interval(d, strata)
+        hits += lo <= effect.mean() <= hi
+    assert 0.92 <= hits / 400 <= 0.98
+
+
+def test_wins_ties_and_losses_follow_the_metric_direction():
+    units = pd.MultiIndex.from_tuples([(s, k) for s in ("a", "b") for k in range(3)])
+    strata = pd.Series(units.get_level_values(0), index=units)
+    base = pd.Series(10.0, index=units)
+    better = base + pd.Series([1, 2, 1, 5, 4, 5], index=units, dtype=float)
+    r = paired_difference(better, base, strata, "acc_completeness_pct")
+    assert (r["n"], r["mean_diff"], r["wins"], r["ties"], r["losses"]) == (6, 3.0, 6, 0, 0)
+    assert r["lo"] < 3.0 < r["hi"]
+    assert paired_difference(better, base, strata, "rmse")["losses"] == 6
+    tied = paired_difference(base, base, strata, "accuracy_pct")
+    assert (tied["ties"], tied["note"]) == (6, "n/a (no spread)") and math.isnan(tied["lo"])
+
+
+# --- the sfm exclusion rule ----------------------------------------------------------
+
+
+def _sfm_rows(reference_cells) -> pd.DataFrame:
+    """Two seeds of one scene in the sfm task; stock COLMAP maps seed 0, not seed 1, and
+    runs in `reference_cells` only."""
+    rows = []
+    for seed in (0, 1):
+        cell = dict(scene="s", seed=seed, task="sfm", protocol="multiview", views=6, status="ok")
+        if seed in reference_cells:
+            ref = dict(registered_views=6 - 4 * seed, maa=1.0 - 0.8 * seed)
+            rows.append(cell | dict(policy="colmap", budget=0, **ref))
+        for policy, maa in (("texture", 0.4), ("adaptive", 0.6)):
+            rows.append(cell | dict(policy=policy, budget=64, registered_views=6, maa=maa + seed))
+    return mark_reference(pd.DataFrame(rows))
+
+
+@pytest.mark.parametrize("cells", [(0, 1), (), (1,)])
+def test_the_sfm_rule_is_applied_in_all_cells_or_none_and_said(cells):
+    """The sfm means depended on which cells stock COLMAP ran in: with it in seed 1 only,
+    seed 1 was left out and seed 0 kept. Now the rule is applied only where it ran in
+    every cell, and Table 1 says which."""
+    vocab = Vocabulary.current()
+    frame = headline_frame(_sfm_rows(cells), vocab)
+    t1 = table1(frame, vocab).set_index("policy")
+    if cells == (0, 1):
+        assert t1.loc["texture", SFM_RULE] == "applied"
+        assert t1.loc["texture", "sfm_maa"] == pytest.approx(0.4)
+        assert t1.loc["texture", "sfm_excluded_runs"] == 1
+    else:
+        missing = 2 - len(cells)
+        assert (
+            t1.loc["texture", SFM_RULE]
+            == f"not applied: colmap did not run in {missing} of 2 cells"
+        )
+        assert t1.loc["texture", "sfm_maa"] == pytest.approx(0.9)  # both seeds
+        pairs = paired_sfm(frame, vocab)
+        assert (pairs[pairs["metric"] == "sfm_maa"]["n"] == 2).all()
+
+
+def test_a_grid_that_scores_sfm_runs_the_reference():
+    assert with_reference(("texture", "adaptive"), ("tri", "sfm")) == (
+        "texture",
+        "adaptive",
+        "colmap",
+    )
+    assert with_reference(("texture",), ("tri",)) == ("texture",)
+    assert with_reference(("colmap", "texture"), ("sfm",)) == ("colmap", "texture")
+
+
+def test_a_dataset_run_with_colmap_keeps_its_sfm_means_and_its_transfer_table(
+    medium_entry, renders_dir, tmp_path, monkeypatch, capsys
+):
+    """On a dataset the poses are the truth: nothing is excluded, even where stock COLMAP
+    does not map it (adding colmap to the temple run made every sfm mean NaN and removed
+    transfer.csv). The default --rendered is the package's snapshot from any folder."""
+    ds = export_dataset(medium_entry("table"), tmp_path / "table-ds")
+    rendered, out = tmp_path / "r", tmp_path / "d"
+    grid = dict(seeds=(0,), budgets=(64,), tasks=("sfm",), protocols=("multiview",))
+    policies = ("random", "texture", "adaptive")
+    run = RunConfig(render=MEDIUM)
+    bench_run(
+        BenchConfig(scenes=("table",), policies=policies, run=run, **grid), rendered, renders_dir
+    )
+    argv = ["run", "--dataset", str(ds), "--policies", ",".join([*policies, "colmap"])]
+    argv += ["--budget", "64", "--tasks", "sfm", "--protocols", "multiview", "--workers", "1"]
+    argv += ["--renders", str(renders_dir), "--results", str(out)]
+    assert main([*argv, "--rendered", str(rendered)]) == 0
+    # stock COLMAP does not map the dataset, as on the temple (views registered off the
+    # truth; at this size it does not map it anyway)
+    runs = pd.read_csv(out / "runs.csv")
+    runs.loc[runs["policy"] == "colmap", ["registered_views", "maa"]] = (2, 0.1)
+    mark_reference(runs).to_csv(out / "runs.csv", index=False)
+    assert (pd.read_csv(out / "runs.csv")["reference_maps"] == 0).all()
+    assert main(["plot", "--results", str(out), "--rendered", str(rendered)]) == 0
+    t1 = pd.read_csv(out / "table1.csv").set_index("policy")
+    sfm = runs[runs["policy"] == "texture"]["maa"]
+    assert t1.loc["texture", "sfm_maa"] == pytest.approx(sfm.mean())
+    assert t1.loc["texture", SFM_RULE] == "not applied: a dataset's poses are the truth"
+    summary = pd.read_csv(out / "transfer.csv")
+    assert summary["methods"].tolist() == [3]
+    # from another folder, the default --rendered is the package's published snapshot
+    capsys.readouterr()
+    monkeypatch.chdir(tmp_path)
+    assert not (tmp_path / "results").exists()
+    assert main(["plot", "--results", str(out)]) == 0
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "no rendered results" not in err
+    assert "share no ranked budget" in err  # it was read: budget 64 is not in it
+    assert main(["plot", "--results", str(out), "--rendered", "nowhere"]) == 0
+    missing = "no transfer.csv: no rendered results to compare with (nowhere/runs.csv is missing"
+    assert missing in capsys.readouterr().err
