@@ -51,17 +51,18 @@ def _num(x) -> str:
     return f"{x:.3g}" if abs(x) < 1000 else f"{x:,.0f}"
 
 
-def _text(x) -> str:
-    return x if isinstance(x, str) else "n/a"
+def _text(x, missing: str = "n/a") -> str:
+    return x if isinstance(x, str) else missing
 
 
-def _interval(row: pd.Series, col: str) -> str:
-    """`mean [lo, hi]`, or the mean alone where the table has no interval."""
+def _interval(row: pd.Series, col: str, lo: str = "", hi: str = "", note: str = "") -> str:
+    """`mean [lo, hi]`, or the mean and the table's note on why it has no interval."""
     mean = _num(row.get(col))
-    lo, hi = row.get(f"{col}_lo"), row.get(f"{col}_hi")
-    if lo is None or hi is None or pd.isna(lo) or pd.isna(hi):
-        return mean
-    return f"{mean} [{_num(lo)}, {_num(hi)}]"
+    low, high = row.get(lo or f"{col}_lo"), row.get(hi or f"{col}_hi")
+    if low is not None and high is not None and not pd.isna(low) and not pd.isna(high):
+        return f"{mean} [{_num(low)}, {_num(high)}]"
+    why = row.get(note) if note else None
+    return f"{mean}, {why}" if isinstance(why, str) and why else mean
 
 
 def _table(header: list[str], rows: list[list[str]]) -> list[str]:
@@ -107,11 +108,12 @@ def _table1_section(t1: pd.DataFrame, vocab: Vocabulary, title: str) -> list[str
         rows = t1.dropna(subset=cols, how="all") if cols else t1.iloc[0:0]
         if rows.empty:
             continue
-        header = ["method", "budget", "runs", *cols]
+        header = ["method", "budget", "runs", *cols, "why an interval is missing"]
         body = {
             b: [
                 [str(r["strategy"]), _num(r["budget"]), _num(r["runs"])]
                 + [_interval(r, c) for c in cols]
+                + [_text(r.get("note"), "")]
                 for _, r in at.iterrows()
             ]
             for b, at in rows.groupby("budget")
@@ -146,7 +148,7 @@ def _table2_section(t2: pd.DataFrame) -> list[str]:
                     m,
                     _num(r.get(f"{HEADLINE_POLICY}_{m}")),
                     f"{_num(r.get(f'best_baseline_{m}'))} ({_text(best)})",
-                    _interval(r, f"diff_{m}"),
+                    _interval(r, f"diff_{m}", note=f"diff_{m}_note"),
                     _text(r.get(f"diff_{m}_wtl")),
                 ]
             )
@@ -172,7 +174,7 @@ def _paired_section(paired: pd.DataFrame, title: str, baseline: str | None) -> l
             str(r["baseline"]),
             str(r["metric"]),
             _num(r["n"]),
-            f"{_num(r['mean_diff'])} [{_num(r['lo'])}, {_num(r['hi'])}]",
+            _interval(r, "mean_diff", "lo", "hi", "note"),
             f"{_num(r['wins'])}/{_num(r['ties'])}/{_num(r['losses'])}",
         ]
         for _, r in rows.iterrows()
