@@ -36,6 +36,7 @@ from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
 from bench.harness.predict import prediction_hash
 from bench.harness.tasks import RUNNERS
 from bench.render.entry import render_scene
+from bench.report.summary import errors, failures, sfm_exclusions
 from bench.results import (
     DAMAGED,
     Workspace,
@@ -290,11 +291,24 @@ def _run_in(
         stage_s["report"] = time.perf_counter() - t
     invocation |= {"rows": n_rows, "seconds": {"total": time.perf_counter() - t_start, **stage_s}}
     write_manifest(ws, cfg, invocation, out)
+    ours = in_grid(cfg, out)
+    said = [s for s in (failures(ours), sfm_exclusions(ours), errors(ours)) if s]
     log(
-        f"{n_rows} rows done, {len(done)} reused, in {invocation['seconds']['total']:.0f} s; "
-        f"results in {ws.results}"
+        f"{n_rows} rows done, {len(done)} reused, in {invocation['seconds']['total']:.0f} s"
+        + (f"; of the grid's {len(ours)} rows, " + "; ".join(said) if said else "")
+        + f"; results in {ws.results}"
     )
     return out
+
+
+def in_grid(cfg: BenchConfig, rows: pd.DataFrame) -> pd.DataFrame:
+    """The rows of `cfg`'s grid (a results folder may hold more)."""
+    units = {tuple(asdict(u).values()) for u in cfg.units()}
+    keep = [
+        (sc, sd, p, b) in units and t in cfg.tasks and pr in cfg.protocols
+        for sc, sd, p, b, t, pr in rows[list(KEY)].itertuples(index=False)
+    ]
+    return rows[keep]
 
 
 def mark_reference(table: pd.DataFrame) -> pd.DataFrame:
