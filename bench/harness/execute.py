@@ -145,10 +145,13 @@ def unit_task(unit: Unit, plan: Plan, cfg: RunConfig, ws: Workspace, *_after) ->
 
 
 def failed_rows(entry: Path, unit: Unit, jobs, cfg: RunConfig, why: str) -> list[dict]:
-    """Rows recording a unit that could not be computed (their failure: `ERROR` + why)."""
+    """Rows recording a unit that could not be computed (their failure: `ERROR` + why),
+    with no value for any metric a task needs (so a report of such rows alone is drawn)."""
     failure = ERROR + " ".join(why.split())[:400]
+    empty = {k: math.nan for r in RUNNERS.values() for k in r.spec.needs}
     return [
         identity(entry, unit, job, cfg)
+        | empty
         | {"wall_ms": math.nan, "status": "failed", "failure": failure}
         for job in jobs
     ]

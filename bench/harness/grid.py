@@ -36,7 +36,7 @@ from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
 from bench.harness.predict import prediction_hash
 from bench.harness.tasks import RUNNERS
 from bench.render.entry import render_scene
-from bench.report.summary import errors, failures, sfm_exclusions
+from bench.report.summary import failures, sfm_exclusions
 from bench.results import (
     DAMAGED,
     Workspace,
@@ -292,7 +292,7 @@ def _run_in(
     invocation |= {"rows": n_rows, "seconds": {"total": time.perf_counter() - t_start, **stage_s}}
     write_manifest(ws, cfg, invocation, out)
     ours = in_grid(cfg, out)
-    said = [s for s in (failures(ours), sfm_exclusions(ours), errors(ours)) if s]
+    said = [s for s in (failures(ours), sfm_exclusions(ours)) if s]
     log(
         f"{n_rows} rows done, {len(done)} reused, in {invocation['seconds']['total']:.0f} s"
         + (f"; of the grid's {len(ours)} rows, " + "; ".join(said) if said else "")
