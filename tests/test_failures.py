@@ -37,7 +37,7 @@ def late_fail(inp, budget, rng, cfg):
         raise RuntimeError(f"boom on call {len(CALLS)}")
     return list(range(budget))
 """
-RAISE_LINE = LATE.splitlines().index("        raise RuntimeError(f\"boom on call {len(CALLS)}\")") + 1
+RAISE_LINE = LATE.splitlines().index('        raise RuntimeError(f"boom on call {len(CALLS)}")') + 1
 
 
 @pytest.mark.parametrize("workers", ["1", "2"])
@@ -131,12 +131,13 @@ def _drawn(monkeypatch) -> dict:
 def test_figure3_of_an_sfm_only_run_draws_its_panels_alone_with_n_a_inside(monkeypatch, tmp_path):
     drawn = _drawn(monkeypatch)
     t1 = _table1(["texture", "random", "colmap"], {"sfm_maa": [0.4, 0.3, math.nan]})
-    figures.figure3(t1, tmp_path / "figure3", note="3 failed (2 sfm: the mapper ...)")
+    figures.figure3(t1, tmp_path / "figure3")
     (ax,) = drawn["fig"].axes  # one panel: no empty ones for the task that did not run
     assert "mAA" in ax.get_title()
     (na,) = [t for t in ax.texts if t.get_text() == "n/a"]
     lo, hi = ax.get_xlim()
     assert lo < na.get_position()[0] - 0.4 and na.get_position()[0] + 0.4 < hi
+    figures.figure3(t1, tmp_path / "figure3", note="3 failed (2 sfm: the mapper ...)")
     assert "3 failed (2 sfm: the mapper ...)" in [t.get_text() for t in drawn["fig"].texts]
 
 

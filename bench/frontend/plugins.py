@@ -139,7 +139,8 @@ def _check_import(name: str, fromlist=()) -> None:
             raise GroundTruthRead(f"broke the contract rule 'no ground truth': it imported {full}")
 
 
-_REAL = {"import": builtins.__import__, "import_module": importlib.import_module}
+_REAL: dict = {}
+"""The import functions the guards wrap."""
 
 
 def _guarded_import(name, globals=None, locals=None, fromlist=(), level=0):
@@ -154,25 +155,24 @@ def _guarded_import_module(name, package=None):
 
 
 @cache
-def _install_audit_hook() -> None:
-    sys.addaudithook(_audit)  # for the life of the process; it acts in guarded threads only
+def _install_guards() -> None:
+    """The audit hook and the import wrappers, once for the life of the process; they act
+    in a thread inside `firewall` only."""
+    _REAL.update({"import": builtins.__import__, "import_module": importlib.import_module})
+    builtins.__import__, importlib.import_module = _guarded_import, _guarded_import_module
+    sys.addaudithook(_audit)
 
 
 @contextmanager
 def firewall():
     """Run a block where importing a forbidden stage or opening ground truth raises
     `GroundTruthRead` (in this thread; module docstring)."""
-    _install_audit_hook()
-    outer = not getattr(_GUARD, "depth", 0)
-    if outer:
-        builtins.__import__, importlib.import_module = _guarded_import, _guarded_import_module
+    _install_guards()
     _GUARD.depth = getattr(_GUARD, "depth", 0) + 1
     try:
         yield
     finally:
         _GUARD.depth -= 1
-        if outer:
-            builtins.__import__, importlib.import_module = _REAL["import"], _REAL["import_module"]
 
 
 def _check(source: str, where: str) -> None:

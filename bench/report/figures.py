@@ -94,7 +94,7 @@ def figure3(t1: pd.DataFrame, out: Path, title: str = "", note: str = "") -> Non
     bottom = 0.0
     if note:
         fig.text(0.01, 0.005, note, fontsize=8, wrap=True, va="bottom")
-        bottom = min(0.25, 0.5 / fig.get_figheight() * (1 + note.count("\n")))
+        bottom = min(0.25, (0.1 + 0.18 * (1 + note.count("\n"))) / fig.get_figheight())
     fig.tight_layout(rect=(0, bottom, 1, 1))
     save(fig, out, ("png", "pdf"))
 
