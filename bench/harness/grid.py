@@ -6,7 +6,9 @@ file is rewritten through a temporary name, so an interrupt keeps every finished
 The settings are stored in `config.json` beside the results and the vocabulary of the rows
 in `vocabulary.json`; a run into a folder holding other settings is refused unless
 `overwrite`. Rows whose prediction is current but whose scoring is not (or every row,
-with `reevaluate`) are scored again from the stored predictions.
+with `reevaluate`) are scored again from the stored predictions; rows that could not be
+computed (a policy raised, a worker died) are computed again. The last line says how many
+of the grid's rows failed, by reason, and which (scene, seed) the sfm means leave out.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
 from bench.harness.predict import prediction_hash
 from bench.harness.tasks import RUNNERS
 from bench.render.entry import render_scene
-from bench.report.summary import failures, sfm_exclusions
+from bench.report.summary import ERROR, failures, sfm_exclusions
 from bench.results import (
     DAMAGED,
     Workspace,
@@ -222,7 +224,10 @@ def _current_rows(
                 "computed; computing them again"
             )
         stale |= changed
-    df = df[~stale]
+    errored = ~stale & df["failure"].str.startswith(ERROR)
+    if errored.any():
+        log(f"{int(errored.sum())} row(s) could not be computed last time; computing them again")
+    df = df[~(stale | errored)]
     rescore = df["policy"].isin(known) & (
         options.reevaluate | (df["evaluation_hash"] != evaluation_hash())
     )
