@@ -33,6 +33,7 @@ def _module(tmp_path, body: str, name: str = "mine"):
         ("name = 'bench.harness'\nimportlib.import_module(name)\n", "by a computed name (line 5)"),
         ("__import__('bench.' + 'scenes')\n", "it imports bench.scenes (line 4)"),
         ("import sys\nsys.modules.get('x')\n", "it reads sys.modules (line 5)"),
+        ("from sys import modules\n", "it reads sys.modules (line 4)"),
     ],
 )
 def test_a_module_importing_a_stage_by_a_built_name_is_refused(tmp_path, body, why):

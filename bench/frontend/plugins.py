@@ -106,6 +106,8 @@ def ground_truth_use(source: str, where: str) -> str | None:
             and isinstance(node.value, ast.Name)
             and node.value.id == "sys"
         ):
+            names = ["sys.modules"]
+        if "sys.modules" in names:
             return f"it reads sys.modules (line {node.lineno})"
         for name in names:
             if _forbidden(name):
