@@ -20,8 +20,8 @@ from bench.frontend.signals import SIGNALS, Signals
 from bench.frontend.views import View
 from bench.report import figures
 from bench.report.figures import PANELS
-from bench.report.summary import failures, sfm_exclusions
 from bench.results import read_runs
+from bench.summary import failures, sfm_exclusions
 from bench.vocabulary import METHODS, REFERENCE_MAPS
 
 LATE = """\

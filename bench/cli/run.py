@@ -293,11 +293,11 @@ def has_pixel_truth(dataset: Path) -> bool:
 def run(args: argparse.Namespace) -> None:
     from bench.harness.execute import Cluster, default_workers
     from bench.harness.grid import BenchConfig, RunOptions, in_grid, run_benchmark
-    from bench.report.summary import errors
     from bench.report.tables import headline_frame, table1, with_oracle_share
     from bench.report.write import write_report
     from bench.results import Workspace
     from bench.scenes.spec import scene_names
+    from bench.summary import errors
     from bench.vocabulary import ORACLE, Vocabulary
 
     if args.scheduler is not None and args.workers is not None:

@@ -41,8 +41,8 @@ from bench.harness.config import RunConfig
 from bench.harness.evaluate import evaluate, identity
 from bench.harness.predict import LoadedScene, has_prediction, predict
 from bench.harness.tasks import RUNNERS
-from bench.report.summary import ERROR
 from bench.results import Workspace
+from bench.summary import ERROR
 from bench.vocabulary import Job, Unit
 
 _HELD: dict = {}

@@ -38,7 +38,6 @@ from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
 from bench.harness.predict import prediction_hash
 from bench.harness.tasks import RUNNERS
 from bench.render.entry import render_scene
-from bench.report.summary import ERROR, failures, sfm_exclusions
 from bench.results import (
     DAMAGED,
     Workspace,
@@ -49,6 +48,7 @@ from bench.results import (
     set_aside_damaged,
 )
 from bench.scenes.spec import load_spec, scene_names
+from bench.summary import ERROR, failures, sfm_exclusions
 from bench.vocabulary import (
     HEADLINE,
     KEY,

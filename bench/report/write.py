@@ -30,7 +30,6 @@ from bench.report.figures import (
     figure_transfer,
     headline_budget,
 )
-from bench.report.summary import failures, sfm_exclusions
 from bench.report.tables import (
     frontend_cost,
     headline_frame,
@@ -43,6 +42,7 @@ from bench.report.tables import (
 )
 from bench.report.transfer import transfer
 from bench.results import read_runs
+from bench.summary import failures, sfm_exclusions
 from bench.vocabulary import VOCABULARY_FILE, Vocabulary
 
 
