@@ -50,30 +50,29 @@ def test_a_raising_plugin_fails_its_rows_saying_where_and_the_grid_finishes(
     argv += ["--width", "64", "--height", "48", "--spp", "2", "--max-depth", "2"]
     argv += ["--policies", "texture,late-fail", "--tasks", "tri", "--protocols", "multiview"]
     argv += ["--policy-module", str(module), "--results", str(tmp_path / "r")]
+    run = lambda: main([*argv, "--renders", str(renders_dir)])  # noqa: E731
     try:
-        assert main([*argv, "--renders", str(renders_dir)]) == 2
-        first = capsys.readouterr().err.strip().splitlines()
-        assert main([*argv, "--renders", str(renders_dir)]) == 2  # computed again, not reused
+        assert run() == 2
+        runs = read_runs(tmp_path / "r" / "runs.csv")
+        (late,) = runs[runs["policy"] == "late-fail"].itertuples()
+        assert late.status == "failed"
+        for where in ("RuntimeError: boom on call 3", "view 2 ", f"{module}:{RAISE_LINE}"):
+            assert where in late.failure
+        assert "in table seed 0, task tri" in late.failure
+        assert (runs["policy"] == "texture").sum() == 1  # every other row is written
+        assert (tmp_path / "r" / "table1.csv").is_file()
+        assert (tmp_path / "r" / "figure3.png").is_file()
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err[-1].startswith("bench: error: 1 row(s) could not be computed, of late-fail (1)")
+        assert f"{module}:{RAISE_LINE}" in err[-1] and "Traceback" not in "\n".join(err)
+        summary = [line for line in err if "of the grid's 2 rows, " in line]
+        assert summary and "1 tri: error of late-fail" in summary[0]
+        assert not any("figure2.png not drawn" in line for line in err)  # nobody asked for it
+        assert run() == 2  # computed again, not reused
+        again = "1 row(s) could not be computed last time; computing them again"
+        assert again in capsys.readouterr().err
     finally:
         POLICIES.pop("late-fail", None), METHODS.pop("late-fail", None)
-    assert (
-        "1 row(s) could not be computed last time; computing them again" in capsys.readouterr().err
-    )
-    runs = read_runs(tmp_path / "r" / "runs.csv")
-    (late,) = runs[runs["policy"] == "late-fail"].itertuples()
-    assert late.status == "failed"
-    for where in ("RuntimeError: boom on call ", "view 2 ", f"{module}:{RAISE_LINE}"):
-        assert where in late.failure
-    assert "in table seed 0, task tri" in late.failure
-    assert (runs["policy"] == "texture").sum() == 1  # every other row is written
-    assert (tmp_path / "r" / "table1.csv").is_file() and (tmp_path / "r" / "figure3.png").is_file()
-    err = first
-    assert err[-1].startswith("bench: error: 1 row(s) could not be computed, of late-fail (1)")
-    assert f"{module}:{RAISE_LINE}" in err[-1] and "Traceback" not in "\n".join(err)
-    assert any(
-        "of the grid's 2 rows, " in line and "1 tri: error of late-fail" in line for line in err
-    )
-    assert not any("figure2.png not drawn" in line for line in err)  # nobody asked for it
 
 
 def _input() -> PolicyInput:
