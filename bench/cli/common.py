@@ -82,13 +82,14 @@ def parse_list(
 ) -> tuple:
     """The items of a list option, which has one syntax: `--option a,b,c`. Integer items of
     `--seeds` may also be inclusive ranges such as 100-119. A repeated item runs once,
-    unless the list is a vector (`unique` False)."""
+    unless the list is a vector (`unique` False). Spaces around an item are ignored."""
     how = f"{option} takes {LIST_FORM}, e.g. {option} {example}"
-    if any(not x.strip() for x in text.split(",")):
+    parts = [x.strip() for x in text.split(",")]
+    if not all(parts):
         raise BenchError(f"{how}; got {text!r}")
     items = []
     try:
-        for x in text.split(","):
+        for x in parts:
             lo, dash, hi = (
                 x.partition("-") if option == "--seeds" and x[1:].count("-") else (x, "", "")
             )

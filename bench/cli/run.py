@@ -138,8 +138,9 @@ def _input_arguments(parser: argparse.ArgumentParser) -> None:
         default=[],
         metavar="FILE",
         help="a Python file whose @policy functions are registered (repeatable); see "
-        "examples/my_policy.py",
+        "examples/my_policy.py and 'Writing a policy' below",
     )
+    parser.epilog = policy_guide()
     parser.add_argument(
         "--detector",
         default="sift",
@@ -190,6 +191,28 @@ def _folder_arguments(parser: argparse.ArgumentParser) -> None:
         "--overwrite",
         action="store_true",
         help="replace results of another configuration in RESULTS",
+    )
+
+
+def policy_guide() -> str:
+    """`bench run --help`'s section for policy authors, from the docstrings of the types a
+    policy receives."""
+    from bench.frontend.features import Candidates
+    from bench.frontend.policies import PolicyInput
+    from bench.frontend.signals import Signals
+
+    def fields(cls) -> str:
+        return "; ".join(f"{k}: {v.rstrip('.')}" for k, v in field_docs(cls).items()) + "."
+
+    return (
+        "Writing a policy (--policy-module FILE): decorate `def name(inp, budget, rng, cfg)` "
+        "with @bench.frontend.policies.policy('name'); it returns one array of min(budget, N) "
+        "distinct integer indices into inp.candidates (not None, not a tuple); rng is a seeded "
+        "numpy Generator, cfg the PolicyConfig. A policy that raises or breaks this contract "
+        "fails its rows (file:line in runs.csv's failure) and the grid goes on; it may not "
+        "read ground truth (bench.frontend.plugins). inp (PolicyInput): "
+        f"{fields(PolicyInput)} inp.candidates (Candidates, N keypoints): {fields(Candidates)} "
+        f"inp.signals (Signals, each (N,) float64 in [0, 1]): {fields(Signals)}"
     )
 
 
@@ -269,11 +292,12 @@ def has_pixel_truth(dataset: Path) -> bool:
 
 def run(args: argparse.Namespace) -> None:
     from bench.harness.execute import Cluster, default_workers
-    from bench.harness.grid import BenchConfig, RunOptions, run_benchmark, with_reference
+    from bench.harness.grid import BenchConfig, RunOptions, in_grid, run_benchmark, with_reference
     from bench.report.tables import headline_frame, table1, with_oracle_share
     from bench.report.write import write_report
     from bench.results import Workspace
     from bench.scenes.spec import scene_names
+    from bench.summary import errors
     from bench.vocabulary import ORACLE, Vocabulary
 
     if args.scheduler is not None and args.workers is not None:
@@ -339,3 +363,6 @@ def run(args: argparse.Namespace) -> None:
         "sfm_excluded_runs",
     ]
     print(t[[c for c in cols if c in t]].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
+    failed = errors(in_grid(cfg, df))
+    if failed:  # after every other row and the tables are written
+        raise BenchError(f"{failed}; every other row and the tables are written")

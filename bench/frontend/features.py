@@ -67,11 +67,14 @@ class Candidates:
     """The candidate keypoints of one view."""
 
     xy: np.ndarray
-    """(N, 2) float, COLMAP pixel convention."""
+    """(N, 2) float64 x, y in pixels, COLMAP convention (the image's corner is 0, 0; the
+    first pixel's centre 0.5, 0.5)."""
     size: np.ndarray
-    """(N,) keypoint diameter in pixels (the detector's scale)."""
+    """(N,) float64 keypoint diameter in pixels (the detector's scale)."""
     angle: np.ndarray
+    """(N,) float64 orientation in degrees [0, 360) (OpenCV's; -1: none)."""
     response: np.ndarray
+    """(N,) float64 detector response (strength; its scale depends on the detector)."""
     descriptors: np.ndarray
     """(N, D): float32 unit-length for SIFT, uint8 bit strings for ORB/AKAZE."""
 

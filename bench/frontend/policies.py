@@ -15,8 +15,10 @@ exact budget (min(B, N) indices; a whole-pool method such as `all` the whole poo
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from functools import cache
@@ -33,11 +35,17 @@ from bench.vocabulary import METHODS, Method, declare_method
 
 @dataclass(frozen=True)
 class PolicyInput:
-    """Everything a policy may look at."""
+    """Everything a policy may look at: arrays and a file name, no path to any file."""
 
     view: View
+    """The image: `index` (int, its position in the scene), `name` (its file name),
+    `image` (H, W, 3) uint8 sRGB in RGB order, `camera` (`bench.camera.Camera`: `width`,
+    `height` in px; `fx`, `fy`, `cx`, `cy` in px; `R` (3, 3), `t` (3,) world to camera,
+    the identity where `posed` is False, as in the sfm task)."""
     candidates: Candidates
+    """The view's N candidate keypoints, (N, ...) arrays indexed alike (`Candidates`)."""
     signals: Signals
+    """One (N,) float array per signal, each in [0, 1] (`Signals`)."""
 
 
 @dataclass(frozen=True)
@@ -135,6 +143,49 @@ def contract_violation(idx: np.ndarray, want: int, n: int) -> str | None:
     return None
 
 
+class PolicyFailed(BenchError):
+    """A policy raised or broke its contract: the method failed, not the input. Says
+    what, in which view, and where in the policy's code (`file:line`); a grid records it
+    in the unit's rows and goes on (`bench.harness.execute`)."""
+
+    def __init__(self, policy: str, what: str, view: View, where: str):
+        self.policy, self.what, self.view, self.where = policy, what, view, where
+        super().__init__(f"policy {policy} {what} (view {view.index} {view.name!r}, at {where})")
+
+
+def code_line(fn: Callable, error: BaseException | None = None) -> str:
+    """`file:line` of a policy: the last line of its file in `error`'s traceback (where it
+    raised), else the line that defines it."""
+    code = getattr(inspect.unwrap(fn), "__code__", None)
+    if code is None:
+        return repr(fn)
+    frames = traceback.extract_tb(error.__traceback__) if error is not None else []
+    line = next(
+        (f.lineno for f in reversed(frames) if f.filename == code.co_filename),
+        code.co_firstlineno,
+    )
+    return f"{code.co_filename}:{line}"
+
+
+def _indices(out) -> tuple[np.ndarray | None, str | None]:
+    """A policy's return value as a flat index array, or what is wrong with it."""
+    if out is None:
+        return None, "returned None (missing return?)"
+    if isinstance(out, tuple):
+        return None, f"returned a tuple of {len(out)}, not one array of candidate indices"
+    kind = type(out).__name__
+    try:
+        idx = np.asarray(out)
+    except ValueError as e:  # a ragged list
+        return None, f"returned a {kind} that is not one array of indices: {e}"
+    if idx.ndim == 0 or idx.dtype.kind in "OSUV":
+        return None, f"returned a {kind}, not an array of candidate indices"
+    idx = idx.reshape(-1)
+    if idx.dtype.kind not in "iu":
+        return None, f"broke the contract rule 'integer indices': {idx.dtype}"
+    return idx.astype(np.int64), None
+
+
 def select(
     name: str,
     inp: PolicyInput,
@@ -143,26 +194,29 @@ def select(
     cfg: PolicyConfig = PolicyConfig(),
 ) -> np.ndarray:
     """Run a policy, check its contract and return its selection in ascending order (module
-    docstring)."""
+    docstring); a policy that raises or breaks the contract is a `PolicyFailed`."""
     if name not in POLICIES:
         check_policies([name])
         raise BenchError(f"{name} is not a selection policy (a reference or a peer)")
     whole = METHODS[name].whole_pool
     if budget <= 0 and not whole:
         raise BenchError(f"budget must be positive, got {budget}")
+    fn = POLICIES[name]
     try:
-        idx = np.asarray(POLICIES[name](inp, budget, rng, cfg)).reshape(-1)
+        out = fn(inp, budget, rng, cfg)
     except BenchError:
         raise
     except (Exception, SystemExit) as e:  # a policy ends no run, not even with sys.exit
-        raise BenchError(f"policy {name} failed: {type(e).__name__}: {e}") from e
-    n = len(inp.candidates)
-    if idx.dtype.kind not in "iu":
-        raise BenchError(f"policy {name} broke the contract rule 'integer indices': {idx.dtype}")
-    idx = idx.astype(np.int64)
-    broken = contract_violation(idx, n if whole else min(budget, n), n)
-    if broken:
-        raise BenchError(f"policy {name} broke the contract rule '{broken}'")
+        raise PolicyFailed(
+            name, f"failed: {type(e).__name__}: {e}", inp.view, code_line(fn, e)
+        ) from e
+    idx, wrong = _indices(out)
+    if wrong is None:
+        n = len(inp.candidates)
+        broken = contract_violation(idx, n if whole else min(budget, n), n)
+        wrong = broken and f"broke the contract rule '{broken}'"
+    if wrong:
+        raise PolicyFailed(name, wrong, inp.view, code_line(fn))
     return np.sort(idx)
 
 

@@ -27,9 +27,12 @@ def select_views(
     match: Match,
 ) -> tuple[list[np.ndarray], list[dict]]:
     """Every view's selection (outside policies registered first), and the feedback
-    loop's rounds (none for other policies)."""
+    loop's rounds (none for other policies); the policy runs behind the ground-truth
+    firewall (`bench.frontend.plugins.firewall`)."""
     if policy == feedback.NAME:
-        return feedback.feedback_select(inputs, budget, cfg, match)
+        with plugins.firewall():
+            return feedback.feedback_select(inputs, budget, cfg, match)
     plugins.load(cfg.modules)
     rngs = [policy_rng(seed, policy, budget, i.view.index) for i in inputs]
-    return [select(policy, i, budget, r, cfg) for i, r in zip(inputs, rngs)], []
+    with plugins.firewall():
+        return [select(policy, i, budget, r, cfg) for i, r in zip(inputs, rngs)], []

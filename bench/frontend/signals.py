@@ -62,15 +62,23 @@ SAME_POINT_PX = 8.0
 
 @dataclass
 class Signals:
-    """The signals of one view's candidates, each (N,) in [0, 1]."""
+    """The signals of one view's candidates, each (N,) float64 in [0, 1], indexed like the
+    candidates; higher is better except `ambiguity` (definitions: the module docstring)."""
 
     texture: np.ndarray
+    """Gradient strength around the keypoint (structure tensor's smaller eigenvalue)."""
     repeatability: np.ndarray
+    """Cheap estimate of being detected again (corner-ness x response)."""
     repeatability_redetect: np.ndarray
+    """Fraction of four perturbed re-detections that find it again."""
     distinctiveness: np.ndarray
+    """Descriptor distance to its nearest neighbour in the same view."""
     ambiguity: np.ndarray
+    """Near-duplicate descriptors in this and the nearest views (higher: worse)."""
     parallax: np.ndarray
+    """Triangulation angle other views give it, / 10 degrees, clipped to 1."""
     epipolar: np.ndarray
+    """Overlapping views with a ratio-passing match on its epipolar line, / 2."""
 
 
 SIGNALS = tuple(f.name for f in fields(Signals))

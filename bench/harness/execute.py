@@ -7,10 +7,13 @@ front end, predicts (`bench.harness.predict`; skipped when it only re-scores a c
 stored prediction) and scores (`bench.harness.evaluate`). Renders stay in the main
 process, so one process renders per machine (Mitsuba's LLVM and CUDA variants use every
 core, or the GPU, on their own). A worker holds one scene at a time (`_scene`). Rows come
-back to the main process, which alone writes `runs.csv`. A unit whose worker dies is
-retried once, then recorded as failed rows with the reason; a `BenchError` (bad input,
-deterministic) comes back as a value, is not retried, and stops the run as it does in
-process. The workers of a local cluster ignore Ctrl-C, which the main process handles by
+back to the main process, which alone writes `runs.csv`. A method that fails (its policy
+raises or breaks the contract: `PolicyFailed`) is a value, in process as on a worker: the
+unit's rows are recorded as failed, saying what and where, and the grid goes on. A unit
+whose worker dies is retried once, then recorded the same way. The failure of such a row
+starts with `ERROR` (a task's outcome, such as a mapper that registered no view, does not).
+A `BenchError` (bad input, deterministic) comes back as a value, is not retried, and stops
+the run as it does in process. The workers of a local cluster ignore Ctrl-C, which the main process handles by
 stopping them. With a cluster given by address, the workers must see the same `renders/`
 and results folder (a shared file system).
 
@@ -31,6 +34,7 @@ from pathlib import Path
 from bench import BenchError
 from bench.evaluation.truth import load_truth
 from bench.frontend.geometry import RIG
+from bench.frontend.policies import PolicyFailed
 from bench.frontend.stage import FrontEnd, front_end
 from bench.frontend.views import load_views
 from bench.harness.config import RunConfig
@@ -38,6 +42,7 @@ from bench.harness.evaluate import evaluate, identity
 from bench.harness.predict import LoadedScene, has_prediction, predict
 from bench.harness.tasks import RUNNERS
 from bench.results import Workspace
+from bench.summary import ERROR
 from bench.vocabulary import Job, Unit
 
 _HELD: dict = {}
@@ -121,10 +126,15 @@ def compute_unit(
     scene: LoadedScene, unit: Unit, work: Work, cfg: RunConfig, ws: Workspace
 ) -> list[dict]:
     """The rows of one unit: predicted (unless it only re-scores a current prediction),
-    then scored."""
+    then scored; failed rows saying where, if its policy fails."""
     jobs = list(work.jobs)
-    if not (work.rescore and has_prediction(ws, unit, jobs, cfg)):
-        predict(scene, unit, jobs, cfg, ws)
+    try:
+        if not (work.rescore and has_prediction(ws, unit, jobs, cfg)):
+            predict(scene, unit, jobs, cfg, ws)
+    except PolicyFailed as e:
+        tasks = ", ".join(getattr(e, "tasks", ())) or "?"
+        why = f"{e} in {unit.scene} seed {unit.seed}, task {tasks}"
+        return failed_rows(scene.entry, unit, jobs, cfg, why)
     return evaluate(scene, unit, jobs, cfg, ws)
 
 
@@ -134,12 +144,16 @@ def unit_task(unit: Unit, plan: Plan, cfg: RunConfig, ws: Workspace, *_after) ->
     return compute_unit(scene, unit, plan.work[unit], cfg, ws)
 
 
-def failed_rows(unit: Unit, plan: Plan, cfg: RunConfig, why: str) -> list[dict]:
-    """Rows recording a unit that could not be computed."""
-    entry = plan.entries[unit.group]
+def failed_rows(entry: Path, unit: Unit, jobs, cfg: RunConfig, why: str) -> list[dict]:
+    """Rows recording a unit that could not be computed (their failure: `ERROR` + why),
+    with no value for any metric a task needs (so a report of such rows alone is drawn)."""
+    failure = ERROR + " ".join(why.split())[:400]
+    empty = {k: math.nan for r in RUNNERS.values() for k in r.spec.needs}
     return [
-        identity(entry, unit, job, cfg) | {"wall_ms": math.nan, "status": "failed", "failure": why}
-        for job in plan.work[unit].jobs
+        identity(entry, unit, job, cfg)
+        | empty
+        | {"wall_ms": math.nan, "status": "failed", "failure": failure}
+        for job in jobs
     ]
 
 
@@ -250,7 +264,7 @@ def _on_dask(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, on_sce
             exc = future.exception()
             if exc is not None:
                 why = f"failed on a worker, retried once: {type(exc).__name__}: {exc}"
-                yield failed_rows(unit, plan, cfg, why.replace("\n", " ")[:300])
+                yield failed_rows(plan.entries[unit.group], unit, plan.work[unit].jobs, cfg, why)
             else:
                 yield _result(future)
     finally:

@@ -6,7 +6,9 @@ file is rewritten through a temporary name, so an interrupt keeps every finished
 The settings are stored in `config.json` beside the results and the vocabulary of the rows
 in `vocabulary.json`; a run into a folder holding other settings is refused unless
 `overwrite`. Rows whose prediction is current but whose scoring is not (or every row,
-with `reevaluate`) are scored again from the stored predictions.
+with `reevaluate`) are scored again from the stored predictions; rows that could not be
+computed (a policy raised, a worker died) are computed again. The last line says how many
+of the grid's rows failed, by reason, and which (scene, seed) the sfm means leave out.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from bench.results import (
     set_aside_damaged,
 )
 from bench.scenes.spec import load_spec, scene_names
+from bench.summary import ERROR, failures, sfm_exclusions
 from bench.vocabulary import (
     HEADLINE,
     KEY,
@@ -231,7 +234,10 @@ def _current_rows(
                 "computed; computing them again"
             )
         stale |= changed
-    df = df[~stale]
+    errored = ~stale & df["failure"].str.startswith(ERROR)
+    if errored.any():
+        log(f"{int(errored.sum())} row(s) could not be computed last time; computing them again")
+    df = df[~(stale | errored)]
     rescore = df["policy"].isin(known) & (
         options.reevaluate | (df["evaluation_hash"] != evaluation_hash())
     )
@@ -300,11 +306,24 @@ def _run_in(
         stage_s["report"] = time.perf_counter() - t
     invocation |= {"rows": n_rows, "seconds": {"total": time.perf_counter() - t_start, **stage_s}}
     write_manifest(ws, cfg, invocation, out)
+    ours = in_grid(cfg, out)
+    said = [s for s in (failures(ours), sfm_exclusions(ours, bool(cfg.datasets))) if s]
     log(
-        f"{n_rows} rows done, {len(done)} reused, in {invocation['seconds']['total']:.0f} s; "
-        f"results in {ws.results}"
+        f"{n_rows} rows done, {len(done)} reused, in {invocation['seconds']['total']:.0f} s"
+        + (f"; of the grid's {len(ours)} rows, " + "; ".join(said) if said else "")
+        + f"; results in {ws.results}"
     )
     return out
+
+
+def in_grid(cfg: BenchConfig, rows: pd.DataFrame) -> pd.DataFrame:
+    """The rows of `cfg`'s grid (a results folder may hold more)."""
+    units = {tuple(asdict(u).values()) for u in cfg.units()}
+    keep = [
+        (sc, sd, p, b) in units and t in cfg.tasks and pr in cfg.protocols
+        for sc, sd, p, b, t, pr in rows[list(KEY)].itertuples(index=False)
+    ]
+    return rows[keep]
 
 
 def mark_reference(table: pd.DataFrame) -> pd.DataFrame:

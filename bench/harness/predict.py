@@ -44,7 +44,7 @@ from bench.frontend import (
     stage,
     views,
 )
-from bench.frontend.policies import PolicyInput, weights_file
+from bench.frontend.policies import PolicyFailed, PolicyInput, weights_file
 from bench.frontend.selection import select_views
 from bench.frontend.stage import FrontEnd
 from bench.frontend.views import Source
@@ -179,7 +179,13 @@ def _predict_policy(scene, unit, jobs, cfg, ws, record) -> None:
     folder, matched = ws.unit_dir(unit), {}
     for grant in dict.fromkeys(RUNNERS[j.task].spec.grant for j in jobs):
         fe = scene.fronts[grant]
-        selections, select_s, rounds = select_features(fe, scene.truth, unit, cfg)
+        try:
+            selections, select_s, rounds = select_features(fe, scene.truth, unit, cfg)
+        except PolicyFailed as e:
+            e.tasks = tuple(
+                dict.fromkeys(j.task for j in jobs if RUNNERS[j.task].spec.grant == grant)
+            )
+            raise
         key = repr(([s.tolist() for s in selections], rounds))
         xy = [c.xy[s] for c, s in zip(fe.pools, selections)]
         if key not in matched:

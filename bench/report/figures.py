@@ -50,17 +50,23 @@ def _errors(t: pd.DataFrame, m: str) -> np.ndarray:
     return np.nan_to_num(np.vstack([lo, hi]))
 
 
-def figure3(t1: pd.DataFrame, out: Path, title: str = "") -> None:
+def figure3(t1: pd.DataFrame, out: Path, title: str = "", note: str = "") -> None:
     """Aggregate metrics per strategy at the headline budget (references included), with
-    95% intervals; bars are labelled by policy id (the display names are long)."""
+    95% intervals; bars are labelled by policy id (the display names are long).
+    One panel per metric that has a value (the panels of the tasks that ran); `note`
+    (what failed, what the means leave out) below them."""
     b = headline_budget(t1)
     t = t1[(t1["budget"] == b) | (t1["budget"] == 0)].reset_index(drop=True)
-    fig, axes = plt.subplots(3, 3, figsize=(max(15, len(t)), 11))
+    panels = [(m, label) for m, label in PANELS if m in t and np.isfinite(t[m].astype(float)).any()]
+    panels = panels or [(m, label) for m, label in PANELS if m in t][:1]
+    cols = min(3, len(panels))
+    rows = -(-len(panels) // cols)
+    width = max(5.0, len(t) / 3)
+    fig, axes = plt.subplots(rows, cols, figsize=(width * cols, 3.7 * rows + 0.6), squeeze=False)
+    for ax in axes.ravel()[len(panels) :]:
+        fig.delaxes(ax)
     colors = plt.cm.tab20(np.arange(len(t)) % 20)
-    for ax, (m, label) in zip(axes.ravel(), PANELS):
-        if m not in t:
-            ax.set_visible(False)
-            continue
+    for ax, (m, label) in zip(axes.ravel(), panels):
         values = t[m].to_numpy(float)
         ok = np.isfinite(values)
         ax.bar(
@@ -77,14 +83,31 @@ def figure3(t1: pd.DataFrame, out: Path, title: str = "") -> None:
                 color="gray",
             )
         ax.set_xticks(range(len(t)), t["policy"], rotation=50, ha="right", fontsize=8)
+        ax.set_xlim(-0.6, len(t) - 0.4)  # every slot inside, a missing last one's "n/a" too
         ax.set_title(label, fontsize=10)
         if m in LOG_SCALE and (values[ok] > 0).any():
             ax.set_yscale("log")
     fig.suptitle(
         title or f"Aggregate metrics per strategy (budget {b}; mean and 95% interval over runs)"
     )
-    fig.tight_layout()
+    bottom = 0.0
+    if note:
+        fig.text(0.01, 0.005, note, fontsize=8, wrap=True, va="bottom")
+        bottom = min(0.25, (0.1 + 0.18 * (1 + note.count("\n"))) / fig.get_figheight())
+    fig.tight_layout(rect=(0, bottom, 1, 1))
     save(fig, out, ("png", "pdf"))
+
+
+def _line_style(k: int) -> dict:
+    """The k-th policy's line in the budget figure: nine distinct hues (tab10 without its
+    grey, the references' colour), then the same hues with another marker and dash, so no
+    two lines look alike."""
+    hues = [plt.cm.tab10(i) for i in (0, 1, 2, 3, 4, 5, 6, 8, 9)]
+    return {
+        "color": hues[k % 9],
+        "marker": "os^Dv"[(k // 9) % 5],
+        "linestyle": ("-", "--", "-.", (0, (1, 1)), (0, (5, 1, 1, 1)))[(k // 9) % 5],
+    }
 
 
 def figure_budget(t1: pd.DataFrame, out: Path) -> None:
@@ -96,11 +119,15 @@ def figure_budget(t1: pd.DataFrame, out: Path) -> None:
         if m not in t1:
             ax.set_visible(False)
             continue
-        ax.set_prop_cycle(color=plt.cm.tab20(np.arange(20)))
+        curves = [p for p in t1.loc[t1["budget"] > 0, "policy"].unique() if p != ORACLE]
         for policy, g in t1[t1["budget"] > 0].groupby("policy", sort=False):
             g = g.sort_values("budget")
-            style = {"linestyle": ":", "color": "black"} if policy == ORACLE else {}
-            line = ax.plot(g["budget"], g[m], marker="o", label=g["strategy"].iloc[0], **style)
+            style = (
+                {"linestyle": ":", "color": "black", "marker": "o"}
+                if policy == ORACLE
+                else _line_style(curves.index(policy))
+            )
+            line = ax.plot(g["budget"], g[m], label=g["strategy"].iloc[0], **style)
             ax.fill_between(
                 g["budget"], g[f"{m}_lo"], g[f"{m}_hi"], color=line[0].get_color(), alpha=0.15
             )
@@ -156,6 +183,12 @@ def read_text_model(folder: Path) -> tuple[dict, np.ndarray, np.ndarray]:
     ]
     table = np.array(rows, float).reshape(-1, 4)
     return images, table[:, 0].astype(int), table[:, 1:]
+
+
+def figure2_expected(df: pd.DataFrame) -> bool:
+    """Whether the rows ask for Figure 2 (they hold adaptive on table), so that not drawing
+    it is worth saying."""
+    return bool(((df["scene"] == "table") & (df["policy"] == "adaptive")).any())
 
 
 def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | None:

@@ -46,13 +46,13 @@ import numpy as np
 import pandas as pd
 
 from bench.report.stats import LOWER_IS_BETTER, paired_difference, stratified_interval
+from bench.summary import sfm_rule
 from bench.vocabulary import (
     HEADLINE,
     HEADLINE_POLICY,
     ORACLE,
     PAIRED_PEER,
     REFERENCE_MAPS,
-    REFERENCE_PEER,
     UNIT_KEY,
     Vocabulary,
 )
@@ -63,20 +63,6 @@ UNIT = list(UNIT_KEY)
 SFM_RULE = "sfm_exclusion"
 """The `headline_frame` column (and Table 1's) saying whether the sfm exclusion rule is
 applied (`sfm_rule`)."""
-
-
-def sfm_rule(df: pd.DataFrame, dataset: bool = False) -> str:
-    """Whether the sfm exclusion rule is applied to the rows `df` ("applied") or why not:
-    on a dataset (its poses are the truth), or where stock COLMAP with all features did
-    not run in every (scene, seed) cell of the sfm task (the rule is all or nothing, so
-    that a mean never depends on which cells it ran in)."""
-    if dataset:
-        return "not applied: a dataset's poses are the truth"
-    cells = df[df["task"] == "sfm"].drop_duplicates(["scene", "seed"])
-    known = cells[REFERENCE_MAPS].notna().sum() if REFERENCE_MAPS in cells else 0
-    if known < len(cells):
-        return f"not applied: {REFERENCE_PEER} did not run in {len(cells) - known} of {len(cells)} cells"
-    return "applied"
 
 
 def headline_frame(

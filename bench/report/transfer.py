@@ -6,7 +6,7 @@ completeness where the dataset has per-pixel truth), the budgeted methods that b
 results folders hold are ranked by their mean, best first, on the dataset and on the
 rendered benchmark (all its scenes and seeds pooled, at the same budget, under the headline
 protocol; for sfm, without the cells stock COLMAP does not map where that rule holds,
-`bench.report.tables.sfm_rule`; a dataset's cells are never left out); tied means share
+`bench.summary.sfm_rule`; a dataset's cells are never left out); tied means share
 their mean rank. `transfer.csv` has Kendall's tau-b between the
 two rankings with a 95% percentile bootstrap interval (the methods resampled with
 replacement, `DRAWS` draws, seed 0), the winner on each side and the methods whose rank

@@ -23,7 +23,14 @@ import pandas as pd
 
 from bench.console import log
 from bench.files import atomic_path, write_text_atomic
-from bench.report.figures import figure2, figure3, figure_budget, figure_transfer, headline_budget
+from bench.report.figures import (
+    figure2,
+    figure2_expected,
+    figure3,
+    figure_budget,
+    figure_transfer,
+    headline_budget,
+)
 from bench.report.page import PAGE, results_page
 from bench.report.tables import (
     SFM_RULE,
@@ -38,6 +45,7 @@ from bench.report.tables import (
 )
 from bench.report.transfer import transfer
 from bench.results import read_runs
+from bench.summary import failures, sfm_exclusions
 from bench.vocabulary import VOCABULARY_FILE, Vocabulary
 
 
@@ -97,15 +105,22 @@ def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> pd.DataF
 
 
 def _write_figures(df: pd.DataFrame, t1: pd.DataFrame, results: Path, renders: Path) -> None:
-    figure3(t1, results / "figure3")
+    figure3(t1, results / "figure3", note=figure3_note(df, is_dataset_run(results)))
     if (t1["budget"] > 0).sum() and t1.loc[t1["budget"] > 0, "budget"].nunique() > 1:
         figure_budget(t1, results / "figure_budget")
     else:
         _drop(results / "figure_budget.png")
     why = figure2(df, results, renders, results / "figure2")
+    if why and (figure2_expected(df) or (results / "figure2.png").exists()):
+        log(f"figure2.png not drawn (and any older one removed): {why}")
     if why:
         _drop(results / "figure2.png")
-        log(f"figure2.png not drawn (and any older one removed): {why}")
+
+
+def figure3_note(df: pd.DataFrame, dataset: bool = False) -> str:
+    """Figure 3's note: the rows that failed, and the cells the sfm means leave out."""
+    said = [s for s in (failures(df), sfm_exclusions(df, dataset)) if s]
+    return f"Of {len(df)} rows: " + "\n".join(said) if said else ""
 
 
 def _write_tables(results: Path, tables: dict[str, pd.DataFrame]) -> None:

@@ -1,0 +1,77 @@
+"""What a run's rows say went wrong, in a line: the rows that failed (by reason), the rows
+that could not be computed (a method raised or broke its contract, a worker died), and the
+(scene, seed) cells left out of the sfm means. For `bench run`'s summary and Figure 3."""
+
+from __future__ import annotations
+
+import re
+
+import pandas as pd
+
+from bench.vocabulary import REFERENCE_MAPS, REFERENCE_PEER
+
+ERROR = "error: "
+"""How the failure of a row that could not be computed starts (`bench.harness.execute`);
+a task's outcome (a mapper that registered no view) does not start so."""
+
+
+NUMBER = re.compile(r"\d+")
+
+
+def _kind(row) -> str:
+    """A failure's reason without its numbers (an error: its method)."""
+    if row.failure.startswith(ERROR):
+        return f"{row.task}: error of {row.policy}"
+    return f"{row.task}: {NUMBER.sub('N', row.failure)[:60]}"
+
+
+def failures(rows: pd.DataFrame) -> str:
+    """'N failed (n task: reason; ...)', or '' when no row failed."""
+    failed = rows[rows["status"] == "failed"]
+    if failed.empty:
+        return ""
+    kinds = pd.Series([_kind(r) for r in failed.itertuples()]).value_counts()
+    return f"{len(failed)} failed ({'; '.join(f'{n} {k}' for k, n in kinds.items())})"
+
+
+def errors(rows: pd.DataFrame) -> str:
+    """'N row(s) of METHOD[, ...] could not be computed: FIRST FAILURE', or ''."""
+    bad = rows[rows["failure"].fillna("").str.startswith(ERROR)]
+    if bad.empty:
+        return ""
+    methods = ", ".join(f"{p} ({n})" for p, n in bad["policy"].value_counts().items())
+    first = bad["failure"].iloc[0][len(ERROR) :]
+    return f"{len(bad)} row(s) could not be computed, of {methods}; the first: {first}"
+
+
+def sfm_rule(df: pd.DataFrame, dataset: bool = False) -> str:
+    """Whether the sfm exclusion rule is applied to the rows `df` ("applied") or why not:
+    on a dataset (its poses are the truth), or where stock COLMAP with all features did
+    not run in every (scene, seed) cell of the sfm task (the rule is all or nothing, so
+    that a mean never depends on which cells it ran in)."""
+    if dataset:
+        return "not applied: a dataset's poses are the truth"
+    cells = df[df["task"] == "sfm"].drop_duplicates(["scene", "seed"])
+    known = cells[REFERENCE_MAPS].notna().sum() if REFERENCE_MAPS in cells else 0
+    if known < len(cells):
+        return f"not applied: {REFERENCE_PEER} did not run in {len(cells) - known} of {len(cells)} cells"
+    return "applied"
+
+
+def sfm_exclusions(rows: pd.DataFrame, dataset: bool = False) -> str:
+    """Which (scene, seed) cells the sfm means leave out and why, why none is left out
+    where the rule does not apply, or '' without the sfm task."""
+    if not (rows["task"] == "sfm").any():
+        return ""
+    rule = sfm_rule(rows, dataset)
+    if rule != "applied":
+        return f"sfm exclusion rule {rule}"
+    cells = rows[rows[REFERENCE_MAPS].eq(0)][["scene", "seed"]].drop_duplicates()
+    if cells.empty:
+        return ""
+    names = ", ".join(f"{s} seed {d}" for s, d in sorted(map(tuple, cells.to_numpy())))
+    total = len(rows[["scene", "seed"]].drop_duplicates())
+    return (
+        f"sfm means leave out {len(cells)} of {total} (scene, seed): {names} "
+        f"({REFERENCE_PEER} with all features does not map them)"
+    )
