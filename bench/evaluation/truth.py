@@ -51,11 +51,14 @@ class Surface:
         self.hi = np.array([b.max(0) for b in blocks]).reshape(-1, 3)
         self._last: tuple[bytes, np.ndarray] | None = None
 
-    def distances(self, X: np.ndarray, chunk: int = 1024) -> np.ndarray:
+    def distances(self, X: np.ndarray) -> np.ndarray:
         """Distance from each point (N, 3) to the nearest sample (inf without samples)."""
         X = np.ascontiguousarray(X, np.float64).reshape(-1, 3)
-        if self._last is not None and self._last[0] == X.tobytes():
-            return self._last[1].copy()
+        if self._last is None or self._last[0] != X.tobytes():
+            self._last = (X.tobytes(), self._nearest(X))
+        return self._last[1].copy()
+
+    def _nearest(self, X: np.ndarray, chunk: int = 1024) -> np.ndarray:
         best = np.full(len(X), np.inf)
         for start in range(0, len(X) if self.trees else 0, chunk):
             x, near = X[start : start + chunk], best[start : start + chunk]
@@ -71,7 +74,6 @@ class Surface:
                 for b in np.unique(order[pts, k]):
                     sel = pts[order[pts, k] == b]
                     near[sel] = np.minimum(near[sel], self.trees[b].query(x[sel])[0])
-        self._last = (X.tobytes(), best.copy())
         return best
 
 
