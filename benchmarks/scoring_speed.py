@@ -36,8 +36,10 @@ ap.add_argument("--scene", default="facade")
 ap.add_argument("--renders", default="renders")
 ap.add_argument("--results", help="grid: the results folder (new, or one to re-score)")
 ap.add_argument("--code", help="grid: a checkout of the code to run instead of this one")
-ap.add_argument("extra", nargs="*", help="grid: arguments passed to `bench run` (after --)")
-a = ap.parse_args()
+argv = sys.argv[1:]
+cut = argv.index("--") if "--" in argv else len(argv)
+a = ap.parse_args(argv[:cut])
+a.extra = argv[cut + 1 :]  # grid: arguments passed to `bench run`
 
 
 def points() -> None:
