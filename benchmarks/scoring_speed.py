@@ -7,7 +7,8 @@ the distances are equal to the last bit.
 
 `grid`: a small grid run with `bench run` (into RESULTS), then `bench run --reevaluate`;
 prints the wall-clock of each and, from runs.csv, the worker seconds of the scoring
-(evaluate_ms, evaluate_matches_ms) against those of the stages before it. `--code DIR` runs
+(evaluate_ms, evaluate_matches_ms) against those of a unit's own stages (select, match,
+verify, task; the front end's are stored with its cache). `--code DIR` runs
 another checkout of the code (e.g. the commit before this change) with this interpreter;
 compare the two runs.csv files with benchmarks/compare_runs.py.
 
@@ -91,11 +92,11 @@ def grid() -> None:
         rows = pd.read_csv(results / "runs.csv")
         s = {c: rows[c].sum() / 1000 for c in rows if c.endswith("_ms") and c != "wall_ms"}
         scoring = s.get("evaluate_ms", 0) + s.get("evaluate_matches_ms", 0)
-        before = sum(v for c, v in s.items() if not c.startswith("evaluate"))
+        unit = sum(s.get(f"{c}_ms", 0) for c in ("select", "match", "verify", "task"))
         print(
             f"{label}: {wall:.1f} s wall, {len(rows)} rows; worker seconds: scoring "
             f"{scoring:.1f} (evaluate {s.get('evaluate_ms', 0):.1f}), tasks "
-            f"{s.get('task_ms', 0):.1f}, all stages before the scoring {before:.1f}",
+            f"{s.get('task_ms', 0):.1f}, a unit's stages (select, match, verify, task) {unit:.1f}",
             flush=True,
         )
 
