@@ -9,11 +9,12 @@ import shutil
 import subprocess
 import sys
 
+import cv2
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from bench import files
+from bench import BenchError, files
 from bench.evaluation import truth as truth_module
 from bench.evaluation.groundtruth import load_ground_truth
 from bench.evaluation.metrics import point_error, point_metrics
@@ -192,3 +193,11 @@ def test_images_are_decoded_once_per_scene_and_not_on_a_cache_hit(
     assert fronts[RIG].views[2].image is fronts[IMAGES].views[2].image
     assert decoded == ["view_02.png"]
     execute._HELD.clear()
+
+
+def test_an_image_of_another_size_than_its_camera_is_refused_when_decoded(tmp_path):
+    cv2.imwrite(str(tmp_path / "a.png"), np.zeros((8, 10, 3), np.uint8))
+    image = views_module.ImageFile(tmp_path / "a.png", 12, 8)
+    with pytest.raises(BenchError, match=r"a.png is 10x8, its camera says 12x8$"):
+        image()
+    assert views_module.ImageFile(tmp_path / "a.png", 10, 8)().shape == (8, 10, 3)

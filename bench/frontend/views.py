@@ -37,16 +37,16 @@ class ImageFile:
     """An image file, decoded on its first use and kept (the copies of a view share it)."""
 
     def __init__(self, path: Path, width: int, height: int):
-        self.path, self.size = Path(path), (width, height)
+        self._path, self._size = Path(path), (width, height)
         self._pixels: np.ndarray | None = None
 
     def __call__(self) -> np.ndarray:
         if self._pixels is None:
-            img = read_image(self.path)
-            if img.shape[1::-1] != self.size:
+            img = read_image(self._path)
+            if img.shape[1::-1] != self._size:
                 raise BenchError(
-                    f"{self.path} is {img.shape[1]}x{img.shape[0]}, its camera says "
-                    f"{self.size[0]}x{self.size[1]}"
+                    f"{self._path} is {img.shape[1]}x{img.shape[0]}, its camera says "
+                    f"{self._size[0]}x{self._size[1]}"
                 )
             self._pixels = img
         return self._pixels
