@@ -54,8 +54,9 @@ class Surface:
     def distances(self, X: np.ndarray) -> np.ndarray:
         """Distance from each point (N, 3) to the nearest sample (inf without samples)."""
         X = np.ascontiguousarray(X, np.float64).reshape(-1, 3)
-        if self._last is None or self._last[0] != X.tobytes():
-            self._last = (X.tobytes(), self._nearest(X))
+        key = X.tobytes()
+        if self._last is None or self._last[0] != key:
+            self._last = (key, self._nearest(X))
         return self._last[1].copy()
 
     def _nearest(self, X: np.ndarray, chunk: int = 1024) -> np.ndarray:
