@@ -20,6 +20,7 @@ compare the two runs.csv files with benchmarks/compare_runs.py.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import subprocess
 import sys
@@ -90,11 +91,13 @@ def grid() -> None:
         subprocess.run(cmd + more, check=True, env=env, cwd=code, stdout=subprocess.DEVNULL)
         wall = time.perf_counter() - t
         rows = pd.read_csv(results / "runs.csv")
+        stage = json.loads((results / "manifest.json").read_text())["seconds"]
         s = {c: rows[c].sum() / 1000 for c in rows if c.endswith("_ms") and c != "wall_ms"}
         scoring = s.get("evaluate_ms", 0) + s.get("evaluate_matches_ms", 0)
         unit = sum(s.get(f"{c}_ms", 0) for c in ("select", "match", "verify", "task"))
         print(
-            f"{label}: {wall:.1f} s wall, {len(rows)} rows; worker seconds: scoring "
+            f"{label}: {wall:.1f} s wall (runs stage {stage['runs_wall']:.1f} s, report "
+            f"{stage['report']:.1f} s), {len(rows)} rows; worker seconds: scoring "
             f"{scoring:.1f} (evaluate {s.get('evaluate_ms', 0):.1f}), tasks "
             f"{s.get('task_ms', 0):.1f}, a unit's stages (select, match, verify, task) {unit:.1f}",
             flush=True,
