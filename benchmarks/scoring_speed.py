@@ -6,9 +6,9 @@ old way) and with `bench.evaluation.truth.Surface`; prints the seconds of each a
 the distances are equal to the last bit.
 
 `grid`: a small grid run with `bench run` (into RESULTS), then `bench run --reevaluate`;
-prints the wall-clock of each and, from runs.csv, the worker seconds of the scoring
-(evaluate_ms, evaluate_matches_ms) against those of a unit's own stages (select, match,
-verify, task; the front end's are stored with its cache). `--code DIR` runs
+prints the wall-clock of each and, from manifest.json, the seconds of the runs stage and of
+the report, and the worker seconds of the scoring (evaluate, evaluate_matches) against those
+of a unit's own stages (select, match, verify, task). `--code DIR` runs
 another checkout of the code (e.g. the commit before this change) with this interpreter;
 compare the two runs.csv files with benchmarks/compare_runs.py.
 
@@ -91,15 +91,13 @@ def grid() -> None:
         subprocess.run(cmd + more, check=True, env=env, cwd=code, stdout=subprocess.DEVNULL)
         wall = time.perf_counter() - t
         rows = pd.read_csv(results / "runs.csv")
-        stage = json.loads((results / "manifest.json").read_text())["seconds"]
-        s = {c: rows[c].sum() / 1000 for c in rows if c.endswith("_ms") and c != "wall_ms"}
-        scoring = s.get("evaluate_ms", 0) + s.get("evaluate_matches_ms", 0)
-        unit = sum(s.get(f"{c}_ms", 0) for c in ("select", "match", "verify", "task"))
+        s = json.loads((results / "manifest.json").read_text())["seconds"]
+        unit = sum(s[k] for k in ("select", "match", "verify", "task"))
         print(
-            f"{label}: {wall:.1f} s wall (runs stage {stage['runs_wall']:.1f} s, report "
-            f"{stage['report']:.1f} s), {len(rows)} rows; worker seconds: scoring "
-            f"{scoring:.1f} (evaluate {s.get('evaluate_ms', 0):.1f}), tasks "
-            f"{s.get('task_ms', 0):.1f}, a unit's stages (select, match, verify, task) {unit:.1f}",
+            f"{label}: {wall:.1f} s wall (runs stage {s['runs_wall']:.1f} s, report "
+            f"{s['report']:.1f} s), {len(rows)} rows; worker seconds: scoring "
+            f"{s['evaluate'] + s['evaluate_matches']:.1f}, a unit's stages (select, match, "
+            f"verify, task) {unit:.1f}, of them tasks {s['task']:.1f}",
             flush=True,
         )
 
