@@ -80,24 +80,38 @@ def checksum(path: Path) -> str:
     return f"{zlib.crc32(Path(path).read_bytes()):08x}"
 
 
+_VERIFIED: set[tuple] = set()
+"""The entries this process found whole: their meta.json and each file's size, time and inode."""
+
+
 def entry_problem(entry: Path) -> str | None:
-    """Why `entry` is not a complete, undamaged cache entry, or None if it is."""
+    """Why `entry` is not a complete, undamaged cache entry, or None if it is. The checksums
+    are computed once per process: again only when the meta or a file's size, modification
+    time or inode changes."""
     try:
-        meta = json.loads((entry / "meta.json").read_text())
-        files = meta["files"]
+        text = (entry / "meta.json").read_text()
+        files = json.loads(text)["files"]
     except FileNotFoundError:
         return "meta.json missing"
     except (OSError, ValueError, KeyError, TypeError) as e:
         return f"meta.json unreadable ({type(e).__name__})"
+    stats, crcs = [], {}
     for name, rec in files.items():
         p = entry / name
-        size, crc = (rec, None) if isinstance(rec, int) else (rec["bytes"], rec["crc32"])
+        size, crcs[name] = (rec, None) if isinstance(rec, int) else (rec["bytes"], rec["crc32"])
         if not p.is_file():
             return f"{name} missing"
-        if p.stat().st_size != size:
-            return f"{name} truncated or altered ({p.stat().st_size} bytes, expected {size})"
-        if crc is not None and checksum(p) != crc:
+        st = p.stat()
+        if st.st_size != size:
+            return f"{name} truncated or altered ({st.st_size} bytes, expected {size})"
+        stats.append((name, st.st_size, st.st_mtime_ns, st.st_ino))
+    key = (str(Path(entry).resolve()), text, tuple(stats))
+    if key in _VERIFIED:
+        return None
+    for name, crc in crcs.items():
+        if crc is not None and checksum(entry / name) != crc:
             return f"{name} altered (its checksum differs from the one recorded)"
+    _VERIFIED.add(key)
     return None
 
 

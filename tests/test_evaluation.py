@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from bench.backend.matching import expected_ransac_iterations
@@ -32,7 +31,7 @@ from bench.evaluation.poses import (
     relative_pose_errors,
     similarity,
 )
-from bench.evaluation.truth import SceneTruth
+from bench.evaluation.truth import SceneTruth, Surface
 from bench.frontend.features import Candidates
 
 # --- metrics on five hand-made points -------------------------------------------------
@@ -41,7 +40,7 @@ TRUE = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [0.5, 0.5, 1.0]])
 
 
 def test_point_error_rmse_median_and_completeness_on_five_points():
-    surface = cKDTree(TRUE)
+    surface = Surface(TRUE)
     X = TRUE.copy()
     X[4, 2] += 0.3  # one point 0.3 units off its surface
     e = point_error(X, surface)
@@ -134,7 +133,7 @@ def test_reconstructable_points_per_track_protocol():
 
 
 def test_accuracy_is_the_share_of_points_within_tau():
-    surface = cKDTree(TRUE)
+    surface = Surface(TRUE)
     X = TRUE.copy()
     X[4, 2] += 0.3
     row = point_metrics(X, surface, reconstructable=10)

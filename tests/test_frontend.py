@@ -217,7 +217,7 @@ def test_policy_input_has_no_ground_truth_fields():
     assert [f.name for f in dataclasses.fields(View)] == [
         "index",
         "name",
-        "image",
+        "pixels",
         "camera",
         "posed",
     ]

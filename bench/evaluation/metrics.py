@@ -53,20 +53,19 @@ import math
 from itertools import combinations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from bench.backend.matching import PairMatches, expected_ransac_iterations
 from bench.camera import Camera
-from bench.evaluation.truth import SceneTruth
+from bench.evaluation.truth import SceneTruth, Surface
 from bench.frontend.features import Candidates
 
 THRESHOLDS = (0.02, 0.05, 0.10, 0.20)
 COVERAGE_GRID = (16, 12)
 
 
-def point_error(X: np.ndarray, surface: cKDTree) -> np.ndarray:
+def point_error(X: np.ndarray, surface: Surface) -> np.ndarray:
     """Distance from each point (N, 3) to the nearest ground-truth surface sample."""
-    return surface.query(X)[0] if len(X) else np.zeros(0)
+    return surface.distances(X) if len(X) else np.zeros(0)
 
 
 def rmse(errors: np.ndarray) -> float:
@@ -144,7 +143,7 @@ def match_metrics(
 
 
 def point_metrics(
-    X: np.ndarray, surface: cKDTree | None, reconstructable: int | None
+    X: np.ndarray, surface: Surface | None, reconstructable: int | None
 ) -> dict[str, float]:
     """Accuracy of reconstructed points X (N, 3): rmse, median error, accuracy within each
     tau and, given the reconstructable points, completeness within each tau (NaN where the

@@ -19,6 +19,63 @@ from bench.frontend.features import Candidates
 
 CORRESPONDENCE_PX = 3.0
 """Ground-truth correspondence: reprojection within this many pixels."""
+BLOCK = 16384
+"""Surface samples per block of `Surface`."""
+
+
+class Surface:
+    """Ground-truth surface samples, and the exact distance from points to the nearest one.
+
+    One k-d tree over all samples is slow far from the surface: its cells reach into the
+    empty space in front of it, so a point 10 units away visits much of the tree (1,000
+    points 5-15 units away took 2.9 s, against 4 ms near the surface). Here the samples are
+    split into blocks of neighbouring samples, each with its own k-d tree and tight bounding
+    box; a point visits the blocks in the order of their box's distance and stops at the
+    first box farther than its nearest sample so far. The distances are a single tree's, to
+    the last bit (the same arithmetic on the same nearest sample). The last query's answer
+    is kept: a tri model's scores and its `point_errors.csv` ask for the same points."""
+
+    def __init__(self, samples: np.ndarray):
+        samples = np.asarray(samples, np.float64).reshape(-1, 3)
+        blocks = []
+        if len(samples):
+            stack = [cKDTree(samples, leafsize=BLOCK, balanced_tree=False).tree]
+            while stack:  # the leaves of a coarse tree: blocks of neighbouring samples
+                node = stack.pop()
+                if node.split_dim == -1:
+                    blocks.append(samples[node.indices])
+                else:
+                    stack += [node.lesser, node.greater]
+        self.trees = [cKDTree(b, balanced_tree=False) for b in blocks]
+        self.lo = np.array([b.min(0) for b in blocks]).reshape(-1, 3)
+        self.hi = np.array([b.max(0) for b in blocks]).reshape(-1, 3)
+        self._last: tuple[bytes, np.ndarray] | None = None
+
+    def distances(self, X: np.ndarray) -> np.ndarray:
+        """Distance from each point (N, 3) to the nearest sample (inf without samples)."""
+        X = np.ascontiguousarray(X, np.float64).reshape(-1, 3)
+        key = X.tobytes()
+        if self._last is None or self._last[0] != key:
+            self._last = (key, self._nearest(X))
+        return self._last[1].copy()
+
+    def _nearest(self, X: np.ndarray, chunk: int = 1024) -> np.ndarray:
+        best = np.full(len(X), np.inf)
+        for start in range(0, len(X) if self.trees else 0, chunk):
+            x, near = X[start : start + chunk], best[start : start + chunk]
+            gap = np.maximum(self.lo - x[:, None], 0) + np.maximum(x[:, None] - self.hi, 0)
+            bound = np.sqrt(np.einsum("nbk,nbk->nb", gap, gap))  # to each block's box
+            order = np.argsort(bound, 1)
+            bound = np.take_along_axis(bound, order, 1)
+            for k in range(order.shape[1]):
+                # a margin of 1e-9: the box bound and the tree round in their own ways
+                pts = np.flatnonzero(bound[:, k] <= near * (1 + 1e-9))
+                if not len(pts):
+                    break
+                for b in np.unique(order[pts, k]):
+                    sel = pts[order[pts, k] == b]
+                    near[sel] = np.minimum(near[sel], self.trees[b].query(x[sel])[0])
+        return best
 
 
 def _visible(X: np.ndarray, cam: Camera, gt: GroundTruth) -> tuple[np.ndarray, np.ndarray]:
@@ -43,7 +100,7 @@ def _visible(X: np.ndarray, cam: Camera, gt: GroundTruth) -> tuple[np.ndarray, n
 class SceneTruth:
     """Ground-truth structures of one render entry and candidate pool, shared by all runs."""
 
-    surface: cKDTree | None
+    surface: Surface | None
     """Ground-truth surface samples (None: no point accuracy)."""
     cams: list[Camera]
     gts: list[GroundTruth] | None
@@ -72,13 +129,11 @@ class SceneTruth:
         """From per-pixel truth (its single-surface positions are the surface unless a
         point cloud is given), or from a point cloud alone."""
         if gts is None:
-            surface = cKDTree(np.asarray(cloud, np.float64)) if cloud is not None else None
+            surface = Surface(cloud) if cloud is not None else None
             kind = "poses" if cloud is None else "point cloud"
             return SceneTruth(surface, cams, None, None, [c.xy for c in pools], None, None, kind)
         samples = (
-            np.concatenate([g.position[g.single_surface] for g in gts]).astype(np.float64)
-            if cloud is None
-            else np.asarray(cloud, np.float64)
+            np.concatenate([g.position[g.single_surface] for g in gts]) if cloud is None else cloud
         )
         points = []
         for cam, gt, cand in zip(cams, gts, pools):
@@ -89,7 +144,7 @@ class SceneTruth:
             points.append(P)
         pool_xy = [c.xy for c in pools]
         track, track_views = _tracks(cams, gts, points, pool_xy)
-        return SceneTruth(cKDTree(samples), cams, gts, points, pool_xy, track, track_views)
+        return SceneTruth(Surface(samples), cams, gts, points, pool_xy, track, track_views)
 
     def reconstructable(self, min_views: int) -> int | None:
         """Ground-truth tracks spanning at least `min_views` views (None without per-pixel

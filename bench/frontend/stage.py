@@ -45,14 +45,21 @@ class FrontEnd:
 
 
 def front_end(
-    entry: Path, det: DetectorConfig, sig: SignalConfig, cache_dir: Path, grant: str = RIG
+    entry: Path,
+    det: DetectorConfig,
+    sig: SignalConfig,
+    cache_dir: Path,
+    grant: str = RIG,
+    views: list[View] | None = None,
 ) -> FrontEnd:
     """Candidates and signals of every view of `entry` (a render entry or a dataset) under
-    the geometry granted (RIG or IMAGES), computed or read from the cache."""
+    the geometry granted (RIG or IMAGES), computed or read from the cache; `views`: the
+    entry's (`load_views`), shared between geometries so that each image is decoded once,
+    and only when the cache misses."""
     entry = Path(entry)
     if grant not in (RIG, IMAGES):
         raise BenchError(f"unknown geometry {grant!r}; valid: {RIG}, {IMAGES}")
-    views = load_views(entry)
+    views = load_views(entry) if views is None else views
     if grant == IMAGES:
         views = [v.without_pose() for v in views]
     key = content_key(

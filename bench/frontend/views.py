@@ -33,6 +33,25 @@ DEFAULT_FOCAL_FACTOR = 1.2
 """COLMAP's focal-length prior without EXIF: 1.2 x max(width, height)."""
 
 
+class ImageFile:
+    """An image file, decoded on its first use and kept (the copies of a view share it)."""
+
+    def __init__(self, path: Path, width: int, height: int):
+        self._path, self._size = Path(path), (width, height)
+        self._pixels: np.ndarray | None = None
+
+    def __call__(self) -> np.ndarray:
+        if self._pixels is None:
+            img = read_image(self._path)
+            if img.shape[1::-1] != self._size:
+                raise BenchError(
+                    f"{self._path} is {img.shape[1]}x{img.shape[0]}, its camera says "
+                    f"{self._size[0]}x{self._size[1]}"
+                )
+            self._pixels = img
+        return self._pixels
+
+
 @dataclass(frozen=True)
 class View:
     """One calibrated image."""
@@ -40,11 +59,16 @@ class View:
     index: int
     name: str
     """File name relative to the image folder (the name COLMAP records)."""
-    image: np.ndarray
-    """8-bit sRGB, HxWx3 (RGB order)."""
+    pixels: np.ndarray | ImageFile
+    """The image (`image`), or its file, decoded when first needed."""
     camera: Camera
     posed: bool = True
     """Whether `camera` holds a real pose (False: intrinsics only, identity pose)."""
+
+    @property
+    def image(self) -> np.ndarray:
+        """8-bit sRGB, HxWx3 (RGB order)."""
+        return self.pixels() if isinstance(self.pixels, ImageFile) else self.pixels
 
     @property
     def gray(self) -> np.ndarray:
@@ -61,7 +85,7 @@ class View:
         sx, sy = w / c.width, h / c.height
         img = cv2.resize(self.image, (w, h), interpolation=cv2.INTER_AREA)
         cam = Camera(w, h, c.fx * sx, c.fy * sy, c.cx * sx, c.cy * sy, c.R, c.t)
-        return replace(self, image=img, camera=cam), sx, sy
+        return replace(self, pixels=img, camera=cam), sx, sy
 
     def without_pose(self) -> View:
         """The same image and intrinsics with the pose removed (identity, `posed` False):
@@ -143,21 +167,16 @@ def focal_prior(path: Path, width: int, height: int) -> float:
 
 
 def load_views(source: Path | Source) -> list[View]:
-    """The calibrated, posed views of a render entry or a dataset (see the module docstring)."""
+    """The calibrated, posed views of a render entry or a dataset (see the module docstring);
+    each image is decoded when first needed."""
     src = source if isinstance(source, Source) else Source.of(source)
     model = read_model(src.model)
     if src.dataset:
         check_images([n for n, _ in model], image_files(src.images), src.model, src.images)
-    views = []
-    for i, (name, cam) in enumerate(model):
-        img = read_image(src.images / name)
-        if img.shape[:2] != (cam.height, cam.width):
-            raise BenchError(
-                f"{src.images / name} is {img.shape[1]}x{img.shape[0]}, its camera says "
-                f"{cam.width}x{cam.height}"
-            )
-        views.append(View(i, name, img, cam))
-    return views
+    return [
+        View(i, name, ImageFile(src.images / name, cam.width, cam.height), cam)
+        for i, (name, cam) in enumerate(model)
+    ]
 
 
 def image_files(folder: Path) -> list[str]:

@@ -112,7 +112,7 @@ def _write_point_errors(model, scene: LoadedScene, out: Path) -> None:
     ids = list(model.points3D)
     if not ids:
         return
-    errors = point_error(model_points(model), scene.truth.surface)
+    errors = point_error(model_points(model), scene.truth.surface)  # kept from the scores
     with atomic_path(out / "point_errors.csv") as tmp:
         np.savetxt(
             tmp,

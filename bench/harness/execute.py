@@ -83,7 +83,11 @@ class Cluster:
 
 def _front_ends(entry: Path, cfg: RunConfig, renders: Path, grants) -> dict[str, FrontEnd]:
     """The front end of an entry under each geometry granted, computed or read from its cache."""
-    return {g: front_end(entry, cfg.detector, cfg.signals, renders / "frontend", g) for g in grants}
+    views = load_views(entry)  # decoded once, when a front end is computed
+    return {
+        g: front_end(entry, cfg.detector, cfg.signals, renders / "frontend", g, views)
+        for g in grants
+    }
 
 
 def _scene(entry: Path, cfg: RunConfig, renders: Path, grants) -> LoadedScene:
