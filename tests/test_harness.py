@@ -358,7 +358,7 @@ def test_rows_computed_by_other_code_are_computed_again(
 ):
     """The key that decides whether a row is finished covers the stages' code."""
     shutil.copytree(quick_results, tmp_path / "r")
-    monkeypatch.setattr(prediction, "prediction_code_hash", lambda: "another-code")
+    monkeypatch.setattr(prediction, "shared_code_hash", lambda: "another-code")
     calls = []
     spy(monkeypatch, calls)
     bench_run(dataclasses.replace(SMALL, scenes=("table",)), tmp_path / "r", renders_dir)
