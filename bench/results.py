@@ -232,7 +232,8 @@ def check_results_dir(results: Path, settings: dict, overwrite: bool) -> None:
                 f"{stored_path} is unreadable ({type(e).__name__}); use --overwrite to start again"
             ) from e
         now = _flatten(settings)
-        differ = [k for k in sorted(set(stored) | set(now)) if stored.get(k) != now.get(k)]
+        # a stored setting this code no longer has (one that moved to its method) decides nothing
+        differ = [k for k in sorted(now) if stored.get(k) != now[k]]
         if differ:
             shown = "; ".join(
                 f"{k}: {stored.get(k)!r} there, {now.get(k)!r} now" for k in differ[:4]

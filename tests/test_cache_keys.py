@@ -220,6 +220,10 @@ def test_a_methods_own_setting_does_not_bind_the_folder(tmp_path):
     ratio = dataclasses.replace(ratio, backend=dataclasses.replace(ratio.backend, ratio=0.7))
     with pytest.raises(BenchError, match="backend.ratio"):
         check_results_dir(tmp_path, ratio.as_dict(), False)
+    old = RunConfig().shared()  # a folder of the code before, loop_rounds a shared setting
+    old["policy"] |= {"loop_rounds": 3, "epipolar_weight": 0.28, "learned_weights": ""}
+    (tmp_path / "config.json").write_text(json.dumps({"settings": old}))
+    check_results_dir(tmp_path, RunConfig().as_dict(), False)
 
 
 def test_a_methods_own_setting_is_set_with_its_name():
