@@ -63,6 +63,7 @@ class _Module:
     effects: list[ast.stmt] = field(default_factory=list)
     aliases: dict[str, tuple[str, str | None]] = field(default_factory=dict)
     """Local name -> (module, attribute) of an import (attribute None: the module itself)."""
+    package: str = ""
 
 
 def _is_module(name: str) -> bool:
@@ -72,6 +73,27 @@ def _is_module(name: str) -> bool:
         return importlib.util.find_spec(name) is not None
     except (ImportError, ValueError):
         return False
+
+
+def _imports(stmt: ast.Import | ast.ImportFrom, package: str) -> dict[str, tuple[str, str | None]]:
+    """The names an import binds -> (module, attribute) (attribute None: the module)."""
+    if isinstance(stmt, ast.Import):
+        return {
+            a.asname or a.name.partition(".")[0]: (
+                a.name if a.asname else a.name.partition(".")[0],
+                None,
+            )
+            for a in stmt.names
+        }
+    base = stmt.module or ""
+    if stmt.level:
+        parts = package.split(".")
+        base = ".".join(parts[: len(parts) - stmt.level + 1] + ([base] if base else []))
+    out = {}
+    for a in stmt.names:
+        sub = f"{base}.{a.name}"
+        out[a.asname or a.name] = (sub, None) if _is_module(sub) else (base, a.name)
+    return out
 
 
 def _bound(stmt: ast.stmt) -> list[str]:
@@ -114,24 +136,10 @@ def _parse(modname: str) -> _Module | None:
         return _PARSED[key]
     tree = strip_docstrings(ast.parse(source))
     m = _Module(modname)
-    package = modname if hasattr(module, "__path__") else modname.rpartition(".")[0]
+    m.package = modname if hasattr(module, "__path__") else modname.rpartition(".")[0]
     for stmt in tree.body:
-        if isinstance(stmt, ast.Import):
-            for a in stmt.names:
-                if a.asname:
-                    m.aliases[a.asname] = (a.name, None)
-                else:
-                    top = a.name.partition(".")[0]
-                    m.aliases[top] = (top, None)
-        elif isinstance(stmt, ast.ImportFrom):
-            base = stmt.module or ""
-            if stmt.level:
-                parts = package.split(".")
-                base = ".".join(parts[: len(parts) - stmt.level + 1] + ([base] if base else []))
-            for a in stmt.names:
-                sub = f"{base}.{a.name}"
-                target = (sub, None) if _is_module(sub) else (base, a.name)
-                m.aliases[a.asname or a.name] = target
+        if isinstance(stmt, ast.Import | ast.ImportFrom):
+            m.aliases |= _imports(stmt, m.package)
         else:
             names = _bound(stmt)
             for n in names:
@@ -226,6 +234,13 @@ class _Walk:
             for s in stmts:
                 for chain in _chains(s):
                     stack += self.resolve(modname, chain)
+                for node in ast.walk(s):  # an import inside a function: what it imports
+                    if isinstance(node, ast.Import):
+                        for a in node.names:
+                            stack += self.resolve(a.name, [])
+                    elif isinstance(node, ast.ImportFrom):
+                        for mod, attr in _imports(node, m.package).values():
+                            stack += self.resolve(mod, [attr] if attr else [])
 
 
 def target_of(obj) -> Target:

@@ -9,12 +9,13 @@ file is one `BenchError` naming the file and the first bad row, and nothing is p
 from it. Recovery: `bench run --set-aside-damaged` moves the damaged rows (as they were)
 to `runs.damaged.csv` beside it and computes them again.
 
-A row is finished when its `prediction_hash` (the settings and the source of every stage
-up to the reconstruction) and its `evaluation_hash` (the source of the scoring) are the
+A row is finished when its `prediction_hash` (the shared settings and code, and its
+method's own settings and code) and its `evaluation_hash` (the code of the scoring) are the
 current ones: a row whose prediction is stale is computed again; a row whose evaluation
-alone is stale is scored again from the unit's stored prediction. A results folder is bound to its settings
+alone is stale is scored again from the unit's stored prediction. A results folder is bound to its shared settings
 (`config.json`); its grid may grow (new scenes, seeds, policies, budgets, tasks run only
-the new rows), and only a change of settings needs `--overwrite`.
+the new rows), a method's own settings may change (its rows alone run again), and only a
+change of shared settings needs `--overwrite`.
 """
 
 from __future__ import annotations

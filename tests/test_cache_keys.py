@@ -30,6 +30,10 @@ def helper(x):
 def colmap_io(path):
     """Not reached by the stage."""
     return open(path).read()
+
+
+def lazy(x):
+    return x * 3
 '''
 
 STAGE = '''
@@ -41,7 +45,13 @@ from ckpkg.shared import helper
 
 def run(x):
     """Runs."""
-    return helper(x) + shared.SCALE + method_a(x)
+    return helper(x) + shared.SCALE + method_a(x) + late(x)
+
+
+def late(x):
+    from ckpkg.shared import lazy
+
+    return lazy(x)
 
 
 def method_a(x):
@@ -107,6 +117,7 @@ def test_docstrings_comments_and_unreached_code_change_no_hash(pkg, module, old,
         ("shared", "return SCALE * x", "return SCALE * x + 1"),  # a function the stage calls
         ("shared", "SCALE = 2", "SCALE = 3"),  # a constant it reads, through the module
         ("stage", "return x + 1", "return x + 10"),  # a function of its own module
+        ("shared", "return x * 3", "return x * 4"),  # imported inside a function
     ],
 )
 def test_an_edit_in_a_stage_closure_changes_its_hash(pkg, module, old, new):
