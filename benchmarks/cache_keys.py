@@ -8,14 +8,16 @@ a policy added (`texture-low`, in the grid from then on); `adaptive-loop`'s loop
 changed (`--set adaptive-loop.loop_rounds=1`; on a source tree without per-method
 settings `--set policy.loop_rounds=1 --overwrite`, which that code requires); a scene
 added (`table2`, the table generator under another name). Printed: per step the rows
-predicted again (P), scored again only (S), new (+) or reused (.), the renders made,
-and the seconds; a grid of rows x steps. `--source` runs another checkout (e.g. one made
+predicted again (P), scored again only (S), new (+) or reused (.), the scenes whose
+render key the change altered (what any later run re-renders), the renders made and the
+seconds; a grid of rows x steps. `--source` runs another checkout (e.g. one made
 with `git worktree add /tmp/old 105c362`) for the before/after comparison.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
 import subprocess
@@ -74,6 +76,25 @@ def run(src: Path, work: Path, extra: list[str], scenes: str, policies: str) -> 
     return time.perf_counter() - t
 
 
+KEYS = """
+import json, sys
+from bench.render.config import QUICK_RENDER
+from bench.render.entry import render_key
+from bench.scenes.spec import load_spec, scene_names
+print(json.dumps({s: render_key(load_spec(s), 0, QUICK_RENDER, "scalar_rgb") for s in scene_names()}))
+"""
+
+
+def render_keys(src: Path) -> dict[str, str]:
+    """Each scene's render key (seed 0, --quick) under the source tree `src`."""
+    env = os.environ | {"PYTHONPATH": str(src)}
+    cmd = [sys.executable, "-c", KEYS]
+    done = subprocess.run(cmd, cwd=src, env=env, capture_output=True, text=True)
+    if done.returncode:
+        sys.exit(f"render keys failed:\n{done.stderr[-3000:]}")
+    return json.loads(done.stdout)
+
+
 def entries(work: Path) -> set[str]:
     return {p.name for p in (work / "renders").iterdir() if p.is_dir() and "-s" in p.name}
 
@@ -100,6 +121,11 @@ def main() -> None:
                     src / "bench" / "frontend" / "signals.py",
                     "from __future__ import annotations",
                     "from __future__ import annotations  # a comment",
+                ),
+                edit(
+                    src / "bench" / "camera.py",
+                    "Pinhole cameras in the OpenCV/COLMAP convention",
+                    "Pinhole cameras, in the OpenCV and COLMAP convention",
                 ),
             ),
             "table,facade",
@@ -150,8 +176,10 @@ def main() -> None:
     ]
     grid, summary, previous = {}, [], None
     for name, change, scenes, policies, extra in steps:
+        keys = render_keys(src)
         if change:
             change()
+        rekeyed = [k for k, v in render_keys(src).items() if keys.get(k) != v]
         before = entries(work) if (work / "renders").is_dir() else set()
         seconds = run(src, work, extra, scenes, policies)
         rows = pd.read_csv(work / "results" / "runs.csv", dtype=str)
@@ -172,7 +200,8 @@ def main() -> None:
         counts = {k: sum(v == k for v in status.values()) for k in "P+S."}
         summary.append(
             f"{name:13s} predicted again {counts['P']:2d}, new {counts['+']:2d}, scored again "
-            f"{counts['S']:2d}, reused {counts['.']:2d}; renders made: "
+            f"{counts['S']:2d}, reused {counts['.']:2d}; render keys changed: "
+            f"{', '.join(rekeyed) or 'none'}; renders made: "
             f"{', '.join(m.rsplit('-', 1)[0] for m in made) or 'none'}; {seconds:.0f} s"
         )
         previous = now
