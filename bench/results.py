@@ -9,12 +9,13 @@ file is one `BenchError` naming the file and the first bad row, and nothing is p
 from it. Recovery: `bench run --set-aside-damaged` moves the damaged rows (as they were)
 to `runs.damaged.csv` beside it and computes them again.
 
-A row is finished when its `prediction_hash` (the settings and the source of every stage
-up to the reconstruction) and its `evaluation_hash` (the source of the scoring) are the
+A row is finished when its `prediction_hash` (the shared settings and code, and its
+method's own settings and code) and its `evaluation_hash` (the code of the scoring) are the
 current ones: a row whose prediction is stale is computed again; a row whose evaluation
-alone is stale is scored again from the unit's stored prediction. A results folder is bound to its settings
+alone is stale is scored again from the unit's stored prediction. A results folder is bound to its shared settings
 (`config.json`); its grid may grow (new scenes, seeds, policies, budgets, tasks run only
-the new rows), and only a change of settings needs `--overwrite`.
+the new rows), a method's own settings may change (its rows alone run again), and only a
+change of shared settings needs `--overwrite`.
 """
 
 from __future__ import annotations
@@ -209,20 +210,31 @@ def _flatten(d: dict, prefix: str = "") -> dict:
     return out
 
 
+OWN_SETTINGS = "methods"
+"""The section of `config.json` holding each method's own settings: they decide that
+method's rows alone (its `prediction_hash`) and do not bind the folder."""
+
+
+def _shared(settings: dict) -> dict:
+    return {k: v for k, v in settings.items() if k != OWN_SETTINGS}
+
+
 def check_results_dir(results: Path, settings: dict, overwrite: bool) -> None:
-    """Refuse to compute into `results` under other row-deciding settings than the ones
-    its `config.json` holds, naming each that differs, unless `overwrite`. Writes nothing."""
-    settings = json.loads(json.dumps(settings))  # tuples as lists, as stored
+    """Refuse to compute into `results` under other shared settings than the ones its
+    `config.json` holds, naming each that differs, unless `overwrite` (a method's own
+    settings may change: its rows alone are computed again). Writes nothing."""
+    settings = _shared(json.loads(json.dumps(settings)))  # tuples as lists, as stored
     stored_path = results / "config.json"
     if stored_path.exists() and not overwrite:
         try:
-            stored = _flatten(json.loads(stored_path.read_text())["settings"])
+            stored = _flatten(_shared(json.loads(stored_path.read_text())["settings"]))
         except (ValueError, KeyError, TypeError) as e:
             raise BenchError(
                 f"{stored_path} is unreadable ({type(e).__name__}); use --overwrite to start again"
             ) from e
         now = _flatten(settings)
-        differ = [k for k in sorted(set(stored) | set(now)) if stored.get(k) != now.get(k)]
+        # a stored setting this code no longer has (one that moved to its method) decides nothing
+        differ = [k for k in sorted(now) if stored.get(k) != now[k]]
         if differ:
             shown = "; ".join(
                 f"{k}: {stored.get(k)!r} there, {now.get(k)!r} now" for k in differ[:4]
@@ -256,14 +268,21 @@ def models_replaced(results: Path, overwrite: bool) -> Iterator[dict]:
 
 
 def bind_results_dir(results: Path, settings: dict, vocab: Vocabulary, overwrite: bool) -> None:
-    """Bind `results` to these settings (`config.json`) as the first rows are computed, and
-    record the vocabulary of its rows (`vocabulary.json`: this run's, keeping the entries
+    """Bind `results` to these settings (`config.json`: the shared ones bind it; each
+    method's own, under `methods`, are the latest run's, earlier runs' kept for methods
+    it does not set) as the first rows are computed, and record the vocabulary of its rows (`vocabulary.json`: this run's, keeping the entries
     of earlier runs for names it does not declare); with `overwrite`, the rows and
     vocabulary of other settings go first (their models went aside, `models_replaced`)."""
     if overwrite:
         for name in ("runs.csv", DAMAGED, VOCABULARY_FILE):
             (results / name).unlink(missing_ok=True)
     settings = json.loads(json.dumps(settings))
+    try:
+        earlier = json.loads((results / "config.json").read_text())["settings"][OWN_SETTINGS]
+    except (OSError, ValueError, KeyError, TypeError):
+        earlier = {}
+    if OWN_SETTINGS in settings and not overwrite:
+        settings[OWN_SETTINGS] = earlier | settings[OWN_SETTINGS]
     write_text_atomic(results / "config.json", json.dumps({"settings": settings}, indent=1))
     if (results / VOCABULARY_FILE).is_file():
         vocab = vocab.merged(Vocabulary.load(results))

@@ -3,7 +3,9 @@ headline, the units of work, and the registries of methods and tasks.
 
 A method (a selection policy, a reference or a stock-COLMAP peer) is declared where it is
 implemented (`bench.frontend.policies.policy`, the feedback loop, the oracle, the peers),
-with its display label and its role; the display names, the baselines, the default grid
+with its display label, its role, the functions that implement it (`CODE`: its rows'
+code hash starts there, `bench.harness.predict`) and its own settings (`SETTINGS`: a
+dataclass, set as `--set <method>.<field>=value`); the display names, the baselines, the default grid
 and the budget-0 rule are derived from these declarations. A task is declared where its
 reconstruction and evaluation are (`bench.harness.tasks`). A results folder records the
 vocabulary its rows were computed under (`vocabulary.json`), and the report reads that
@@ -108,10 +110,15 @@ class Job(NamedTuple):
 
 METHODS: dict[str, Method] = {}
 TASKS: dict[str, Task] = {}
+CODE: dict[str, tuple] = {}
+"""The functions that implement each method: the roots of its rows' code hash."""
+SETTINGS: dict[str, type] = {}
+"""The dataclass of each method's own settings (a method without one has none)."""
 
 
-def declare_method(method: Method) -> Method:
-    """Register a method under a name no other method has."""
+def declare_method(method: Method, code: tuple = (), settings: type | None = None) -> Method:
+    """Register a method under a name no other method has, with the functions that
+    implement it and the dataclass of its own settings (if it has any)."""
     if method.role not in ROLES:
         raise BenchError(
             f"policy {method.name}: unknown role {method.role!r}; valid: {', '.join(ROLES)}"
@@ -119,7 +126,18 @@ def declare_method(method: Method) -> Method:
     if method.name in METHODS:
         raise BenchError(f"policy name {method.name!r} is taken; give the policy another name")
     METHODS[method.name] = method
+    if code:
+        implemented_by([method.name], *code)
+    if settings is not None:
+        SETTINGS[method.name] = settings
     return method
+
+
+def implemented_by(names, *functions) -> None:
+    """Record the functions that implement the declared methods `names` (module
+    docstring); a method declared before its functions are defined names them here."""
+    for name in names:
+        CODE[name] = CODE.get(name, ()) + functions
 
 
 def declare_task(task: Task) -> Task:

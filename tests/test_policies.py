@@ -15,7 +15,6 @@ from bench.frontend.geometry import SignalConfig, depth_priors
 from bench.frontend.policies import (
     POLICIES,
     SHIPPED_WEIGHTS,
-    PolicyConfig,
     PolicyInput,
     policy,
     select,
@@ -68,7 +67,7 @@ def test_feedback_loop_meets_the_budget_logs_rounds_and_is_deterministic(fe):
             cams, xy, [c.descriptors[s] for c, s in zip(fe.pools, sel)], BackendConfig()
         )[0]
 
-    cfg = PolicyConfig(loop_rounds=2)
+    cfg = feedback.LoopConfig(loop_rounds=2)
     sel, rounds = feedback.feedback_select(_inputs(fe), BUDGET, cfg, match)
     again, _ = feedback.feedback_select(_inputs(fe), BUDGET, cfg, match)
     assert all(np.array_equal(a, b) for a, b in zip(sel, again))

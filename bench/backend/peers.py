@@ -28,7 +28,7 @@ import pycolmap
 from bench.backend.matching import BackendConfig
 from bench.backend.reconstruction import Reconstruction, map_database, quiet_colmap, write_images
 from bench.camera import Camera
-from bench.vocabulary import Method, declare_method
+from bench.vocabulary import Method, declare_method, implemented_by
 
 PEERS = tuple(
     declare_method(m).name
@@ -145,3 +145,6 @@ def run_peer(
         return PeerRun(recs, keypoints, tentative, verified, {"detect": detect_s, "match": match_s})
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+implemented_by(PEERS, run_peer)

@@ -165,8 +165,33 @@ def apply_settings(config, assignments: list[str]):
             raise BenchError(
                 f"--set takes section.field=value, e.g. backend.ratio=0.7; got {text!r}"
             )
-        config = _assign(config, path.split("."), value, path)
+        config = _assign_own(config, path.split("."), value, path) or _assign(
+            config, path.split("."), value, path
+        )
     return config
+
+
+def _assign_own(config, parts: list[str], text: str, path: str):
+    """`config` (a `RunConfig`) with a method's own setting set (`method.field=value`),
+    or None if `path` names no method with settings of its own."""
+    from bench.vocabulary import SETTINGS
+
+    if not hasattr(config, "with_own"):
+        return None
+    if parts[0] == "policy" and len(parts) == 2:  # a setting that moved to its method
+        owner = [m for m, cls in SETTINGS.items() if parts[1] in config.own(m)]
+        if owner:
+            raise BenchError(
+                f"--set {path}: {parts[1]} is {owner[0]}'s own setting: "
+                f"--set {owner[0]}.{parts[1]}={text}"
+            )
+    if parts[0] not in SETTINGS or len(parts) != 2:
+        return None
+    own = _assign(config.policy_config(parts[0]), parts[1:], text, path)
+    try:
+        return config.with_own(parts[0], **{parts[1]: getattr(own, parts[1])})
+    except BenchError as e:
+        raise BenchError(f"--set {path}: {e}") from None
 
 
 def settings_help(cls: type, prefix: str = "") -> list[str]:
@@ -174,6 +199,8 @@ def settings_help(cls: type, prefix: str = "") -> list[str]:
     hints = typing.get_type_hints(cls)
     out = []
     for f in dataclasses.fields(cls):
+        if typing.get_origin(hints[f.name]) is dict:  # the methods' own: `methods_help`
+            continue
         inner = [
             a
             for a in (hints[f.name], *typing.get_args(hints[f.name]))

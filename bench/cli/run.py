@@ -46,12 +46,12 @@ DESCRIPTION = (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The grid's lists and the settings, then `_input_arguments` and `_folder_arguments`."""
-    from bench.frontend.policies import PolicyConfig, Weights
+    from bench.frontend.policies import PolicyConfig, Weights, own_fields
     from bench.harness.config import RunConfig
     from bench.harness.grid import default_policies
     from bench.harness.tasks import RUNNERS
     from bench.scenes.spec import scene_names
-    from bench.vocabulary import PROTOCOLS
+    from bench.vocabulary import PROTOCOLS, SETTINGS
 
     def list_arg(name: str, default: str | None, metavar: str, what: str) -> None:
         parser.add_argument(
@@ -96,7 +96,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="SECTION.FIELD=VALUE",
         help="any setting of the run, applied after the options above and recorded in "
         "config.json (repeatable; e.g. --set backend.ratio=0.7, --set policy.tiles=8,6, "
-        "--set signals.depth_prior=none); settings: " + ", ".join(settings_help(RunConfig)),
+        "--set signals.depth_prior=none); settings: "
+        + ", ".join(settings_help(RunConfig))
+        + "; each method's own (decide its rows alone): "
+        + ", ".join(f"{m}.{k}" for m, cls in SETTINGS.items() for k in own_fields(cls)),
     )
     _input_arguments(parser)
     _folder_arguments(parser)
@@ -229,6 +232,7 @@ def weights_arg(text: str):
 
 def run_config(args: argparse.Namespace):
     """The run's settings: the --quick preset, then the options, then each --set."""
+    from bench.frontend import plugins
     from bench.frontend.features import DetectorConfig
     from bench.frontend.policies import PolicyConfig
     from bench.harness.config import RunConfig
@@ -246,6 +250,7 @@ def run_config(args: argparse.Namespace):
             log(f"{', '.join(given)} ignored with --dataset: its images are not rendered")
         render = None
     modules = tuple(str(Path(m).resolve()) for m in args.policy_module)
+    plugins.load(modules)  # their policies' own settings may be --set
     run = RunConfig(
         render=render,
         detector=DetectorConfig(detector=args.detector),

@@ -37,9 +37,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from bench.backend.matching import tentative_matches
-from bench.evaluation.truth import SceneTruth
+from bench.evaluation.truth import SceneTruth, load_truth
 from bench.frontend.features import Candidates
-from bench.vocabulary import ORACLE, Method, declare_method
+from bench.vocabulary import ORACLE, Method, declare_method, implemented_by
 
 declare_method(Method(ORACLE, "Oracle (ground truth, reference)", "reference"))
 
@@ -143,3 +143,6 @@ def exact_track_count(track: list[np.ndarray], budget: int) -> int:
         bounds=Bounds(0, 1),
     )
     return int(round(-res.fun))
+
+
+implemented_by([ORACLE], matchable_tracks, oracle_select, load_truth)

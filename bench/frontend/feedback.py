@@ -27,11 +27,13 @@ the run's model folder (`loop.json`).
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from bench import BenchError
 from bench.frontend.policies import (
     ADAPTIVE_SIGNALS,
     PolicyConfig,
@@ -39,12 +41,29 @@ from bench.frontend.policies import (
     adaptive_score,
     capped_greedy,
     contract_violation,
+    settings_for,
     tile_of,
 )
-from bench.vocabulary import Method, declare_method
+from bench.vocabulary import Method, declare_method, implemented_by
+
+
+@dataclass(frozen=True)
+class LoopConfig(PolicyConfig):
+    """`adaptive-loop`'s settings."""
+
+    loop_rounds: int = 2
+    """How many times the selection is revised from its own matches."""
+
+    def validate(self) -> LoopConfig:
+        super().validate()
+        if self.loop_rounds < 0:
+            raise BenchError(f"loop_rounds must be >= 0, got {self.loop_rounds}")
+        return self
+
 
 NAME = declare_method(
-    Method("adaptive-loop", "Adaptive feedback loop", "contender", reads=ADAPTIVE_SIGNALS)
+    Method("adaptive-loop", "Adaptive feedback loop", "contender", reads=ADAPTIVE_SIGNALS),
+    settings=LoopConfig,
 ).name
 MIN_ANGLE_DEG = 1.5
 EXPLORE = 0.05
@@ -169,7 +188,9 @@ def revise(
 def feedback_select(
     inputs: list[PolicyInput], budget: int, cfg: PolicyConfig, match: Match
 ) -> tuple[list[np.ndarray], list[dict]]:
-    """The loop's final selection per view, and every round's diagnostics."""
+    """The loop's final selection per view, and every round's diagnostics (its own
+    settings from `cfg` if it is a `LoopConfig`, else their defaults)."""
+    cfg = settings_for(NAME, cfg)
     sel = [
         np.sort(capped_greedy(adaptive_score(i.signals, cfg.weights), i, budget, cfg))
         for i in inputs
@@ -202,3 +223,6 @@ def feedback_select(
         if broken:
             raise RuntimeError(f"{NAME} broke the contract rule '{broken}'")
     return sel, rounds
+
+
+implemented_by([NAME], feedback_select)

@@ -30,7 +30,7 @@ from bench import BenchError
 from bench.frontend.features import Candidates
 from bench.frontend.signals import SIGNALS, Signals
 from bench.frontend.views import View
-from bench.vocabulary import METHODS, Method, declare_method
+from bench.vocabulary import METHODS, SETTINGS, Method, declare_method
 
 
 @dataclass(frozen=True)
@@ -62,7 +62,8 @@ class Weights:
 
 @dataclass(frozen=True)
 class PolicyConfig:
-    """Settings of the selection policies."""
+    """Settings shared by the selection policies; a policy's own settings are a subclass
+    of it, declared with the policy (`policy(..., config=...)`) and given to it alone."""
 
     weights: Weights = Weights()
     """Adaptive score weights for texture, repeatability, distinctiveness, parallax and
@@ -72,14 +73,6 @@ class PolicyConfig:
     cap_factor: float = 2.0
     """Adaptive soft cap: a tile may hold at most cap_factor x B / (non-empty tiles)
     selections, until the cap must grow to fill the budget."""
-    epipolar_weight: float = 0.28
-    """Weight of the epipolar signal in the `cross-view` score (the paper's largest weight,
-    fixed before any run)."""
-    loop_rounds: int = 2
-    """`adaptive-loop`: how many times the selection is revised from its own matches."""
-    learned_weights: str = ""
-    """`learned`: the weights file written by `bench train-weights` (empty: the weights
-    shipped with the package, bench/frontend/learned_weights.json)."""
     modules: tuple[str, ...] = ()
     """Python files whose policies are registered before selecting (`--policy-module`)."""
 
@@ -89,9 +82,25 @@ class PolicyConfig:
             raise BenchError(f"weights must be five numbers (t, r, q, p, a), got {values!r}")
         if min(self.tiles) <= 0 or self.cap_factor <= 0:
             raise BenchError("tiles and cap_factor must be positive")
-        if self.loop_rounds < 0:
-            raise BenchError(f"loop_rounds must be >= 0, got {self.loop_rounds}")
         return self
+
+
+def own_fields(cls: type) -> list[str]:
+    """The fields of a policy's settings class that are its own (not `PolicyConfig`'s)."""
+    shared = {f.name for f in fields(PolicyConfig)}
+    return [f.name for f in fields(cls) if f.name not in shared]
+
+
+def settings_for(name: str, cfg: PolicyConfig, own: dict | None = None) -> PolicyConfig:
+    """The settings a method is given: the shared ones of `cfg` with its own (`own`, else
+    those `cfg` carries, else their defaults); `cfg` itself for a method without any."""
+    cls = SETTINGS.get(name)
+    if cls is None:
+        return cfg
+    shared = {f.name: getattr(cfg, f.name) for f in fields(PolicyConfig)}
+    if own is None:
+        own = {k: getattr(cfg, k) for k in own_fields(cls) if hasattr(cfg, k)}
+    return cls(**shared, **own)
 
 
 Policy = Callable[[PolicyInput, int, np.random.Generator, PolicyConfig], np.ndarray]
@@ -105,11 +114,13 @@ def policy(
     role: str = "contender",
     whole_pool: bool = False,
     reads: tuple[str, ...] = (),
+    config: type | None = None,
 ) -> Callable[[Policy], Policy]:
     """Register a policy under a name no other method has: its display label (default:
     the name), its role (`bench.vocabulary.ROLES`), whether it takes the whole pool
-    (then it runs once per scene and seed, as budget 0) and the signals it reads (for its
-    reported cost, and so that `bench select` computes the costly ones)."""
+    (then it runs once per scene and seed, as budget 0), the signals it reads (for its
+    reported cost, and so that `bench select` computes the costly ones) and the class of
+    its own settings (a `PolicyConfig` subclass; `--set <name>.<field>=value`)."""
     unknown = [s for s in reads if s not in SIGNALS]
     if unknown:
         raise BenchError(
@@ -117,7 +128,8 @@ def policy(
         )
 
     def register(fn: Policy) -> Policy:
-        declare_method(Method(name, label or name, role, whole_pool, tuple(reads)))
+        method = Method(name, label or name, role, whole_pool, tuple(reads))
+        declare_method(method, code=(fn,), settings=config)
         POLICIES[name] = fn
         return fn
 
@@ -202,6 +214,7 @@ def select(
     if budget <= 0 and not whole:
         raise BenchError(f"budget must be positive, got {budget}")
     fn = POLICIES[name]
+    cfg = settings_for(name, cfg)
     try:
         out = fn(inp, budget, rng, cfg)
     except BenchError:
@@ -321,7 +334,21 @@ def adaptive_fast_policy(inp, budget, rng, cfg):
     return capped_greedy(adaptive_score(inp.signals, cfg.weights), inp, budget, cfg)
 
 
-@policy("cross-view", "Adaptive + epipolar signal", reads=(*ADAPTIVE_SIGNALS, "epipolar"))
+@dataclass(frozen=True)
+class CrossViewConfig(PolicyConfig):
+    """`cross-view`'s settings."""
+
+    epipolar_weight: float = 0.28
+    """Weight of the epipolar signal in the `cross-view` score (the paper's largest weight,
+    fixed before any run)."""
+
+
+@policy(
+    "cross-view",
+    "Adaptive + epipolar signal",
+    reads=(*ADAPTIVE_SIGNALS, "epipolar"),
+    config=CrossViewConfig,
+)
 def cross_view_policy(inp, budget, rng, cfg):
     """`adaptive-fast` plus epipolar_weight x the epipolar signal: candidates with a
     ratio-passing match on their epipolar lines in other views first (beyond the paper)."""
@@ -354,7 +381,20 @@ def learned_weights(path: str) -> dict:
         raise BenchError(f"cannot read the learned weights {path}: {e}") from e
 
 
-@policy("learned", "Learned weights", reads=ADAPTIVE_SIGNALS)
+@dataclass(frozen=True)
+class LearnedConfig(PolicyConfig):
+    """`learned`'s settings."""
+
+    learned_weights: str = ""
+    """`learned`: the weights file written by `bench train-weights` (empty: the weights
+    shipped with the package, bench/frontend/learned_weights.json)."""
+
+    def inputs(self) -> list[Path]:
+        """The files whose content decides the policy's selections."""
+        return [weights_file(self.learned_weights)]
+
+
+@policy("learned", "Learned weights", reads=ADAPTIVE_SIGNALS, config=LearnedConfig)
 def learned_policy(inp, budget, rng, cfg):
     """The logit of a logistic model of "became an accurate point" over the five signals
     (weights fitted by `bench train-weights` on training seeds), under the adaptive tile

@@ -7,7 +7,8 @@ on a downscaled copy (so every pixel threshold of the signals means what it mean
 rendered views); its candidates are returned in full-resolution pixels.
 
 Cached (npz beside the render cache) by the render entry, the geometry granted, the
-detector and signal settings and the code that computes them; the seconds measured when it was computed are stored with
+detector and signal settings and the code that computes them (`front_end` and what it
+reaches, `bench.codehash`); the seconds measured when it was computed are stored with
 it, so reported front-end times do not depend on whether the cache was warm.
 """
 
@@ -15,15 +16,17 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass, fields
+from functools import cache
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from bench import BenchError
+from bench.codehash import code_hash
 from bench.console import log
-from bench.files import atomic_path, content_key, source_hash
-from bench.frontend import features, geometry, signals
+from bench.files import atomic_path, content_key
+from bench.frontend import features
 from bench.frontend.features import Candidates, DetectorConfig
 from bench.frontend.geometry import IMAGES, RIG
 from bench.frontend.signals import SIGNALS, TIMED, SignalConfig, Signals, compute_signals
@@ -42,6 +45,12 @@ class FrontEnd:
     seconds: dict[str, float]
     """Measured seconds over all views: 'detect', 'geometry' and one per signal."""
     cached: bool
+
+
+@cache
+def frontend_code_hash() -> str:
+    """Hash of the front end's code: `front_end` and what it reaches."""
+    return code_hash([front_end])
 
 
 def front_end(
@@ -69,7 +78,7 @@ def front_end(
             "detector": asdict(det),
             "signals": asdict(sig),
             "opencv": cv2.__version__,
-            "code": source_hash(features, geometry, signals),
+            "code": frontend_code_hash(),
         }
     )
     path = Path(cache_dir) / f"{entry.name}-{det.detector}-{grant}-{key}.npz"

@@ -20,24 +20,29 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-from bench.evaluation import groundtruth, metrics, poses, truth
+from bench.codehash import code_hash
 from bench.evaluation.metrics import coverage_pct, match_metrics, model_points, point_error
-from bench.files import atomic_path, source_hash
+from bench.evaluation.truth import load_truth
+from bench.files import atomic_path
 from bench.frontend.colmap_model import read_model
 from bench.frontend.signals import seconds_of
 from bench.frontend.views import Source, source_key
-from bench.harness import tasks
 from bench.harness.config import RunConfig
 from bench.harness.predict import LoadedScene, prediction_hash, read_record, stored_pairs
 from bench.harness.tasks import RUNNERS
 from bench.results import PREDICTION, Workspace
-from bench.vocabulary import HEADLINE, METHODS, Job, Unit
+from bench.vocabulary import CODE, HEADLINE, METHODS, Job, Unit
+
+SCORING_CODE = (sys.modules[__name__], load_truth)
+"""Where the scoring's code starts: this module and the loading of the ground truth."""
 
 
 @cache
 def evaluation_hash() -> str:
-    """The `evaluation_hash` of every row: the source of the scoring."""
-    return source_hash(groundtruth, truth, metrics, poses, tasks, sys.modules[__name__])
+    """The `evaluation_hash` of every row: the code `SCORING_CODE` reaches (the
+    prediction's hash, a column of its own, and the methods' code cut out)."""
+    methods = [f for code in CODE.values() for f in code]
+    return code_hash(SCORING_CODE, cut=(prediction_hash, *methods))
 
 
 def evaluate(

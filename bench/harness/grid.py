@@ -110,7 +110,9 @@ class BenchConfig:
         plugins.load(self.run.policy.modules)
         check_policies(self.policies)
         if "learned" in self.policies and not self.datasets:
-            trained = set(learned_weights(self.run.policy.learned_weights)["seeds"])
+            trained = set(
+                learned_weights(self.run.policy_config("learned").learned_weights)["seeds"]
+            )
             shared = sorted(trained & set(self.seeds))
             if shared:
                 raise BenchError(

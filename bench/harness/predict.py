@@ -26,33 +26,21 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.backend import matching, peers, reconstruction
 from bench.backend.matching import PairMatches, match_and_verify, matcher
 from bench.backend.peers import run_peer
-from bench.evaluation import groundtruth, oracle, truth
+from bench.codehash import code_hash
 from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.evaluation.truth import SceneTruth
-from bench.files import atomic_path, content_key, source_hash, temp_dir_beside, write_text_atomic
-from bench.frontend import (
-    features,
-    feedback,
-    geometry,
-    plugins,
-    policies,
-    selection,
-    signals,
-    stage,
-    views,
-)
-from bench.frontend.policies import PolicyFailed, PolicyInput, weights_file
+from bench.files import atomic_path, content_key, temp_dir_beside, write_text_atomic
+from bench.frontend import plugins
+from bench.frontend.policies import PolicyFailed, PolicyInput
 from bench.frontend.selection import select_views
-from bench.frontend.stage import FrontEnd
+from bench.frontend.stage import FrontEnd, front_end
 from bench.frontend.views import Source
-from bench.harness import config, tasks
 from bench.harness.config import RunConfig
 from bench.harness.tasks import RUNNERS, Matched
 from bench.results import PREDICTION, Workspace
-from bench.vocabulary import METHODS, ORACLE, Job, Unit
+from bench.vocabulary import CODE, METHODS, ORACLE, Job, Unit
 
 
 @dataclass(frozen=True)
@@ -65,41 +53,48 @@ class LoadedScene:
     truth: SceneTruth
 
 
+SHARED_CODE = (sys.modules[__name__], front_end)
+"""Where the code every method's rows share starts: this module (selection, matching,
+the tasks' reconstructions, the export) and the front end. Each method's own code starts
+at its functions (`bench.vocabulary.CODE`); the scoring (`bench.evaluation`) is the
+evaluation hash's."""
+SCORING = "bench.evaluation"
+
+
+def _method_roots(but: str | None = None) -> list:
+    """Every method's functions (but those of `but`)."""
+    own = CODE.get(but, ())
+    return [f for code in CODE.values() for f in code if f not in own]
+
+
 @cache
-def prediction_code_hash() -> str:
-    """Hash of the source of every stage from the render to the exported models."""
-    return source_hash(
-        views,
-        features,
-        geometry,
-        signals,
-        policies,
-        feedback,
-        plugins,
-        selection,
-        stage,
-        matching,
-        reconstruction,
-        peers,
-        groundtruth,
-        truth,
-        oracle,
-        tasks,
-        config,
-        sys.modules[__name__],
-    )
+def shared_code_hash() -> str:
+    """Hash of the code every method's rows share (`SHARED_CODE`): the methods' own code
+    and the scoring are cut out."""
+    return code_hash(SHARED_CODE, cut=(SCORING, *_method_roots()))
+
+
+@cache
+def method_code_hash(method: str) -> str:
+    """Hash of a method's own code: its functions and what they reach, other methods'
+    functions cut out ('' for a method that names no functions)."""
+    code = CODE.get(method, ())
+    return code_hash(code, cut=_method_roots(but=method)) if code else ""
 
 
 def prediction_hash(cfg: RunConfig, policy: str) -> str:
-    """The `prediction_hash` of a policy's rows: the settings, the code and the learned
-    weights, and for a policy from a module (`--policy-module`, an entry point) its
-    module's content as well."""
+    """The `prediction_hash` of a policy's rows: the shared settings and code, the
+    policy's own settings, code and input files (the learned weights), and for a policy
+    from a module (`--policy-module`, an entry point) its module's content as well."""
     plugins.load(cfg.policy.modules)
+    own = cfg.policy_config(policy)
     base = content_key(
         {
-            "settings": cfg.as_dict(),
-            "code": prediction_code_hash(),
-            "inputs": plugins.files_hash([weights_file(cfg.policy.learned_weights)]),
+            "settings": cfg.shared(),
+            "own": cfg.own(policy),
+            "code": shared_code_hash(),
+            "method": method_code_hash(policy),
+            "inputs": plugins.files_hash(own.inputs()) if hasattr(own, "inputs") else "",
         }
     )
     origin = plugins.ORIGIN.get(policy)
@@ -118,7 +113,9 @@ def select_features(
     else:
         inputs = [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
         match = matcher([v.camera for v in fe.views], fe.pools, cfg.backend)
-        sel, rounds = select_views(unit.policy, inputs, unit.budget, unit.seed, cfg.policy, match)
+        sel, rounds = select_views(
+            unit.policy, inputs, unit.budget, unit.seed, cfg.policy_config(unit.policy), match
+        )
     return sel, time.perf_counter() - t, rounds
 
 

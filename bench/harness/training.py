@@ -23,6 +23,7 @@ from scipy.optimize import minimize
 from bench import BenchError
 from bench.backend.matching import match_and_verify
 from bench.backend.reconstruction import triangulate
+from bench.codehash import code_hash
 from bench.console import log, progress
 from bench.evaluation.metrics import point_error
 from bench.evaluation.truth import load_truth
@@ -31,7 +32,6 @@ from bench.frontend.policies import ADAPTIVE_SIGNALS, Weights
 from bench.frontend.stage import front_end
 from bench.frontend.views import Source
 from bench.harness.config import RunConfig
-from bench.harness.predict import prediction_code_hash
 from bench.render.entry import render_scene
 
 LABEL_TAU = 0.10
@@ -108,7 +108,7 @@ def train_weights(
         "scenes": list(scenes),
         "samples": int(len(y)),
         "positives": int(y.sum()),
-        "code": prediction_code_hash(),
+        "code": code_hash([labelled_candidates, fit_logistic]),
         "settings": cfg.as_dict(),
         "seconds": round(time.perf_counter() - t, 1),
     }

@@ -6,30 +6,43 @@ from __future__ import annotations
 
 import json
 import time
+from functools import cache
 from importlib.metadata import version
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from bench import BenchError, camera, files
+from bench import BenchError, files
 from bench.camera import write_colmap_rig
+from bench.codehash import code_hash
 from bench.console import log
-from bench.render import mitsuba
 from bench.render.config import RenderConfig
 from bench.render.mitsuba import AOVS, GT_LAYERS, MITSUBA_FROM_OPENCV, render_view, srgb8
 from bench.render.variant import resolve_variant
-from bench.scenes import generators, shapes, textures
+from bench.scenes import generators  # noqa: F401 (registers the scenes' generators)
 from bench.scenes import spec as scene_spec
 from bench.scenes.spec import SceneSpec, build_scene, load_spec
 
+RENDER_CODE = (build_scene, render_view, srgb8, write_colmap_rig)
+"""Where the code that decides a render entry's content starts (with the scene's own
+generator); this module's cache plumbing is not in it, so editing it re-renders nothing."""
+
+
+@cache
+def render_code_hash(scene: str) -> str:
+    """Hash of the code that renders `scene`: `RENDER_CODE`, the scene's generator and
+    what they reach; the other scenes' generators cut out (a new scene renders itself
+    alone), and so is what no renderer reaches (COLMAP I/O beside the camera model)."""
+    own = scene_spec.generator_of(scene)
+    others = [g for g in scene_spec.generator_functions() if g is not own]
+    return code_hash([*RENDER_CODE, own], cut=others)
+
 
 def render_key(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -> str:
-    """Hash of everything that changes pixels: scene, seed, rig, settings, code, renderer.
-
-    The code is that of the scene description and of `bench.render.mitsuba`; this module's
-    cache plumbing is not hashed, so editing it re-renders nothing."""
-    code = files.source_hash(scene_spec, generators, shapes, textures, camera, mitsuba)
+    """Hash of everything that changes pixels: scene, seed, rig, settings, code
+    (`render_code_hash`), renderer."""
+    code = render_code_hash(spec.name)
     return files.content_key(
         {
             "scene": spec.name,

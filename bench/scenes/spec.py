@@ -88,6 +88,16 @@ def generator(name: str) -> Callable[[Generator], Generator]:
     return register
 
 
+def generator_of(name: str) -> Generator:
+    """The builder registered for scene type `name`."""
+    return _GENERATORS[name]
+
+
+def generator_functions() -> list[Generator]:
+    """The builders of every scene type registered."""
+    return list(_GENERATORS.values())
+
+
 def scene_names() -> list[str]:
     return sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
 
