@@ -126,8 +126,8 @@ def declare_method(method: Method, code: tuple = (), settings: type | None = Non
     if method.name in METHODS:
         raise BenchError(f"policy name {method.name!r} is taken; give the policy another name")
     METHODS[method.name] = method
-    if code:
-        implemented_by([method.name], *code)
+    CODE[method.name] = tuple(code)  # a name declared anew starts from its own code only
+    SETTINGS.pop(method.name, None)
     if settings is not None:
         SETTINGS[method.name] = settings
     return method

@@ -200,7 +200,7 @@ def test_a_new_policy_or_a_methods_own_setting_changes_that_methods_rows_alone(t
     plugins.load_module(str(module))
     try:
         predict.shared_code_hash.cache_clear()
-        predict.method_code_hash.cache_clear()
+        predict._own_code_hash.cache_clear()
         assert {m: predict.prediction_hash(cfg, m) for m in names} == before
     finally:  # the registry as it was, for the other tests
         for registry in (METHODS, POLICIES, CODE, plugins.ORIGIN):

@@ -74,12 +74,18 @@ def shared_code_hash() -> str:
     return code_hash(SHARED_CODE, cut=(SCORING, *_method_roots()))
 
 
-@cache
 def method_code_hash(method: str) -> str:
     """Hash of a method's own code: its functions and what they reach, other methods'
     functions cut out ('' for a method that names no functions)."""
-    code = CODE.get(method, ())
-    return code_hash(code, cut=_method_roots(but=method)) if code else ""
+    code = tuple(CODE.get(method, ()))
+    return _own_code_hash(method, code) if code else ""
+
+
+@cache
+def _own_code_hash(method: str, code: tuple) -> str:
+    """Kept per function objects, not per name: a policy module loaded again from another
+    file registers the same name with other functions."""
+    return code_hash(code, cut=_method_roots(but=method))
 
 
 def prediction_hash(cfg: RunConfig, policy: str) -> str:
