@@ -194,6 +194,7 @@ TIMING = [
     "evaluate_ms",
     "wall_ms",
     "invocation",
+    "row_checksum",
 ]
 POLICIES = ["random", "texture", "grid", "adaptive", "oracle", "colmap-b", "all", "colmap"]
 ROWS = 2 * (6 * 2 * 2 + 2 * 2)  # scenes x (selections x tasks x protocols + peers x protocols)
@@ -473,7 +474,7 @@ def test_paired_bootstrap_on_known_differences():
 
 
 def test_cells_stock_colmap_cannot_map_are_marked_and_left_out_of_the_sfm_means():
-    from bench.harness.grid import mark_reference
+    from bench.results import mark_reference
     from bench.report.tables import headline_frame, paired_sfm, table1, table_scenes
 
     rows = []
@@ -484,7 +485,7 @@ def test_cells_stock_colmap_cannot_map_are_marked_and_left_out_of_the_sfm_means(
         for policy, maa in (("texture", 0.5), ("adaptive", 0.7), ("colmap-b", 0.4)):
             maa += 0.2 * seed
             rows.append(cell | dict(policy=policy, budget=64, registered_views=6, maa=maa))
-    table = mark_reference(pd.DataFrame(rows))
+    table = mark_reference(pd.DataFrame(rows), vocabulary.Vocabulary.current())
     maps = table.groupby("seed")["reference_maps"].agg(set).to_dict()
     assert maps == {0: {1}, 1: {0}, 2: {0}}
     vocab = vocabulary.Vocabulary.current()
