@@ -474,8 +474,8 @@ def test_paired_bootstrap_on_known_differences():
 
 
 def test_cells_stock_colmap_cannot_map_are_marked_and_left_out_of_the_sfm_means():
-    from bench.results import mark_reference
     from bench.report.tables import headline_frame, paired_sfm, table1, table_scenes
+    from bench.results import mark_reference
 
     rows = []
     # stock COLMAP maps seed 0; seed 1 it registers in part, seed 2 with wrong poses
