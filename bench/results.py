@@ -347,8 +347,12 @@ def append_runs(path: Path, rows: list[dict], vocab: Vocabulary) -> None:
     header = next(csv.reader([path.open().readline()])) if path.is_file() else []
     new = [k for k in dict.fromkeys(k for t in texts for k in t) if k not in header]
     if not new:
-        with path.open("a") as f:
-            f.write(_csv_lines([[t.get(k, "") for k in header] for t in texts]))
+        text = _csv_lines([[t.get(k, "") for k in header] for t in texts])
+        with path.open("rb+") as f:
+            f.seek(-1, os.SEEK_END)
+            ended = f.read(1) == b"\n"  # a write cut just before its last newline
+            f.seek(0, os.SEEK_END)
+            f.write((text if ended else "\n" + text).encode())
         return
     old = []
     if header:
