@@ -254,7 +254,6 @@ def read_runs(
     `DamagedRuns` error. `keep_altered` (for `bench run --reevaluate`, which scores them
     again): rows whose values were altered are kept, marked in an `altered` column."""
     path = runs_file(path)
-    vocab = vocab or Vocabulary.load(path.parent)
     header, good, bad = check_runs(path, vocab)
     if ROW_CHECKSUM not in header and not keep_altered:
         raise BenchError(
@@ -278,7 +277,8 @@ def read_runs(
     df = _frame(header, good + altered)
     if keep_altered:
         df["altered"] = [False] * len(good) + [True] * len(altered)
-    return mark_reference(df, vocab).sort_values(list(KEY), kind="stable", ignore_index=True)
+    df = mark_reference(df, vocab or Vocabulary.load(path.parent))
+    return df.sort_values(list(KEY), kind="stable", ignore_index=True)
 
 
 def _frame(header: list[str], good: list[tuple[int, str]]) -> pd.DataFrame:

@@ -937,7 +937,8 @@ def test_figure2_is_drawn_from_the_exported_model_alone(quick_results, renders_d
 
 def test_a_task_is_added_in_one_place(renders_dir, tmp_path, monkeypatch):
     """A new task is one registration in the task registry: the grid runs it, its rows
-    are checked against its required metrics and Table 1 shows its columns."""
+    are checked against its required metrics and their declared ranges, and Table 1 shows
+    its columns."""
     from bench.backend.reconstruction import known_pose_task
     from bench.harness import tasks
 
@@ -945,7 +946,13 @@ def test_a_task_is_added_in_one_place(renders_dir, tmp_path, monkeypatch):
         return {"observed_points": 0 if model is None else model.num_points3D()}
 
     runner = tasks.TaskRunner(
-        vocabulary.Task("count", "rig", needs=("observed_points",), columns=("observed_points",)),
+        vocabulary.Task(
+            "count",
+            "rig",
+            needs=("observed_points",),
+            columns=("observed_points",),
+            ranges={"observed_points": vocabulary.AT_LEAST_0},
+        ),
         reconstruct=lambda m, cfg, protocol: known_pose_task(
             m.image_dir, m.cams, m.names, m.xy, m.pairs, cfg, protocol
         ),
