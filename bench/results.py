@@ -344,7 +344,10 @@ def append_runs(path: Path, rows: list[dict], vocab: Vocabulary) -> None:
         if why:
             key = ", ".join(t.get(k, "?") for k in KEY)
             raise BenchError(f"a computed row ({key}) breaks the runs.csv contract: {why}")
-    header = next(csv.reader([path.open().readline()])) if path.is_file() else []
+    header = []
+    if path.is_file():
+        with path.open() as f:
+            header = next(csv.reader([f.readline()]))
     new = [k for k in dict.fromkeys(k for t in texts for k in t) if k not in header]
     if not new:
         text = _csv_lines([[t.get(k, "") for k in header] for t in texts])
