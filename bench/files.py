@@ -19,7 +19,7 @@ import shutil
 import tempfile
 import zlib
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 
 from bench import BenchError
@@ -59,15 +59,18 @@ def temp_dir_beside(target: Path) -> Path:
 @contextmanager
 def atomic_path(path: Path) -> Iterator[Path]:
     """A temporary name beside `path` (this process's own, with the same suffix) to write
-    to; renamed onto `path` when the block completes, removed whatever happens: readers
-    see the old file or the new one, never half of one."""
+    to; renamed onto `path` when the block completes, removed if it fails (a clean-up that
+    fails too, e.g. on a read-only file system, never hides the error that ended the
+    block): readers see the old file or the new one, never half of one."""
     path = Path(path)
     tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
     try:
         yield tmp
         tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    except BaseException:
+        with suppress(OSError):
+            tmp.unlink(missing_ok=True)
+        raise
 
 
 def write_text_atomic(path: Path, text: str) -> None:

@@ -3,11 +3,22 @@ with the contract checked on every read.
 
 Every row is validated: the file's structure (each line has as many fields as the header:
 a row cut in the middle is caught), the required columns, the key values (scene, policy,
-seed >= 0, budget >= 0, a known task and protocol), numbers where numbers belong, the
-status (`ok` rows have their task's headline metrics, `failed` rows a reason). A damaged
-file is one `BenchError` naming the file and the first bad row, and nothing is published
-from it. Recovery: `bench run --set-aside-damaged` moves the damaged rows (as they were)
-to `runs.damaged.csv` beside it and computes them again.
+seed >= 0, budget >= 0, a known task and protocol; no key twice), numbers where numbers
+belong, the status (`ok` rows have their task's headline metrics, `failed` rows a reason).
+Each row also carries its own integrity: every number lies in its declared range
+(`bench.vocabulary.RANGES`), and `row_checksum` (last) is a hash of the row's values as
+written, so a value edited by hand is caught (against accidents, not an attacker with the
+code). A damaged file is one `BenchError` naming the file and the first bad row (line and
+key), and nothing is published from it. Recovery: `bench run --reevaluate` scores rows
+whose values were altered again; `bench run --set-aside-damaged` moves the damaged rows (as
+they were) to `runs.damaged.csv` beside it and computes them again. A file written before
+rows carried checksums is refused in one line; `bench run --reevaluate` scores its rows
+again and records them with checksums.
+
+Rows are appended to `runs.csv` as their units finish (`append_runs`); the file is rewritten
+whole only to drop rows a run computes again (once, before its first rows) or to add a
+column its header lacks. Readers get the rows sorted by their key, with `reference_maps`
+derived from the stock-COLMAP rows (`mark_reference`).
 
 A row is finished when its `prediction_hash` (the shared settings and code, and its
 method's own settings and code) and its `evaluation_hash` (the code of the scoring) are the
@@ -15,7 +26,10 @@ current ones: a row whose prediction is stale is computed again; a row whose eva
 alone is stale is scored again from the unit's stored prediction. A results folder is bound to its shared settings
 (`config.json`); its grid may grow (new scenes, seeds, policies, budgets, tasks run only
 the new rows), a method's own settings may change (its rows alone run again), and only a
-change of shared settings needs `--overwrite`.
+change of shared settings needs `--overwrite`. One bench process at a time writes a folder
+(`holding`): a run, `bench plot` or `bench publish`; another is refused in one line while
+it does. `bench publish` refuses to replace a snapshot of other settings or another grid
+(`snapshot_differences`) unless `--replace`.
 """
 
 from __future__ import annotations
@@ -24,22 +38,36 @@ import csv
 import io
 import json
 import math
+import numbers
 import os
 import shutil
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
 
 from bench import BenchError
-from bench.files import write_text_atomic
-from bench.vocabulary import HEADLINE, KEY, PROTOCOLS, VOCABULARY_FILE, Job, Unit, Vocabulary
+from bench.files import content_key, exclusive, write_text_atomic
+from bench.vocabulary import (
+    HEADLINE,
+    KEY,
+    PROTOCOLS,
+    REFERENCE_MAPS,
+    REFERENCE_MIN_MAA,
+    REFERENCE_PEER,
+    VOCABULARY_FILE,
+    Job,
+    Unit,
+    Vocabulary,
+)
 
 HASHES = ("prediction_hash", "evaluation_hash")
+ROW_CHECKSUM = "row_checksum"
+"""The last column: a hash of the row's other values as written (`row_checksum`)."""
 TEXT_COLUMNS = ("scene", "policy", "task", "protocol", "render_key", *HASHES, "status")
-TEXT_COLUMNS += ("failure", "invocation", "ground_truth")
+TEXT_COLUMNS += ("failure", "invocation", "ground_truth", ROW_CHECKSUM)
 REQUIRED = (*KEY, "render_key", *HASHES, "status", "failure", "invocation", "wall_ms")
 DAMAGED = "runs.damaged.csv"
 PREDICTION = "prediction"
@@ -82,6 +110,30 @@ class DamagedRuns(BenchError):
         self.lines = lines
 
 
+def runs_file(path: Path) -> Path:
+    """`path` (a `runs.csv`), or one line saying that there is none."""
+    path = Path(path)
+    if not path.is_file():
+        raise BenchError(f"{path} not found: run `bench run` first (or pass --results DIR)")
+    return path
+
+
+def holding(folder: Path, reading: bool = False):
+    """Hold a results folder (or snapshot) for a run, `bench plot` or `bench publish`:
+    another bench process is refused in one line while one does. `reading`: a folder that
+    cannot be written is read without the lock (no run can write there either)."""
+    folder = Path(folder)
+    if reading and folder.is_dir() and not os.access(folder, os.W_OK):
+        return nullcontext()
+    return exclusive(folder / ".bench-run.lock", f"results folder {folder}")
+
+
+def row_checksum(fields: dict[str, str]) -> str:
+    """The hash of a row's values as written (its empty fields and checksum left out, so
+    that a column added to the header changes nothing)."""
+    return content_key({k: v for k, v in fields.items() if v and k != ROW_CHECKSUM})
+
+
 def _row_problem(row: dict[str, str], vocab: Vocabulary) -> str | None:
     """Why one row (raw strings) breaks the contract, or None."""
     for k in ("scene", "policy", "render_key", *HASHES, "invocation"):
@@ -116,11 +168,45 @@ def _row_problem(row: dict[str, str], vocab: Vocabulary) -> str | None:
     return None
 
 
+def _altered(row: dict[str, str], vocab: Vocabulary) -> str | None:
+    """Why the values of a well-formed row are not the ones written (a number outside its
+    declared range, or values that do not match the row's checksum), or None."""
+    for k, v in row.items():
+        if k in TEXT_COLUMNS or k in KEY or not v:
+            continue
+        bounds = vocab.range_of(k)
+        if bounds is None:
+            return f"{k} has no declared range (bench.vocabulary.RANGES)"
+        lo, hi = bounds
+        x = float(v)
+        if not math.isfinite(x) or x < lo or (hi is not None and x > hi):
+            return f"{k} {v} is outside its range [{lo:g}, {'inf' if hi is None else f'{hi:g}'}]"
+    if ROW_CHECKSUM not in row:
+        return f"no {ROW_CHECKSUM} (written before rows carried checksums)"
+    if row[ROW_CHECKSUM] != row_checksum(row):
+        return f"its values do not match its {ROW_CHECKSUM} (edited by hand?)"
+    return None
+
+
+def _key_of(row: dict[str, str]) -> tuple:
+    return tuple(int(row[k]) if k in ("seed", "budget") else row[k] for k in KEY)
+
+
+def _key_text(header: list[str], line: str) -> str:
+    """` (scene, seed s, policy, budget b, task, protocol)` of a row's line, if readable."""
+    try:
+        row = dict(zip(header, next(csv.reader([line]))))
+        return " ({}, seed {}, {}, budget {}, {}, {})".format(*(row[k] for k in KEY))
+    except (csv.Error, StopIteration, KeyError):
+        return ""
+
+
 def check_runs(
     path: Path, vocab: Vocabulary | None = None
-) -> tuple[list[str], list[tuple[int, str]], list[tuple[int, str, str]]]:
-    """(header, good rows as (line, text), damaged rows as (line, text, why)), the rows
-    checked against `vocab` (default: the vocabulary recorded beside the file)."""
+) -> tuple[list[str], list[tuple[int, str]], list[tuple[int, str, str, bool]]]:
+    """(header, good rows as (line, text), bad rows as (line, text, why, altered)), the
+    rows checked against `vocab` (default: the vocabulary recorded beside the file);
+    `altered`: a well-formed row whose values are not the ones written (`_altered`)."""
     try:
         text = Path(path).read_text()
     except UnicodeDecodeError:
@@ -138,39 +224,62 @@ def check_runs(
     if missing:
         raise DamagedRuns(f"{path} is damaged: its header lacks {', '.join(missing)}", [1])
     vocab = vocab or Vocabulary.load(Path(path).parent)
-    good, bad = [], []
+    good, bad, seen = [], [], {}
     for n, line in enumerate(lines[1:], start=2):
         try:
             fields = next(csv.reader([line], strict=True))
         except (csv.Error, StopIteration) as e:
-            bad.append((n, line, f"unparsable ({e})"))
+            bad.append((n, line, f"unparsable ({e})", False))
             continue
         if len(fields) != len(header):
-            bad.append((n, line, f"{len(fields)} fields, the header has {len(header)}"))
+            bad.append((n, line, f"{len(fields)} fields, the header has {len(header)}", False))
             continue
-        why = _row_problem(dict(zip(header, fields)), vocab)
-        (bad.append((n, line, why)) if why else good.append((n, line)))
+        row = dict(zip(header, fields))
+        why = _row_problem(row, vocab)
+        if why is None and _key_of(row) in seen:
+            why = f"its key is the key of line {seen[_key_of(row)]}"
+        if why:
+            bad.append((n, line, why, False))
+            continue
+        seen[_key_of(row)] = n
+        why = _altered(row, vocab)
+        (bad.append((n, line, why, True)) if why else good.append((n, line)))
     return header, good, bad
 
 
-def read_runs(path: Path, vocab: Vocabulary | None = None) -> pd.DataFrame:
+def read_runs(
+    path: Path, vocab: Vocabulary | None = None, keep_altered: bool = False
+) -> pd.DataFrame:
     """Every row of a valid `runs.csv`, checked against `vocab` (default: the vocabulary
-    recorded beside it); a damaged one is a `DamagedRuns` error."""
-    path = Path(path)
-    if not path.is_file():
-        raise BenchError(f"{path} not found: run `bench run` first (or pass --results DIR)")
+    recorded beside it), sorted by key, with `reference_maps`; a damaged one is a
+    `DamagedRuns` error. `keep_altered` (for `bench run --reevaluate`, which scores them
+    again): rows whose values were altered are kept, marked in an `altered` column."""
+    path = runs_file(path)
     header, good, bad = check_runs(path, vocab)
-    if bad:
-        n, _, why = bad[0]
-        raise DamagedRuns(
-            f"{path} is damaged: row at line {n}: {why} ({len(bad)} damaged row(s)); nothing "
-            "is published from it. `bench run --set-aside-damaged` moves them to "
-            f"{DAMAGED} and computes them again",
-            [b[0] for b in bad],
+    if ROW_CHECKSUM not in header and not keep_altered:
+        raise BenchError(
+            f"{path} was written before rows carried checksums; `bench run --reevaluate` "
+            "(with the grid it holds) scores its rows again and records them"
         )
-    if not good:
+    damaged = [b for b in bad if not (keep_altered and b[3])]
+    if damaged:
+        n, line, why, _ = damaged[0]
+        remedy = f"`bench run --set-aside-damaged` moves them to {DAMAGED} and computes them again"
+        if any(b[3] for b in damaged):
+            remedy = f"`bench run --reevaluate` scores altered rows again; {remedy}"
+        raise DamagedRuns(
+            f"{path} is damaged: row at line {n}{_key_text(header, line)}: {why} "
+            f"({len(damaged)} damaged row(s)); nothing is published from it. {remedy}",
+            [b[0] for b in damaged],
+        )
+    altered = [(n, line) for n, line, _, _ in bad]
+    if not good and not altered:
         raise BenchError(f"{path} holds no runs")
-    return _frame(header, good)
+    df = _frame(header, good + altered)
+    if keep_altered:
+        df["altered"] = [False] * len(good) + [True] * len(altered)
+    df = mark_reference(df, vocab or Vocabulary.load(path.parent))
+    return df.sort_values(list(KEY), kind="stable", ignore_index=True)
 
 
 def _frame(header: list[str], good: list[tuple[int, str]]) -> pd.DataFrame:
@@ -181,6 +290,99 @@ def _frame(header: list[str], good: list[tuple[int, str]]) -> pd.DataFrame:
         keep_default_na=False,
         na_values=[""],
     ).assign(failure=lambda d: d["failure"].fillna(""))
+
+
+def mark_reference(table: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
+    """`REFERENCE_MAPS` on every row: whether stock COLMAP with all features maps the row's
+    (scene, seed) in the task that admits peers (headline protocol; see the vocabulary)."""
+    if not {"views", "registered_views", "maa"} <= set(table):
+        return table
+    peers = [t for t, task in vocab.tasks.items() if task.peers]
+    ref = table[
+        (table["policy"] == REFERENCE_PEER)
+        & table["task"].isin(peers)
+        & (table["protocol"] == HEADLINE[1])
+    ]
+    maps = {
+        (r.scene, r.seed): int(r.registered_views >= r.views and r.maa >= REFERENCE_MIN_MAA)
+        for r in ref.itertuples()
+        if pd.notna(r.registered_views)
+    }
+    cells = zip(table["scene"], table["seed"])
+    return table.assign(**{REFERENCE_MAPS: [maps.get(c) for c in cells]})
+
+
+def _text(value) -> str:
+    """A value as `runs.csv` holds it: numbers exactly (repr), NaN and None empty, text on
+    one line."""
+    if value is None:
+        return ""
+    if isinstance(value, str):
+        return " ".join(value.splitlines())
+    if isinstance(value, numbers.Integral):
+        return str(int(value))
+    x = float(value)
+    return "" if math.isnan(x) else repr(x)
+
+
+def _csv_lines(rows: list[list[str]]) -> str:
+    out = io.StringIO()
+    csv.writer(out, lineterminator="\n").writerows(rows)
+    return out.getvalue()
+
+
+def append_runs(path: Path, rows: list[dict], vocab: Vocabulary) -> None:
+    """Append a unit's rows to `runs.csv`, each with its checksum, once they pass the checks
+    a reader makes (a row that does not is a bug: one `BenchError` naming it). The first
+    rows create the file with its header; a row with a column the header lacks rewrites
+    the file once with the column added (every checksum stays valid)."""
+    path = Path(path)
+    texts = [{k: _text(v) for k, v in r.items()} for r in rows]
+    for t in texts:
+        t[ROW_CHECKSUM] = row_checksum(t)
+        full = dict.fromkeys(REQUIRED, "") | t
+        why = _row_problem(full, vocab) or _altered(full, vocab)
+        if why:
+            key = ", ".join(t.get(k, "?") for k in KEY)
+            raise BenchError(f"a computed row ({key}) breaks the runs.csv contract: {why}")
+    header = []
+    if path.is_file():
+        with path.open() as f:
+            header = next(csv.reader([f.readline()]))
+    new = [k for k in dict.fromkeys(k for t in texts for k in t) if k not in header]
+    if not new:
+        text = _csv_lines([[t.get(k, "") for k in header] for t in texts])
+        with path.open("rb+") as f:
+            f.seek(-1, os.SEEK_END)
+            ended = f.read(1) == b"\n"  # a write cut just before its last newline
+            f.seek(0, os.SEEK_END)
+            f.write((text if ended else "\n" + text).encode())
+        return
+    old = []
+    if header:
+        old = [dict(zip(header, f)) for f in csv.reader(path.read_text().splitlines()[1:])]
+    header = [k for k in header if k != ROW_CHECKSUM] + [k for k in new if k != ROW_CHECKSUM]
+    header.append(ROW_CHECKSUM)
+    body = [[t.get(k, "") for k in header] for t in old + texts]
+    write_text_atomic(path, _csv_lines([header, *body]))
+
+
+def keep_runs(path: Path, keys: set[tuple]) -> None:
+    """Keep the rows of `keys` alone in `runs.csv` (before a run appends the rows it
+    computes again); the file is rewritten only if it holds others."""
+    path = Path(path)
+    if not path.is_file():
+        return
+    header, good, bad = check_runs(path)
+    kept = [
+        line for _, line in good if _key_of(dict(zip(header, next(csv.reader([line]))))) in keys
+    ]
+    if len(kept) == len(good) + len(bad):
+        return
+    if kept:
+        write_text_atomic(path, "\n".join([",".join(header), *kept]) + "\n")
+    else:
+        path.unlink()
 
 
 def set_aside_damaged(path: Path, vocab: Vocabulary) -> int:
@@ -198,7 +400,7 @@ def set_aside_damaged(path: Path, vocab: Vocabulary) -> int:
     if bad:
         kept = "\n".join([",".join(header)] + [line for _, line in good]) + "\n"
         prior = aside.read_text() if aside.exists() else ",".join(header) + "\n"
-        write_text_atomic(aside, prior + "\n".join(line for _, line, _ in bad) + "\n")
+        write_text_atomic(aside, prior + "\n".join(b[1] for b in bad) + "\n")
         write_text_atomic(path, kept)
     return len(bad)
 
@@ -219,6 +421,20 @@ def _shared(settings: dict) -> dict:
     return {k: v for k, v in settings.items() if k != OWN_SETTINGS}
 
 
+def _settings(path: Path, remedy: str) -> dict:
+    """The flattened settings a `config.json` holds (unreadable: one line with `remedy`)."""
+    try:
+        return _flatten(json.loads(path.read_text())["settings"])
+    except (ValueError, KeyError, TypeError) as e:
+        raise BenchError(f"{path} is unreadable ({type(e).__name__}); {remedy}") from e
+
+
+def _differing(there: dict, here: dict, now: str = "now") -> list[str]:
+    """`key: value there, value now` for each key whose values differ."""
+    keys = [k for k in sorted(set(there) | set(here)) if there.get(k) != here.get(k)]
+    return [f"{k}: {there.get(k)!r} there, {here.get(k)!r} {now}" for k in keys]
+
+
 def check_results_dir(results: Path, settings: dict, overwrite: bool) -> None:
     """Refuse to compute into `results` under other shared settings than the ones its
     `config.json` holds, naming each that differs, unless `overwrite` (a method's own
@@ -226,23 +442,45 @@ def check_results_dir(results: Path, settings: dict, overwrite: bool) -> None:
     settings = _shared(json.loads(json.dumps(settings)))  # tuples as lists, as stored
     stored_path = results / "config.json"
     if stored_path.exists() and not overwrite:
-        try:
-            stored = _flatten(_shared(json.loads(stored_path.read_text())["settings"]))
-        except (ValueError, KeyError, TypeError) as e:
-            raise BenchError(
-                f"{stored_path} is unreadable ({type(e).__name__}); use --overwrite to start again"
-            ) from e
-        now = _flatten(settings)
-        # a stored setting this code no longer has (one that moved to its method) decides nothing
-        differ = [k for k in sorted(now) if stored.get(k) != now[k]]
+        stored = _settings(stored_path, "use --overwrite to start again")
+        now = _flatten(_shared(settings))
+        # a stored setting this code no longer has (one that moved to its method), or a
+        # method's own setting, decides nothing here
+        differ = _differing({k: stored.get(k) for k in now}, now)
         if differ:
-            shown = "; ".join(
-                f"{k}: {stored.get(k)!r} there, {now.get(k)!r} now" for k in differ[:4]
-            )
             raise BenchError(
-                f"{results} holds results of other settings ({shown}); use --overwrite to "
-                "replace them, or another --results folder"
+                f"{results} holds results of other settings ({'; '.join(differ[:4])}); use "
+                "--overwrite to replace them, or another --results folder"
             )
+
+
+def _grid(runs_csv: Path) -> dict[str, set[str]]:
+    """The values of each key column of a `runs.csv` (its grid)."""
+    with runs_csv.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    return {k: {r[k] for r in rows if r.get(k)} for k in KEY}
+
+
+def snapshot_differences(results: Path, to: Path) -> list[str]:
+    """How the snapshot `to` differs from the results folder `results` in its settings
+    (`config.json`) and its grid (the values of each key column of `runs.csv`), one phrase
+    each; none when `to` holds no snapshot."""
+    differ = []
+    there, here = Path(to) / "config.json", Path(results) / "config.json"
+    if there.is_file() and here.is_file():
+        remedy = "use --replace to replace the snapshot"
+        differ += _differing(_settings(there, remedy), _settings(here, remedy), "here")
+    if (Path(to) / "runs.csv").is_file():
+        old, new = _grid(Path(to) / "runs.csv"), _grid(Path(results) / "runs.csv")
+        for k in KEY:
+            gone, added = sorted(old[k] - new[k]), sorted(new[k] - old[k])
+            parts = [
+                f"{', '.join(v[:5])}{' ...' if len(v) > 5 else ''} only {where}"
+                for v, where in ((gone, "there"), (added, "here"))
+                if v
+            ]
+            differ += [f"{k}: {' and '.join(parts)}"] if parts else []
+    return differ
 
 
 @contextmanager

@@ -49,6 +49,40 @@ ORACLE = "oracle"
 ROLES = ("baseline", "contender", "reference", "peer")
 """A baseline competes for "best baseline"; a contender is compared with the baselines; a
 reference (`all`, the oracle) and a peer (stock COLMAP) are shown, never ranked as either."""
+PERCENT, FRACTION, DEGREES, AT_LEAST_0 = (0.0, 100.0), (0.0, 1.0), (0.0, 180.0), (0.0, None)
+RANGES: dict[str, tuple[float, float | None]] = {
+    "views": AT_LEAST_0,
+    "tentative_matches": AT_LEAST_0,
+    "verified_matches": AT_LEAST_0,
+    "inlier_pct": PERCENT,
+    "match_precision_pct": PERCENT,
+    "coverage_pct": PERCENT,
+    "runtime_proxy": AT_LEAST_0,
+    "runtime_scoring": AT_LEAST_0,
+    "runtime_matching": AT_LEAST_0,
+    "runtime_robust": AT_LEAST_0,
+    "reconstructable": AT_LEAST_0,
+    "points": AT_LEAST_0,
+    "rmse": AT_LEAST_0,
+    "median_error": AT_LEAST_0,
+    **{f"accuracy_pct{t}": PERCENT for t in ("", "_0.02", "_0.05", "_0.20")},
+    # accurate points per reconstructable point: above 100 where a model has more accurate
+    # points than there are reconstructable ones (the sfm rows count them against the
+    # multiview protocol's, two-view points included)
+    **{f"acc_completeness_pct{t}": AT_LEAST_0 for t in ("", "_0.02", "_0.05", "_0.20")},
+    "mean_track_length": AT_LEAST_0,
+    "mean_tri_angle_deg": DEGREES,
+    "render_s_per_view": AT_LEAST_0,
+    "registered_views": AT_LEAST_0,
+    "maa": FRACTION,
+    "median_pose_err_deg": DEGREES,
+    "cam_center_err": AT_LEAST_0,
+    "mean_reproj_px": AT_LEAST_0,
+    "keypoints_per_view": AT_LEAST_0,
+}
+"""The range (low, high; None: no bound) of every number a row of `runs.csv` holds; any
+`*_ms` column (a stage's milliseconds) is at least 0, and a task declares its own metrics
+(`Task.ranges`). A value outside its range, or in an undeclared column, is refused."""
 GRANTS = ("rig", "images")
 """What a task's selection may see of the views' geometry: the rig's poses, or the images
 and intrinsics only (`bench.frontend.geometry`)."""
@@ -81,6 +115,8 @@ class Task:
     peers: bool = False
     """Whether the stock-COLMAP peers run it (they have no known-pose mode)."""
     doc: str = ""
+    ranges: dict[str, tuple[float, float | None]] = field(default_factory=dict)
+    """The range of each metric of its own that `RANGES` does not declare."""
 
 
 @dataclass(frozen=True)
@@ -173,6 +209,13 @@ class Vocabulary:
             return len(ROLES), 0
         return ROLES.index(self.methods[policy].role), names.index(policy)
 
+    def range_of(self, column: str) -> tuple[float, float | None] | None:
+        """The declared range of a number column of `runs.csv` (None: undeclared)."""
+        for task in self.tasks.values():
+            if column in task.ranges:
+                return task.ranges[column]
+        return RANGES.get(column, AT_LEAST_0 if column.endswith("_ms") else None)
+
     def merged(self, older: Vocabulary) -> Vocabulary:
         """This vocabulary, keeping `older`'s entries for names it does not declare."""
         return Vocabulary(older.methods | self.methods, older.tasks | self.tasks)
@@ -193,7 +236,14 @@ class Vocabulary:
             n: Method(**{**m, "reads": tuple(m["reads"])}) for n, m in data["methods"].items()
         }
         tasks = {
-            n: Task(**{**t, "needs": tuple(t["needs"]), "columns": tuple(t["columns"])})
+            n: Task(
+                **{
+                    **t,
+                    "needs": tuple(t["needs"]),
+                    "columns": tuple(t["columns"]),
+                    "ranges": {k: tuple(r) for k, r in t.get("ranges", {}).items()},
+                }
+            )
             for n, t in data["tasks"].items()
         }
         return cls(methods, tasks)

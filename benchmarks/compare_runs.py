@@ -1,5 +1,5 @@
-"""The metric columns of two runs.csv files compared on their common rows (timings, hashes
-and invocations left out): how many values differ exactly and beyond 1e-6 relative.
+"""The metric columns of two runs.csv files compared on their common rows (timings, hashes,
+checksums and invocations left out): how many values differ exactly and beyond 1e-6 relative.
 
     .venv/bin/python benchmarks/compare_runs.py results/published/runs.csv results/latest/runs.csv
 """
@@ -17,6 +17,7 @@ skip = {
     "prediction_hash",
     "evaluation_hash",
     "invocation",
+    "row_checksum",
     "wall_ms",
     "render_s_per_view",
 }

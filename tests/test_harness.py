@@ -193,6 +193,7 @@ TIMING = [
     "evaluate_ms",
     "wall_ms",
     "invocation",
+    "row_checksum",
 ]
 POLICIES = ["random", "texture", "grid", "adaptive", "oracle", "colmap-b", "all", "colmap"]
 ROWS = 2 * (6 * 2 * 2 + 2 * 2)  # scenes x (selections x tasks x protocols + peers x protocols)
@@ -453,8 +454,8 @@ def test_version_names_the_distribution(capsys):
 
 
 def test_cells_stock_colmap_cannot_map_are_marked_and_left_out_of_the_sfm_means():
-    from bench.harness.grid import mark_reference
     from bench.report.tables import headline_frame, paired_sfm, table1, table_scenes
+    from bench.results import mark_reference
 
     rows = []
     # stock COLMAP maps seed 0; seed 1 it registers in part, seed 2 with wrong poses
@@ -464,7 +465,7 @@ def test_cells_stock_colmap_cannot_map_are_marked_and_left_out_of_the_sfm_means(
         for policy, maa in (("texture", 0.5), ("adaptive", 0.7), ("colmap-b", 0.4)):
             maa += 0.2 * seed
             rows.append(cell | dict(policy=policy, budget=64, registered_views=6, maa=maa))
-    table = mark_reference(pd.DataFrame(rows))
+    table = mark_reference(pd.DataFrame(rows), vocabulary.Vocabulary.current())
     maps = table.groupby("seed")["reference_maps"].agg(set).to_dict()
     assert maps == {0: {1}, 1: {0}, 2: {0}}
     vocab = vocabulary.Vocabulary.current()
@@ -910,7 +911,8 @@ def test_figure2_is_drawn_from_the_exported_model_alone(quick_results, renders_d
 
 def test_a_task_is_added_in_one_place(renders_dir, tmp_path, monkeypatch):
     """A new task is one registration in the task registry: the grid runs it, its rows
-    are checked against its required metrics and Table 1 shows its columns."""
+    are checked against its required metrics and their declared ranges, and Table 1 shows
+    its columns."""
     from bench.backend.reconstruction import known_pose_task
     from bench.harness import tasks
 
@@ -918,7 +920,13 @@ def test_a_task_is_added_in_one_place(renders_dir, tmp_path, monkeypatch):
         return {"observed_points": 0 if model is None else model.num_points3D()}
 
     runner = tasks.TaskRunner(
-        vocabulary.Task("count", "rig", needs=("observed_points",), columns=("observed_points",)),
+        vocabulary.Task(
+            "count",
+            "rig",
+            needs=("observed_points",),
+            columns=("observed_points",),
+            ranges={"observed_points": vocabulary.AT_LEAST_0},
+        ),
         reconstruct=lambda m, cfg, protocol: known_pose_task(
             m.image_dir, m.cams, m.names, m.xy, m.pairs, cfg, protocol
         ),

@@ -34,7 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> None:
     from bench.report.write import write_report
-    from bench.results import read_runs
+    from bench.results import holding, read_runs, runs_file
 
-    write_report(read_runs(args.results / "runs.csv"), args.results, args.renders, args.rendered)
+    runs_csv = runs_file(args.results / "runs.csv")
+    with holding(args.results):  # refused while a run writes the folder
+        write_report(read_runs(runs_csv), args.results, args.renders, args.rendered)
     print(f"tables and figures rewritten in {args.results}")

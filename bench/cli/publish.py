@@ -11,7 +11,9 @@ HELP = "copy a results folder's runs, tables and figures into the published snap
 DESCRIPTION = (
     "Check RESULTS/runs.csv row by row, then copy it with config.json, vocabulary.json, "
     "manifest.json, the tables and the figures into TO (the snapshot the repository "
-    "tracks), removing report files there that RESULTS does not have."
+    "tracks), removing report files there that RESULTS does not have. A snapshot of other "
+    "settings (config.json) or another grid (scenes, seeds, policies, budgets, tasks, "
+    "protocols) is replaced only with --replace."
 )
 
 
@@ -20,9 +22,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--to", type=Path, default=PUBLISHED, help=f"snapshot folder (default: ./{PUBLISHED})"
     )
+    parser.add_argument(
+        "--replace",
+        action="store_true",
+        help="replace a snapshot of other settings or another grid (refused without it)",
+    )
 
 
 def run(args: argparse.Namespace) -> None:
+    from bench import BenchError
     from bench.report.write import publish
+    from bench.results import holding, runs_file, snapshot_differences
 
-    print(f"published {publish(args.results, args.to)} files of {args.results} in {args.to}")
+    runs_file(args.results / "runs.csv")
+    try:
+        args.to.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise BenchError(f"cannot write to {args.to}: {e.strerror}") from None
+    with holding(args.results, reading=True), holding(args.to):
+        differ = [] if args.replace else snapshot_differences(args.results, args.to)
+        if differ:
+            raise BenchError(
+                f"{args.to} holds a snapshot of other settings or another grid "
+                f"({'; '.join(differ)}); --replace replaces it"
+            )
+        n = publish(args.results, args.to)
+    print(f"published {n} files of {args.results} in {args.to}")

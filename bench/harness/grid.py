@@ -1,8 +1,8 @@
 """`bench run`: every unit of the grid, resumable and reproducible.
 
 Stages per (scene, seed): render (cached) -> front end (cached) -> for each policy and
-budget: one unit (`bench.harness.execute`), its rows appended to `runs.csv` at once (the
-file is rewritten through a temporary name, so an interrupt keeps every finished row).
+budget: one unit (`bench.harness.execute`), its rows appended to `runs.csv` at once (an
+interrupt keeps every finished row; a cut last row is caught as damage, `bench.results`).
 The settings are stored in `config.json` beside the results and the vocabulary of the rows
 in `vocabulary.json`; a run into a folder holding other settings is refused unless
 `overwrite`. Rows whose prediction is current but whose scoring is not (or every row,
@@ -28,7 +28,7 @@ import pandas as pd
 
 from bench import ROOT, BenchError
 from bench.console import log, progress
-from bench.files import exclusive, write_text_atomic
+from bench.files import write_text_atomic
 from bench.frontend import plugins
 from bench.frontend.policies import check_policies, learned_weights
 from bench.frontend.views import source_key
@@ -41,8 +41,11 @@ from bench.render.entry import render_scene
 from bench.results import (
     DAMAGED,
     Workspace,
+    append_runs,
     bind_results_dir,
     check_results_dir,
+    holding,
+    keep_runs,
     models_replaced,
     read_runs,
     set_aside_damaged,
@@ -50,14 +53,10 @@ from bench.results import (
 from bench.scenes.spec import load_spec, scene_names
 from bench.summary import ERROR, failures, sfm_exclusions
 from bench.vocabulary import (
-    HEADLINE,
     KEY,
     METHODS,
     PROTOCOLS,
-    REFERENCE_MAPS,
-    REFERENCE_MIN_MAA,
     REFERENCE_PEER,
-    TASKS,
     Job,
     Unit,
     Vocabulary,
@@ -198,7 +197,7 @@ def run_benchmark(
     except OSError as e:
         raise BenchError(f"cannot write to {results}: {e.strerror}") from e
     try:
-        with exclusive(results / ".bench-run.lock", f"results folder {results}"):
+        with holding(results):
             return _run_in(cfg, ws, options, report)
     finally:
         if created and results.is_dir() and not any(results.iterdir()):
@@ -217,7 +216,10 @@ def _current_rows(
     if not runs_csv.exists() or options.overwrite:
         df = pd.DataFrame(columns=[*KEY, "prediction_hash", "evaluation_hash", "render_key"])
         return df, pd.Series(False, index=df.index)
-    df = read_runs(runs_csv, vocab)
+    df = read_runs(runs_csv, vocab, keep_altered=options.reevaluate)
+    altered = df.pop("altered") if options.reevaluate else pd.Series(False, index=df.index)
+    if altered.any():
+        log(f"{int(altered.sum())} altered row(s) of {runs_csv}; scoring them again")
     # each row against its policy's hash; a policy not registered now (a module not given
     # this time) keeps its rows as they are
     known = set(METHODS)
@@ -240,7 +242,7 @@ def _current_rows(
     if errored.any():
         log(f"{int(errored.sum())} row(s) could not be computed last time; computing them again")
     df = df[~(stale | errored)]
-    rescore = df["policy"].isin(known) & (
+    rescore = altered[~(stale | errored)] | df["policy"].isin(known) & (
         options.reevaluate | (df["evaluation_hash"] != evaluation_hash())
     )
     return df, rescore
@@ -258,7 +260,6 @@ def _run_in(
     df, rescore = _current_rows(cfg, ws, options)
     keys = lambda frame: set(map(tuple, frame[list(KEY)].itertuples(index=False)))  # noqa: E731
     done, again = keys(df[~rescore]), keys(df[rescore])
-    rows = df[~rescore].to_dict("records")
     work = {}
     for unit in cfg.units():
         missing = [j for j in cfg.jobs(unit.policy) if (*asdict(unit).values(), *j) not in done]
@@ -293,13 +294,12 @@ def _run_in(
     t_runs = time.perf_counter()
     with models_replaced(ws.results, options.overwrite) as state:
         for new in _computed(plan, cfg.run, ws, options.cluster, stage_s):
+            vocab = Vocabulary.current()
             if not state["bound"]:  # the folder is bound by the first rows it gets
-                vocab = Vocabulary.current()
                 bind_results_dir(ws.results, cfg.run.as_dict(), vocab, options.overwrite)
+                keep_runs(ws.runs_csv, done)  # the rows computed again go first
                 state["bound"] = True
-            rows += [r | {"invocation": invocation["id"]} for r in new]
-            table = mark_reference(pd.DataFrame(rows).sort_values(list(KEY), kind="stable"))
-            write_text_atomic(ws.runs_csv, table.to_csv(index=False))
+            append_runs(ws.runs_csv, [r | {"invocation": invocation["id"]} for r in new], vocab)
     stage_s["runs_wall"] = time.perf_counter() - t_runs
     out = read_runs(ws.runs_csv)
     if report is not None:
@@ -326,26 +326,6 @@ def in_grid(cfg: BenchConfig, rows: pd.DataFrame) -> pd.DataFrame:
         for sc, sd, p, b, t, pr in rows[list(KEY)].itertuples(index=False)
     ]
     return rows[keep]
-
-
-def mark_reference(table: pd.DataFrame) -> pd.DataFrame:
-    """`REFERENCE_MAPS` on every row: whether stock COLMAP with all features maps the row's
-    (scene, seed) in the task that admits peers (headline protocol; see the vocabulary)."""
-    if not {"views", "registered_views", "maa"} <= set(table):
-        return table
-    peers = [t for t, task in TASKS.items() if task.peers]
-    ref = table[
-        (table["policy"] == REFERENCE_PEER)
-        & table["task"].isin(peers)
-        & (table["protocol"] == HEADLINE[1])
-    ]
-    maps = {
-        (r.scene, r.seed): int(r.registered_views >= r.views and r.maa >= REFERENCE_MIN_MAA)
-        for r in ref.itertuples()
-        if pd.notna(r.registered_views)
-    }
-    cells = zip(table["scene"], table["seed"])
-    return table.assign(**{REFERENCE_MAPS: [maps.get(c) for c in cells]})
 
 
 def _computed(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, stage_s: dict):

@@ -1,0 +1,261 @@
+"""Results that cannot be altered unseen: rows that carry their own checksum and ranges,
+`runs.csv` appended as units finish, `bench publish` that keeps a snapshot of other
+settings, `bench plot` and `bench publish` on a read-only or held folder."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bench import ROOT, BenchError
+from bench.cli import main
+from bench.harness import execute
+from bench.harness.config import RunConfig
+from bench.harness.grid import BenchConfig
+from bench.results import read_runs
+from tests.conftest import MEDIUM, bench_run
+
+GRID = BenchConfig(
+    scenes=("table",),
+    seeds=(0,),
+    policies=("texture", "grid"),
+    budgets=(64,),
+    tasks=("tri",),
+    protocols=("multiview",),
+    run=RunConfig(render=MEDIUM),
+)
+PUBLISHED = ROOT / "results" / "published"
+
+
+@pytest.fixture(scope="module")
+def small_run(renders_dir, tmp_path_factory):
+    """A real run of two rows (texture and grid, tri, multiview, table seed 0)."""
+    results = tmp_path_factory.mktemp("integrity") / "r"
+    bench_run(GRID, results, renders_dir)
+    return results
+
+
+def _edit(runs_csv: Path, policy: str, column: str, value: str, reseal: bool = False):
+    """Set one value of `policy`'s row of `runs.csv` in place, as a hand edit would
+    (`reseal`: with the checksum recomputed, as a bug that wrote it would); (its line, the
+    old value)."""
+    rows = list(csv.reader(runs_csv.read_text().splitlines()))
+    header = rows[0]
+    line = next(n for n, row in enumerate(rows, 1) if row[header.index("policy")] == policy)
+    row = rows[line - 1]
+    old, row[header.index(column)] = row[header.index(column)], value
+    if reseal:
+        from bench.results import row_checksum
+
+        row[-1] = row_checksum(dict(zip(header, row)))
+    out = io.StringIO()
+    csv.writer(out, lineterminator="\n").writerows(rows)
+    runs_csv.write_text(out.getvalue())
+    return line, old
+
+
+def _one_line(capsys) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    return err[0]
+
+
+def test_a_hand_edited_metric_is_refused_by_plot_publish_and_a_resumed_run(
+    small_run, renders_dir, tmp_path, capsys, monkeypatch
+):
+    """One metric changed by hand (26.28 -> 99.0 in the report that found it) was plotted,
+    reused by a resumed run and published; now each refuses it in one line naming the file
+    and the row, and `--reevaluate` scores it again from the stored prediction."""
+    r = tmp_path / "r"
+    shutil.copytree(small_run, r)
+    before = (r / "table1.csv").read_bytes()
+    line, old = _edit(r / "runs.csv", "grid", "acc_completeness_pct", "99.0")
+    assert float(old) != 99.0
+    where = (
+        f"{r / 'runs.csv'} is damaged: row at line {line} (table, seed 0, grid, budget 64, tri, "
+    )
+    where += "multiview): its values do not match its row_checksum"
+    assert main(["plot", "--results", str(r), "--renders", str(renders_dir)]) == 2
+    assert where in _one_line(capsys)
+    assert (r / "table1.csv").read_bytes() == before  # nothing rewritten from it
+    assert main(["publish", "--results", str(r), "--to", str(tmp_path / "p")]) == 2
+    assert where in _one_line(capsys) and not (tmp_path / "p" / "runs.csv").exists()
+    with pytest.raises(BenchError, match="do not match its row_checksum") as e:
+        bench_run(GRID, r, renders_dir)
+    assert "--reevaluate` scores altered rows again" in str(e.value)
+    predicted = []
+    real = execute.predict
+    monkeypatch.setattr(execute, "predict", lambda *a: predicted.append(a) or real(*a))
+    rows = bench_run(GRID, r, renders_dir, reevaluate=True)
+    assert predicted == []  # scored again from the stored prediction
+    fixed = rows.set_index("policy").loc["grid", "acc_completeness_pct"]
+    assert fixed == pytest.approx(float(old)) and (r / "table1.csv").read_bytes() == before
+
+
+@pytest.mark.parametrize("value", ["150", "-5"])
+@pytest.mark.parametrize("reseal", [False, True])
+def test_a_percentage_outside_0_to_100_is_refused(small_run, tmp_path, capsys, value, reseal):
+    """Values of 150 and -5 for a percentage passed every check; now each is refused, also
+    with a checksum that matches (a bug, not a hand edit)."""
+    r = tmp_path / "r"
+    shutil.copytree(small_run, r)
+    line, _ = _edit(r / "runs.csv", "texture", "accuracy_pct", value, reseal)
+    assert main(["plot", "--results", str(r)]) == 2
+    err = _one_line(capsys)
+    assert (
+        f"{r / 'runs.csv'} is damaged: row at line {line} (table, seed 0, texture, budget 64" in err
+    )
+    assert f"accuracy_pct {value} is outside its range [0, 100]" in err
+
+
+def test_a_computed_row_outside_its_range_is_never_written(tmp_path):
+    from bench.results import append_runs
+    from bench.vocabulary import Vocabulary
+
+    row = read_runs(PUBLISHED / "runs.csv").iloc[0].to_dict() | {"maa": 1.5}
+    with pytest.raises(BenchError, match=r"breaks the runs.csv contract: maa 1.5 is outside"):
+        append_runs(tmp_path / "runs.csv", [row], Vocabulary.current())
+    assert not (tmp_path / "runs.csv").exists()
+
+
+def test_runs_csv_is_appended_to_not_rewritten(small_run, renders_dir, tmp_path, monkeypatch):
+    """A unit's rows are appended (the rows before them keep their bytes, the header is
+    written once); a cut append is caught as damage and set aside on request."""
+    r = tmp_path / "r"
+    shutil.copytree(small_run, r)
+    before = (r / "runs.csv").read_text()
+    rewritten = []
+    import bench.results as results
+
+    real = results.write_text_atomic
+    monkeypatch.setattr(
+        results, "write_text_atomic", lambda p, t: rewritten.append(p.name) or real(p, t)
+    )
+    grown = dataclasses.replace(GRID, budgets=(64, 32))
+    bench_run(grown, r, renders_dir)
+    after = (r / "runs.csv").read_text()
+    assert after.startswith(before) and len(after.splitlines()) == 5  # two rows added
+    assert "runs.csv" not in rewritten and after.count("scene,seed") == 1
+    lines = after.splitlines()
+    (r / "runs.csv").write_text("\n".join([*lines[:-1], lines[-1][:-3]]) + "\n")  # a cut append
+    with pytest.raises(BenchError, match="is damaged: row at line 5"):
+        read_runs(r / "runs.csv")
+    rows = bench_run(grown, r, renders_dir, set_aside=True)
+    assert len(rows) == 4 and lines[-1][:-3] in (r / "runs.damaged.csv").read_text()
+
+
+def test_publish_keeps_a_snapshot_of_other_settings_unless_replace(small_run, tmp_path, capsys):
+    """Publishing 2 rows at 320x240 over the 3,240-row snapshot replaced it (and deleted
+    its budget figure) without a word; now it is refused naming the differences."""
+    snap = tmp_path / "published"
+    shutil.copytree(PUBLISHED, snap)
+    argv = ["publish", "--results", str(small_run), "--to", str(snap)]
+    assert main(argv) == 2
+    err = _one_line(capsys)
+    assert f"{snap} holds a snapshot of other settings or another grid (" in err
+    for phrase in (
+        "render.width: 640 there, 320 here",
+        "scene: corridor, facade, vegetation only there",
+        "seed: 1, 2, 3, 4 only there",
+        "task: sfm only there",
+        "); --replace replaces it",
+    ):
+        assert phrase in err
+    assert (snap / "runs.csv").read_bytes() == (PUBLISHED / "runs.csv").read_bytes()
+    assert (snap / "figure_budget.png").is_file()
+    assert main([*argv, "--replace"]) == 0
+    assert (snap / "runs.csv").read_bytes() == (small_run / "runs.csv").read_bytes()
+    assert main(argv) == 0  # the same settings and grid again: no --replace needed
+
+
+def test_the_published_snapshot_carries_its_checksums():
+    rows = read_runs(PUBLISHED / "runs.csv")
+    assert len(rows) == 3240 and rows["row_checksum"].str.len().eq(12).all()
+    assert set(rows["reference_maps"].dropna()) == {0, 1}  # derived from its colmap rows
+
+
+def _read_only(folder: Path, *argv: str) -> subprocess.CompletedProcess:
+    """Run `python argv` with `folder` mounted read-only (in a user and mount namespace:
+    root writes through permission bits, not through a read-only mount)."""
+    cmd = f'mount --bind -o ro "{folder}" "{folder}" && exec "$@"'
+    return subprocess.run(
+        ["unshare", "-rm", "sh", "-c", cmd, "sh", sys.executable, *argv],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
+
+
+def _can_mount_read_only(tmp_path: Path) -> bool:
+    if shutil.which("unshare") is None:
+        return False
+    return _read_only(tmp_path, "-c", "").returncode == 0
+
+
+def test_plot_and_publish_on_a_read_only_folder_are_one_line(small_run, tmp_path):
+    """`bench plot` on a read-only folder ended in an OSError traceback (the clean-up of
+    `atomic_path` failing in turn); now one line, and the clean-up never hides the error."""
+    if not _can_mount_read_only(tmp_path):
+        pytest.skip("no unshare with mount namespaces here")
+    r = tmp_path / "r"
+    shutil.copytree(small_run, r)
+    done = _read_only(r, "-m", "bench", "plot", "--results", str(r))
+    assert done.returncode == 2 and done.stderr.strip().count("\n") == 0, done.stderr
+    assert f"cannot write to {r}: Read-only file system" in done.stderr
+    snap = tmp_path / "snap"
+    snap.mkdir()
+    done = _read_only(snap, "-m", "bench", "publish", "--results", str(r), "--to", str(snap))
+    assert done.returncode == 2 and done.stderr.strip().count("\n") == 0, done.stderr
+    assert f"cannot write to {snap}: Read-only file system" in done.stderr
+    done = _read_only(r, "-m", "bench", "publish", "--results", str(r), "--to", str(snap / "p"))
+    assert done.returncode == 0, done.stderr  # a read-only folder is published from
+    script = (
+        "from bench.files import atomic_path\n"
+        f"with atomic_path({str(r / 'table1.csv')!r}):\n"
+        "    raise ValueError('the error that ended the block')\n"
+    )
+    done = _read_only(r, "-c", script)
+    assert "ValueError: the error that ended the block" in done.stderr.splitlines()[-1]
+
+
+@pytest.mark.parametrize("command", ["plot", "publish"])
+def test_plot_and_publish_refuse_a_folder_a_run_holds(small_run, tmp_path, capsys, command):
+    """`bench plot` read a folder a run was writing and rewrote the tables from partial
+    rows; now plot and publish are refused while a run holds the folder."""
+    from bench.files import exclusive
+
+    r = tmp_path / "r"
+    shutil.copytree(small_run, r)
+    before = (r / "table1.csv").read_bytes()
+    argv = [command, "--results", str(r)]
+    argv += ["--to", str(tmp_path / "p")] if command == "publish" else []
+    with exclusive(r / ".bench-run.lock", "a run"):  # as `bench run` holds it
+        assert main(argv) == 2
+    assert f"results folder {r} is in use by another bench process" in _one_line(capsys)
+    assert (r / "table1.csv").read_bytes() == before and not (tmp_path / "p" / "runs.csv").exists()
+    assert main(argv) == 0  # released: done
+
+
+def test_a_folder_written_before_checksums_is_refused_then_reevaluated(
+    small_run, renders_dir, tmp_path, capsys
+):
+    r = tmp_path / "r"
+    shutil.copytree(small_run, r)
+    rows = list(csv.reader((r / "runs.csv").read_text().splitlines()))
+    old = "\n".join(",".join(row[:-1]) for row in rows) + "\n"  # no row_checksum column
+    (r / "runs.csv").write_text(old)
+    assert main(["plot", "--results", str(r)]) == 2
+    assert "was written before rows carried checksums; `bench run --reevaluate`" in _one_line(
+        capsys
+    )
+    bench_run(GRID, r, renders_dir, reevaluate=True)
+    assert len(read_runs(r / "runs.csv")) == 2
+    assert json.loads((r / "config.json").read_text())["settings"]["render"]["width"] == 320
