@@ -33,6 +33,11 @@ L2 distance of unit SIFT descriptors, or the Hamming fraction of binary ones):
   line passes the ratio test (0.8) against the second nearest there, over 2 (a multiview
   track needs two other views), clipped to 1.
 
+None of them holds an N x N matrix of a photograph's thousands of candidates, and each
+equals its definition above (tests/test_signals_scale.py): distinctiveness and ambiguity
+read the descriptor distances in blocks of BLOCK_ROWS rows; epipolar reads only the pairs
+within the band around each epipolar line (`epipolar_pairs`) and their descriptor distances.
+
 Overlap, nearest views, working distances, epipolar lines and the cameras that parallax
 looks at come from the views' geometry (`bench.frontend.geometry`): the rig's poses when
 the views carry them, else the geometry estimated from the images alone.
@@ -173,7 +178,8 @@ def _distance_blocks(a: np.ndarray, b: np.ndarray):
 def same_view_neighbours(cand: Candidates, tau2: float) -> tuple[np.ndarray, np.ndarray, float]:
     """Per candidate, among the same view's candidates more than 8 px away (one point): the
     squared descriptor distance to the nearest (inf without one) and the number closer
-    than tau2 (squared); and the seconds of the counting alone."""
+    than tau2 (squared); and the seconds of the counting alone. Each distance is computed
+    once (the upper triangle, block by block) and read by both of its candidates."""
     n = len(cand)
     pairs = cKDTree(cand.xy).query_pairs(SAME_POINT_PX, output_type="ndarray")
     rows = np.r_[pairs[:, 0], pairs[:, 1], np.arange(n)]
@@ -181,12 +187,19 @@ def same_view_neighbours(cand: Candidates, tau2: float) -> tuple[np.ndarray, np.
     order = np.argsort(rows, kind="stable")
     rows, cols = rows[order], cols[order]
     d1, near, counting = np.full(n, np.inf, np.float32), np.zeros(n), 0.0
-    for s, D in _distance_blocks(cand.descriptors, cand.descriptors):
-        lo, hi = np.searchsorted(rows, [s, s + len(D)])
-        D[rows[lo:hi] - s, cols[lo:hi]] = np.inf
-        d1[s : s + len(D)] = D.min(1)
+    desc = cand.descriptors
+    for s in range(0, n, BLOCK_ROWS):
+        e = min(s + BLOCK_ROWS, n)
+        D = descriptor_distances(desc[s:e], desc[s:], squared=True)  # rows s:e, columns s:
+        lo, hi = np.searchsorted(rows, [s, e])
+        r, c = rows[lo:hi], cols[lo:hi]
+        D[r[c >= s] - s, c[c >= s] - s] = np.inf
+        d1[s:e] = np.minimum(d1[s:e], D.min(1))
+        d1[e:] = np.minimum(d1[e:], D[:, e - s :].min(0, initial=np.inf))
         t = time.perf_counter()
-        near[s : s + len(D)] = (D < tau2).sum(1)
+        close = D < tau2
+        near[s:e] += close.sum(1)
+        near[e:] += close[:, e - s :].sum(0)
         counting += time.perf_counter() - t
     return d1, near, counting
 
