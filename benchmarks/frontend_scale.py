@@ -3,10 +3,14 @@ response, texture, adaptive-fast and cross-view read, and each one's front end (
 the signals it reads and the geometry they need), under the geometry estimated from the
 images (the `sfm` task) or the rig's poses; best of --repeats. --save writes those signals
 to an npz; --compare prints the largest difference per signal from such a file (e.g. one
-written by an older version of the code).
+written by an older version of the code). --cpu-clock measures this process's CPU seconds
+instead of wall seconds, with OpenCV on one thread (and BLAS too with the variables below):
+what the front end costs on one idle core, whatever else the machine runs.
 
     .venv/bin/python benchmarks/frontend_scale.py DATASET_OR_RENDER_ENTRY [--grant images]
         [--max-image-size 3200] [--repeats 1] [--save S.npz] [--compare S.npz]
+    OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/frontend_scale.py \
+        DATASET --cpu-clock
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import argparse
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from bench.frontend.features import DetectorConfig, detect
@@ -35,7 +40,11 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--save", type=Path)
     ap.add_argument("--compare", type=Path)
+    ap.add_argument("--cpu-clock", action="store_true")
     a = ap.parse_args()
+    if a.cpu_clock:
+        cv2.setNumThreads(1)
+        time.perf_counter = time.process_time  # every clock of the front end, this script's
     det = DetectorConfig(max_image_size=a.max_image_size)
     views = load_views(a.source)
     if a.grant == IMAGES:
@@ -51,7 +60,7 @@ def main() -> None:
         best |= {k: min(best.get(k, np.inf), s) for k, s in seconds.items()}
     n, cam = len(views), views[0].camera
     print(
-        f"{a.source.name} ({a.grant}): {n} views at {cam.width}x{cam.height}, candidates "
+        f"{a.source.name} ({a.grant}, {'CPU' if a.cpu_clock else 'wall'} seconds): {n} views at {cam.width}x{cam.height}, candidates "
         f"per view {[len(p) for p in pools]}"
     )
     for k in ("detect", *TIMED):
