@@ -227,9 +227,9 @@ def distinctiveness(d1_squared: np.ndarray) -> np.ndarray:
 EPIPOLAR_RING = 1.25
 """Radius ratio of the rings around the epipole in which `epipolar_pairs` sorts a view's
 candidates by angle: a line's window in a ring holds at most this many times its band."""
-PAIR_CHUNK = 1 << 15
-LINE_CHUNK = 1024
-"""Epipolar lines, and descriptor pairs, handled at a time: bounds the memory of the band's pairs."""
+LINE_CHUNK, PAIR_CHUNK = 1024, 1 << 13
+"""Epipolar lines, and descriptor pairs, handled at a time: they bound the memory of the
+band's pairs whatever their number."""
 
 
 def _expand(rows: np.ndarray, lo: np.ndarray, hi: np.ndarray, members: np.ndarray):
