@@ -7,7 +7,7 @@ import pytest
 
 from bench.camera import read_colmap_rig
 from bench.frontend.features import DetectorConfig, detect
-from bench.frontend.signals import DUPLICATE_DISTANCE, _same_view_distances
+from bench.frontend.signals import DUPLICATE_DISTANCE, same_view_neighbours
 from bench.frontend.views import load_views
 from bench.scenes.spec import build_scene, load_spec, scene_names
 
@@ -56,8 +56,8 @@ def sift_entries(medium_entry):
 def _near_duplicate_fraction(entry) -> float:
     fractions = []
     for view in load_views(entry)[:3]:
-        D = _same_view_distances(detect(view, DetectorConfig()))
-        fractions.append(np.mean(D.min(1) < DUPLICATE_DISTANCE["sift"]))
+        d1 = same_view_neighbours(detect(view, DetectorConfig()), 0.0)[0]
+        fractions.append(np.mean(d1 < DUPLICATE_DISTANCE["sift"]))
     return float(np.mean(fractions))
 
 

@@ -33,6 +33,11 @@ L2 distance of unit SIFT descriptors, or the Hamming fraction of binary ones):
   line passes the ratio test (0.8) against the second nearest there, over 2 (a multiview
   track needs two other views), clipped to 1.
 
+None of them holds an N x N matrix of a photograph's thousands of candidates, and each
+equals its definition above (tests/test_signals_scale.py): distinctiveness and ambiguity
+read the descriptor distances in blocks of BLOCK_ROWS rows; epipolar reads only the pairs
+within the band around each epipolar line (`epipolar_pairs`) and their descriptor distances.
+
 Overlap, nearest views, working distances, epipolar lines and the cameras that parallax
 looks at come from the views' geometry (`bench.frontend.geometry`): the rig's poses when
 the views carry them, else the geometry estimated from the images alone.
@@ -49,9 +54,9 @@ from scipy.spatial import cKDTree
 
 from bench.frontend.features import Candidates, DetectorConfig, descriptor_distances, detect_points
 from bench.frontend.geometry import (
+    EPIPOLAR_PX,
+    EPIPOLAR_RATIO,
     SignalConfig,
-    epipolar_distances,
-    epipolar_matches,
     view_geometry,
 )
 from bench.frontend.views import View
@@ -166,21 +171,200 @@ def repeatability_redetect(gray: np.ndarray, cand: Candidates, det: DetectorConf
     return np.divide(hits, seen, out=np.zeros_like(hits), where=seen > 0)
 
 
-def _same_view_distances(cand: Candidates) -> np.ndarray:
-    """Same-view squared descriptor distances, inf between candidates closer than 8 px (one
-    point)."""
-    D = descriptor_distances(cand.descriptors, cand.descriptors, squared=True)
+BLOCK_ROWS = 512
+"""Rows of a descriptor distance block: the signals read the distances of N candidates to
+thousands of others block by block (16 MB at 8192 columns), never as an N x N matrix."""
+
+
+def _distance_blocks(a: np.ndarray, b: np.ndarray):
+    """(start, squared descriptor distances of a[start:start + BLOCK_ROWS] to every b), block
+    by block."""
+    for s in range(0, len(a), BLOCK_ROWS):
+        yield s, descriptor_distances(a[s : s + BLOCK_ROWS], b, squared=True)
+
+
+def same_view_neighbours(cand: Candidates, tau2: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """Per candidate, among the same view's candidates more than 8 px away (one point): the
+    squared descriptor distance to the nearest (inf without one) and the number closer
+    than tau2 (squared); and the seconds of the counting alone. Each distance is computed
+    once (the upper triangle, block by block) and read by both of its candidates."""
+    n = len(cand)
     pairs = cKDTree(cand.xy).query_pairs(SAME_POINT_PX, output_type="ndarray")
-    D[pairs[:, 0], pairs[:, 1]] = D[pairs[:, 1], pairs[:, 0]] = np.inf
-    np.fill_diagonal(D, np.inf)
-    return D
+    rows = np.r_[pairs[:, 0], pairs[:, 1], np.arange(n)]
+    cols = np.r_[pairs[:, 1], pairs[:, 0], np.arange(n)]
+    order = np.argsort(rows, kind="stable")
+    rows, cols = rows[order], cols[order]
+    d1, near, counting = np.full(n, np.inf, np.float32), np.zeros(n), 0.0
+    desc = cand.descriptors
+    for s in range(0, n, BLOCK_ROWS):
+        e = min(s + BLOCK_ROWS, n)
+        D = descriptor_distances(desc[s:e], desc[s:], squared=True)  # rows s:e, columns s:
+        lo, hi = np.searchsorted(rows, [s, e])
+        r, c = rows[lo:hi], cols[lo:hi]
+        D[r[c >= s] - s, c[c >= s] - s] = np.inf
+        d1[s:e] = np.minimum(d1[s:e], D.min(1))
+        d1[e:] = np.minimum(d1[e:], D[:, e - s :].min(0, initial=np.inf))
+        t = time.perf_counter()
+        close = D < tau2
+        near[s:e] += close.sum(1)
+        near[e:] += close[:, e - s :].sum(0)
+        counting += time.perf_counter() - t
+    return d1, near, counting
 
 
-def distinctiveness(D2_same: np.ndarray) -> np.ndarray:
-    d1 = np.sqrt(D2_same.min(1)) if D2_same.shape[1] else np.zeros(len(D2_same))
+def cross_view_near_duplicates(
+    a: np.ndarray, b: np.ndarray, tau2: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """How many of b's descriptors lie closer than tau2 (squared) to each of a's, and of a's
+    to each of b's."""
+    na, nb = np.zeros(len(a)), np.zeros(len(b))
+    for s, D in _distance_blocks(a, b):
+        close = D < tau2
+        na[s : s + len(D)] = close.sum(1)
+        nb += close.sum(0)
+    return na, nb
+
+
+def distinctiveness(d1_squared: np.ndarray) -> np.ndarray:
+    d1 = np.sqrt(d1_squared)
     finite = d1[np.isfinite(d1)]
     ref = np.percentile(finite, 90) if len(finite) else 1.0
     return np.clip(np.where(np.isfinite(d1), d1, ref) / max(ref, 1e-12), 0, 1)
+
+
+EPIPOLAR_RING = 1.25
+"""Radius ratio of the rings around the epipole in which `epipolar_pairs` sorts a view's
+candidates by angle: a line's window in a ring holds at most this many times its band."""
+LINE_CHUNK, PAIR_CHUNK = 1024, 1 << 13
+"""Epipolar lines, and descriptor pairs, handled at a time: they bound the memory of the
+band's pairs whatever their number."""
+
+
+def _expand(rows: np.ndarray, lo: np.ndarray, hi: np.ndarray, members: np.ndarray):
+    """The pairs (rows[k], members[p % len(members)]) for p in [lo[k], hi[k])."""
+    count = np.maximum(hi - lo, 0)
+    pos = np.arange(count.sum()) + np.repeat(lo - (np.cumsum(count) - count), count)
+    return np.repeat(rows, count), members[pos % max(len(members), 1)]
+
+
+def _band(lines: np.ndarray, xb: np.ndarray, e: np.ndarray, px: float):
+    """Index pairs (k, m) that hold every point xb[m] within px of lines[k] (homogeneous),
+    every line through the point e (homogeneous), and some more: the points are sorted by
+    angle around e in rings of radius ratio EPIPOLAR_RING, and each line takes, per ring,
+    the window of angles its band can reach there; with e at infinity or so far that the
+    lines are parallel to within a pixel over the points, by offset across the lines."""
+    norm = np.hypot(lines[:, 0], lines[:, 1])
+    good = np.isfinite(norm) & (norm > 1e-12)
+    bad, every = np.flatnonzero(~good), np.arange(len(xb))
+    out = [_expand(bad, np.zeros_like(bad), np.full_like(bad, len(xb)), every)]
+    k = np.flatnonzero(good)
+    nl, cl = lines[k, :2] / norm[k, None], lines[k, 2] / norm[k]
+    tol = px + 1e-3  # beyond rounding
+    c0 = xb.mean(0)
+    r0 = np.hypot(*(xb - c0).T).max()
+    far = e[:2] - e[2] * c0
+    if abs(e[2]) * max(r0**2, 1.0) < np.hypot(*far):  # parallel to within r0^2 / |e - c0| px
+        across = np.array([-far[1], far[0]]) / np.hypot(*far)
+        sign = np.where(nl @ across < 0, -1.0, 1.0)
+        nl, cl = nl * sign[:, None], cl * sign
+        offset = cl + nl @ c0
+        reach = tol + np.hypot(*(nl - across).T) * r0  # |(nl - across).(x - c0)| <= this - tol
+        s = (xb - c0) @ across
+        order = np.argsort(s, kind="stable")
+        lo = np.searchsorted(s[order], -offset - reach, "left")
+        hi = np.searchsorted(s[order], -offset + reach, "right")
+        out.append(_expand(k, lo, hi, order))
+    else:
+        ep = e[:2] / e[2]
+        v = xb - ep
+        r, th = np.hypot(v[:, 0], v[:, 1]), np.mod(np.arctan2(v[:, 1], v[:, 0]), np.pi)
+        th_l = np.mod(np.arctan2(-nl[:, 0], nl[:, 1]), np.pi)
+        th[th >= np.pi], th_l[th_l >= np.pi] = 0.0, 0.0
+        off = np.abs(nl @ ep + cl)  # the line's distance from e: d(x, line) >= r |sin| - off
+        ring = np.floor(np.log(np.maximum(r / px, 1)) / np.log(EPIPOLAR_RING)).astype(int)
+        for g in np.unique(ring):
+            members = np.flatnonzero(ring == g)
+            members = members[np.argsort(th[members], kind="stable")]
+            n, s = len(members), th[members]
+            sin_w = (tol + off) / (px * EPIPOLAR_RING**g) if g else np.ones(len(k))
+            w = np.arcsin(np.minimum(sin_w, 1))
+            lo_v = th_l - w
+            lo_v[lo_v < 0] += np.pi
+            ext = np.r_[s, s + np.pi]
+            lo = np.searchsorted(ext, lo_v, "left")
+            hi = np.minimum(np.searchsorted(ext, lo_v + 2 * w, "right"), lo + n)
+            full = sin_w >= 1
+            lo[full], hi[full] = 0, n
+            out.append(_expand(k, lo, hi, members))
+    return tuple(np.concatenate(x).astype(np.int64) for x in zip(*out))
+
+
+def epipolar_pairs(F: np.ndarray, xa: np.ndarray, xb: np.ndarray, px: float = EPIPOLAR_PX):
+    """The index pairs (ia, ib) whose epipolar distance (`epipolar_distances`: the larger of
+    the two point-to-line distances) is at most px, `LINE_CHUNK` points of a at a time,
+    without the Na x Nb matrix: the candidates of the band around each line in b
+    (`_band`), then the distance of each."""
+    ha, hb = np.c_[xa, np.ones(len(xa))], np.c_[xb, np.ones(len(xb))]
+    la, lb = ha @ F.T, hb @ F
+    inv_a = 1 / np.maximum(np.hypot(la[:, 0], la[:, 1]), 1e-12)
+    inv_b = 1 / np.maximum(np.hypot(lb[:, 0], lb[:, 1]), 1e-12)
+    e = np.linalg.svd(F)[0][:, 2]
+    for s in range(0, len(xa), LINE_CHUNK):
+        ia, ib = _band(la[s : s + LINE_CHUNK], xb, e, px)
+        ia += s
+        num = np.abs(np.einsum("ij,ij->i", la[ia], hb[ib]).astype(np.float32))
+        keep = num * np.maximum(inv_a[ia], inv_b[ib]).astype(np.float32) <= px
+        yield ia[keep], ib[keep]
+
+
+def pair_distances(a: np.ndarray, b: np.ndarray, ia: np.ndarray, ib: np.ndarray) -> np.ndarray:
+    """Squared descriptor distances of the pairs (a[ia[k]], b[ib[k]]), as
+    `descriptor_distances` computes them (float32)."""
+    out = np.empty(len(ia), np.float32)
+    if a.dtype == np.uint8:
+        for s in range(0, len(ia), PAIR_CHUNK):
+            c = slice(s, s + PAIR_CHUNK)
+            bits = np.bitwise_count(a[ia[c]] ^ b[ib[c]]).sum(1).astype(np.float32)
+            out[c] = (bits / (8 * a.shape[1])) ** 2
+        return out
+    na, nb = ((x.astype(np.float32) ** 2).sum(1) for x in (a, b))
+    unit = np.allclose(na, 1, atol=1e-4) and np.allclose(nb, 1, atol=1e-4)
+    for s in range(0, len(ia), PAIR_CHUNK):
+        c = slice(s, s + PAIR_CHUNK)
+        d2 = np.einsum("ij,ij->i", a[ia[c]], b[ib[c]], dtype=np.float32) * np.float32(-2)
+        if unit:
+            d2 += 2
+        else:
+            d2 += na[ia[c]]
+            d2 += nb[ib[c]]
+        out[c] = np.maximum(d2, 0)
+    return out
+
+
+def _keep_two(best: np.ndarray, index: np.ndarray, d2: np.ndarray) -> None:
+    """Fold the distances d2 of pairs of the candidates `index` into best, (2, N): each
+    candidate's two smallest so far."""
+    order = np.lexsort((d2, index))
+    index, d2 = index[order], d2[order]
+    first = np.flatnonzero(np.r_[True, index[1:] != index[:-1]]) if len(index) else index
+    nxt = np.minimum(first + 1, len(index) - 1)
+    second = np.where((first + 1 < len(index)) & (index[nxt] == index[first]), d2[nxt], np.inf)
+    at = index[first]
+    b1, b2, c1 = best[0, at], best[1, at], d2[first]
+    best[0, at] = np.minimum(b1, c1)
+    best[1, at] = np.minimum(np.maximum(b1, c1), np.minimum(b2, second))
+
+
+def epipolar_passes(F: np.ndarray, a: Candidates, b: Candidates) -> tuple[np.ndarray, np.ndarray]:
+    """Whether each candidate of a (of b) has a ratio-passing nearest descriptor among b's
+    (a's) candidates within EPIPOLAR_PX of its epipolar line: `epipolar_matches` on the
+    pairs of `epipolar_pairs` alone, which are all it reads."""
+    best = [np.full((2, len(c)), np.inf, np.float32) for c in (a, b)]
+    for ia, ib in epipolar_pairs(F, a.xy, b.xy):
+        d2 = pair_distances(a.descriptors, b.descriptors, ia, ib)
+        _keep_two(best[0], ia, d2)
+        _keep_two(best[1], ib, d2)
+    return tuple(np.isfinite(d1) & (d1 < EPIPOLAR_RATIO**2 * d2) for d1, d2 in best)
 
 
 def _log_scaled(raw: np.ndarray) -> np.ndarray:
@@ -228,32 +412,34 @@ def compute_signals(
             if "repeatability_redetect" in wanted
             else np.zeros(len(cand))
         )
-        D = clock.time("distinctiveness", _same_view_distances, cand)
-        values[i]["distinctiveness"] = clock.time("distinctiveness", distinctiveness, D)
-        near_dupes[i] += clock.time("ambiguity", np.sum, D < tau2, 1)
+        t = time.perf_counter()
+        d1, near, counting = same_view_neighbours(cand, tau2)
+        values[i]["distinctiveness"] = distinctiveness(d1)
+        clock.seconds["distinctiveness"] += time.perf_counter() - t - counting
+        clock.seconds["ambiguity"] += counting
+        near_dupes[i] += near
     geo = clock.time("geometry", view_geometry, views, pools, cfg)
     for i in range(n):
         values[i]["parallax"] = clock.time("parallax", geo.parallax, i, pools[i])
-    for i in range(n):  # one descriptor distance matrix per overlapping pair
+    for i in range(n):
         for j in geo.overlap[i]:
-            shared = (j in geo.nearest[i]) + (i in geo.nearest[j])
-            F = geo.fundamental(i, j) if "epipolar" in wanted and j > i else None
-            if j < i or not (len(pools[i]) and len(pools[j])) or not (shared or F is not None):
+            if j < i or not (len(pools[i]) and len(pools[j])):
                 continue
-            t0 = time.perf_counter()
-            D2 = descriptor_distances(pools[i].descriptors, pools[j].descriptors, squared=True)
-            t1 = time.perf_counter()
-            if j in geo.nearest[i]:
-                near_dupes[i] += np.maximum((D2 < tau2).sum(1) - 1, 0)
-            if i in geo.nearest[j]:
-                near_dupes[j] += np.maximum((D2 < tau2).sum(0) - 1, 0)
-            t2 = time.perf_counter()
-            # each signal is charged the whole distance matrix it reads: its cost alone
-            clock.seconds["ambiguity"] += ((t1 - t0) if shared else 0.0) + (t2 - t1)
+            if j in geo.nearest[i] or i in geo.nearest[j]:
+                di, dj = clock.time(
+                    "ambiguity",
+                    cross_view_near_duplicates,
+                    pools[i].descriptors,
+                    pools[j].descriptors,
+                    tau2,
+                )
+                if j in geo.nearest[i]:
+                    near_dupes[i] += np.maximum(di - 1, 0)
+                if i in geo.nearest[j]:
+                    near_dupes[j] += np.maximum(dj - 1, 0)
+            F = geo.fundamental(i, j) if "epipolar" in wanted else None
             if F is not None:
-                xy_i, xy_j = pools[i].xy, pools[j].xy
-                pa, _, pb, _ = epipolar_matches(D2, epipolar_distances(F, xy_i, xy_j))
-                clock.seconds["epipolar"] += (t1 - t0) + time.perf_counter() - t2
+                pa, pb = clock.time("epipolar", epipolar_passes, F, pools[i], pools[j])
                 epi_views[i] += pa
                 epi_views[j] += pb
     for i in range(n):
