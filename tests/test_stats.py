@@ -13,10 +13,11 @@ from scipy import stats as scipy_stats
 from bench.cli import main
 from bench.evaluation.export import export_dataset
 from bench.harness.config import RunConfig
-from bench.harness.grid import BenchConfig, mark_reference, with_reference
+from bench.harness.grid import BenchConfig, with_reference
 from bench.report.stats import paired_difference, stratified_interval
 from bench.report.tables import SFM_RULE, headline_frame, paired, paired_sfm, table1
-from bench.vocabulary import Vocabulary
+from bench.results import ROW_CHECKSUM, append_runs, mark_reference, read_runs
+from bench.vocabulary import REFERENCE_MAPS, Vocabulary
 from tests.conftest import MEDIUM, bench_run
 
 # --- intervals ---------------------------------------------------------------------
@@ -116,7 +117,7 @@ def _sfm_rows(reference_cells) -> pd.DataFrame:
             rows.append(cell | dict(policy="colmap", budget=0, **ref))
         for policy, maa in (("texture", 0.4), ("adaptive", 0.6)):
             rows.append(cell | dict(policy=policy, budget=64, registered_views=6, maa=maa + seed))
-    return mark_reference(pd.DataFrame(rows))
+    return mark_reference(pd.DataFrame(rows), Vocabulary.current())
 
 
 @pytest.mark.parametrize("cells", [(0, 1), (), (1,)])
@@ -172,10 +173,12 @@ def test_a_dataset_run_with_colmap_keeps_its_sfm_means_and_its_transfer_table(
     assert main([*argv, "--rendered", str(rendered)]) == 0
     # stock COLMAP does not map the dataset, as on the temple (views registered off the
     # truth; at this size it does not map it anyway)
-    runs = pd.read_csv(out / "runs.csv")
+    runs = read_runs(out / "runs.csv")
     runs.loc[runs["policy"] == "colmap", ["registered_views", "maa"]] = (2, 0.1)
-    mark_reference(runs).to_csv(out / "runs.csv", index=False)
-    assert (pd.read_csv(out / "runs.csv")["reference_maps"] == 0).all()
+    (out / "runs.csv").unlink()
+    rows = runs.drop(columns=[REFERENCE_MAPS, ROW_CHECKSUM]).to_dict("records")
+    append_runs(out / "runs.csv", rows, Vocabulary.current())  # with their checksums
+    assert (read_runs(out / "runs.csv")[REFERENCE_MAPS] == 0).all()
     assert main(["plot", "--results", str(out), "--rendered", str(rendered)]) == 0
     t1 = pd.read_csv(out / "table1.csv").set_index("policy")
     sfm = runs[runs["policy"] == "texture"]["maa"]

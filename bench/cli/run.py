@@ -62,7 +62,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         )
 
     list_arg("scenes", None, "S1,S2", f"scene types (default: {','.join(scene_names())})")
-    list_arg("policies", ",".join(default_policies()), "P1,P2", "policies")
+    list_arg(
+        "policies",
+        ",".join(default_policies()),
+        "P1,P2",
+        "policies; with the sfm task on rendered scenes, stock COLMAP with all its features "
+        "(colmap) is added if missing: the sfm means leave out the (scene, seed) cells it "
+        "does not map",
+    )
     list_arg(
         "budget",
         None,

@@ -73,10 +73,10 @@ def default_policies() -> tuple[str, ...]:
 def with_reference(policies: tuple[str, ...], tasks: tuple[str, ...]) -> tuple[str, ...]:
     """`policies`, with stock COLMAP with all features (`REFERENCE_PEER`) added when the
     grid runs a task that admits peers (sfm) on rendered scenes: the sfm means leave out
-    the cells it does not map, and the rule holds only when it ran in every cell."""
+    the cells it does not map, and the rule holds only when it ran in every cell. (Said by
+    `bench run --help`; the run's closing line names the cells it left out.)"""
     if REFERENCE_PEER in policies or not any(RUNNERS[t].spec.peers for t in tasks if t in RUNNERS):
         return policies
-    log(f"{REFERENCE_PEER} added to the grid: the sfm means leave out the cells it does not map")
     return (*policies, REFERENCE_PEER)
 
 

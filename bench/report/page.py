@@ -207,10 +207,10 @@ def _exclusions(runs: pd.DataFrame, t1: pd.DataFrame) -> list[str]:
     return out + [""]
 
 
-def results_page(results: Path) -> str:
-    """The page of a results folder, from its files."""
+def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
+    """The page of a results folder, from its files (`runs`: its rows, if already read)."""
     results = Path(results)
-    runs = pd.read_csv(results / "runs.csv")
+    runs = pd.read_csv(results / "runs.csv") if runs is None else runs
     vocab = Vocabulary.load(results)
     t1 = _read(results, "table1.csv")
     out = [

@@ -79,7 +79,7 @@ def write_report(
         log("no run of the headline task and protocol: no Table 1 and no figures")
     else:
         _write_figures(df, t1, results, Path(renders))
-    write_text_atomic(results / PAGE, results_page(results))
+    write_text_atomic(results / PAGE, results_page(results, df))
 
 
 def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> pd.DataFrame:
