@@ -35,6 +35,18 @@ explain none. From it:
   median depth in view i of the matches the pose explains, in baselines; with fewer than
   10, the distance at which the baseline subtends the saturation angle).
 
+**The focal length of photographs without one** (no EXIF, no model: COLMAP's guess of
+1.2 x max(width, height), `View.focal_known` False) is estimated before the first pass
+uses it (`estimate_focal`): for the true intrinsics, the essential matrix E = K_j^T F K_i
+of each pair has two equal singular values (Mendonca and Cipolla, 1999). F is COLMAP's
+fundamental matrix of the first pass's tentative matches (LO-RANSAC, seeded, 1 px);
+over the pairs of guessed views it explains `MIN_SUPPORT` matches of, the focal factor
+(focal / max(width, height)) of `FOCAL_FACTORS` that minimises the median of
+(s1 - s2) / (s1 + s2) is taken, one for all the guessed views (one camera; principal
+point at the image centre, square pixels). With fewer than `FOCAL_MIN_PAIRS` such pairs,
+or without a minimum inside the range (critical motions: e.g. optical axes that meet in
+one point, as on the rendered camera paths), the guess stays.
+
 A pair whose geometry cannot be estimated does not overlap (a value, never an error); a
 view that overlaps nothing gets zero parallax and epipolar signals, and a log line says so.
 """
@@ -72,6 +84,9 @@ FIRST_PASS_TRIALS = 1000
 """RANSAC trials of the first pass (COLMAP's default 10000): enough for an inlier ratio of
 0.4 at 99.9% confidence; a pair with fewer inliers than that is left out."""
 RANSAC_SEED = 0
+FOCAL_FACTORS = np.geomspace(0.3, 3.0, 241)
+"""The focal lengths `estimate_focal` tries, x max(width, height): about 1% apart."""
+FOCAL_MIN_PAIRS = 2
 
 
 @dataclass(frozen=True)
@@ -380,6 +395,48 @@ def _relative_pose(
     return a, b, near[_midpoints(a, b, xa[near], xb[near])[1]]
 
 
+def _first_pass(pools: list[Candidates], strong: list[np.ndarray], i: int, j: int):
+    """The first pass's tentative matches of views i and j: their pixels (xa[k] <-> xb[k])."""
+    si, sj = strong[i], strong[j]
+    m = tentative_matches(pools[i].descriptors[si], pools[j].descriptors[sj], FIRST_PASS_RATIO)
+    return pools[i].xy[si][m[:, 0]], pools[j].xy[sj][m[:, 1]]
+
+
+def estimate_focal(
+    views: list[View], pools: list[Candidates], cfg: SignalConfig
+) -> tuple[float, int] | None:
+    """The focal factor of the views whose focal length is guessed and the number of pairs
+    it rests on, or None with too few (module docstring)."""
+    guessed = [i for i, v in enumerate(views) if not v.focal_known]
+    strong = _strongest(pools, cfg.first_pass)
+    opts = pycolmap.RANSACOptions()
+    opts.max_error, opts.random_seed, opts.max_num_trials = (
+        FIRST_PASS_MAX_ERROR,
+        RANSAC_SEED,
+        FIRST_PASS_TRIALS,
+    )
+    costs = []
+    for i, j in combinations(guessed, 2):
+        xa, xb = _first_pass(pools, strong, i, j)
+        fit = pycolmap.estimate_fundamental_matrix(xa, xb, opts) if len(xa) >= 8 else None
+        if fit is None or int(np.sum(fit["inlier_mask"])) < MIN_SUPPORT:
+            continue
+        ka, kb = (_intrinsics(views[v].camera, FOCAL_FACTORS) for v in (i, j))
+        sv = np.linalg.svd(kb.transpose(0, 2, 1) @ fit["F"] @ ka, compute_uv=False)
+        costs.append((sv[:, 0] - sv[:, 1]) / np.maximum(sv[:, 0] + sv[:, 1], 1e-300))
+    best = int(np.median(costs, axis=0).argmin()) if len(costs) >= FOCAL_MIN_PAIRS else 0
+    if best in (0, len(FOCAL_FACTORS) - 1):  # too few pairs, or no minimum inside the range
+        return None
+    return float(FOCAL_FACTORS[best]), len(costs)
+
+
+def _intrinsics(cam: Camera, factors: np.ndarray) -> np.ndarray:
+    """(F, 3, 3): K of `cam` with each focal factor (x max(width, height))."""
+    K = np.tile(cam.K, (len(factors), 1, 1))
+    K[:, 0, 0] = K[:, 1, 1] = factors * max(cam.width, cam.height)
+    return K
+
+
 def image_geometry(views: list[View], pools: list[Candidates], cfg: SignalConfig) -> Geometry:
     """The geometry estimated from the images and intrinsics alone (module docstring)."""
     n = len(views)
@@ -389,11 +446,9 @@ def image_geometry(views: list[View], pools: list[Candidates], cfg: SignalConfig
     pair_frame: dict[tuple[int, int], tuple[Camera, Camera]] = {}
     frames: list[list[Frame]] = [[] for _ in range(n)]
     for i, j in combinations(range(n), 2):
-        si, sj = strong[i], strong[j]
-        m = tentative_matches(pools[i].descriptors[si], pools[j].descriptors[sj], FIRST_PASS_RATIO)
-        if len(m) < MIN_SUPPORT:
+        xa, xb = _first_pass(pools, strong, i, j)
+        if len(xa) < MIN_SUPPORT:
             continue
-        xa, xb = pools[i].xy[si][m[:, 0]], pools[j].xy[sj][m[:, 1]]
         pose = _relative_pose(cams[i], xa, cams[j], xb)
         if pose is None or len(pose[2]) < MIN_SUPPORT:
             continue
