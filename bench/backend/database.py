@@ -51,8 +51,11 @@ class SelectRequest:
     """The detector, signal, policy and back-end settings, as `bench run` has them."""
 
 
-def select_to_database(request: SelectRequest, out: Path) -> Path:
-    """Write OUT/database.db (module docstring); returns its path."""
+def select_to_database(request: SelectRequest, out: Path, seconds: dict | None = None) -> Path:
+    """Write OUT/database.db (module docstring); returns its path. `seconds`, if given,
+    receives the seconds of each step: read, the front end's (`stage.compute`), select,
+    write (the database and the overlays)."""
+    clock = {} if seconds is None else seconds
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise BenchError(f"--out {out} is a file; give a folder for database.db")
@@ -63,14 +66,19 @@ def select_to_database(request: SelectRequest, out: Path) -> Path:
         raise BenchError(f"{policy} is not a selection policy; valid: a policy of `bench run`")
     t = time.perf_counter()
     views = load_image_folder(request.images, request.cameras)
+    clock["read"] = time.perf_counter() - t
     if not all(v.posed for v in views):
         log("no poses (no --cameras): the geometry of the signals is estimated from the images")
-    views, pools, sigs, _ = compute(views, cfg.detector, cfg.signals, METHODS[policy].reads)
+    views, pools, sigs, front = compute(views, cfg.detector, cfg.signals, METHODS[policy].reads)
+    clock |= {k: v for k, v in front.items() if v}
     cams = [v.camera for v in views]
     match = matcher(cams, pools, cfg.backend)
     inputs = [PolicyInput(v, c, g) for v, c, g in zip(views, pools, sigs)]
+    step = time.perf_counter()
     sel, _ = select_views(policy, inputs, budget, 0, cfg.policy, match)
     pairs = match(sel) if request.match else []
+    clock["select"] = time.perf_counter() - step
+    step = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     db = out / "database.db"
     if db.exists():
@@ -97,6 +105,7 @@ def select_to_database(request: SelectRequest, out: Path) -> Path:
             for x, y in c.xy[s] - 0.5:
                 cv2.circle(img, (int(round(x)), int(round(y))), 3, (0, 255, 0), 1, cv2.LINE_AA)
             cv2.imwrite(str(path), img)
+    clock["write"] = time.perf_counter() - step
     n, kept = len(views), sum(len(s) for s in sel)
     seconds = f"{(time.perf_counter() - t) / n:.2f} s per image"
     if METHODS[policy].whole_pool:
