@@ -26,12 +26,11 @@ import cv2
 import numpy as np
 
 from bench import BenchError
-from bench.camera import Camera
 from bench.console import log
 from bench.files import atomic_path, content_key, source_hash
 from bench.frontend import features, geometry, signals
 from bench.frontend.features import Candidates, DetectorConfig
-from bench.frontend.geometry import IMAGES, RIG, SignalConfig, estimate_focal
+from bench.frontend.geometry import IMAGES, RIG, SignalConfig, estimate_focal, focal_camera
 from bench.frontend.signals import SIGNALS, TIMED, Signals, compute_signals
 from bench.frontend.views import View, load_views, source_key
 
@@ -96,9 +95,7 @@ def front_end(
 
 def with_focal(view: View, factor: float) -> View:
     """The view with focal length factor x max(width, height)."""
-    c = view.camera
-    f = factor * max(c.width, c.height)
-    return replace(view, camera=Camera(c.width, c.height, f, f, c.cx, c.cy, c.R, c.t))
+    return replace(view, camera=focal_camera(view.camera, factor))
 
 
 def compute(
