@@ -220,6 +220,7 @@ def test_policy_input_has_no_ground_truth_fields():
         "pixels",
         "camera",
         "posed",
+        "focal_known",
     ]
     assert [f.name for f in dataclasses.fields(Candidates)] == [
         "xy",

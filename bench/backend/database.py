@@ -1,37 +1,38 @@
 """`bench select`: the front end in front of classical SfM, on the user's own photographs.
 
-images (+ optional COLMAP model) -> candidates and the signals the policy reads -> B per
-image by a policy -> OUT/database.db (cameras, images, selected keypoints, COLMAP-format
-SIFT descriptors;
-with `match`, also matches and verified two-view geometries) and, with `overlays`,
-OUT/overlays/<image>.png. The candidate pool of an image is its `max_candidates` strongest
-detections (COLMAP's default feature count; the signals compare candidates pairwise, so a
-12-megapixel pool must be bounded). The database is written under a temporary name, then
-renamed.
+images (+ optional COLMAP model) -> the front-end stage of `bench run`
+(`bench.frontend.stage.compute`: large images downscaled to `detector.max_image_size`,
+the `detector.max_features` strongest candidates, the focal length estimated where it is
+guessed, the signals the policy declares) -> B per image by a policy -> OUT/database.db
+(cameras, images, selected keypoints, COLMAP-format SIFT descriptors; with `match`, also
+matches and verified two-view geometries) and, with `overlays`, OUT/overlays/<image>.png.
+A focal length that is not known (no EXIF, no model) is written as COLMAP writes a
+guess: a prior it does not trust (`has_prior_focal_length` 0), so its mapper refines it.
+The database is written under a temporary name, then renamed.
 """
 
 from __future__ import annotations
 
 import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
 import numpy as np
+import pycolmap
 
 from bench import BenchError
-from bench.backend.matching import BackendConfig, matcher
-from bench.backend.reconstruction import write_database
-from bench.console import log, progress
+from bench.backend.matching import matcher
+from bench.backend.reconstruction import camera_ids, write_database
+from bench.console import log
 from bench.files import atomic_path
 from bench.frontend import feedback, plugins
-from bench.frontend.features import Candidates, DetectorConfig, detect
-from bench.frontend.geometry import SignalConfig
-from bench.frontend.policies import POLICIES, PolicyConfig, PolicyInput, check_policies
+from bench.frontend.policies import POLICIES, PolicyInput, check_policies
 from bench.frontend.selection import select_views
-from bench.frontend.signals import compute_signals
-from bench.frontend.views import load_image_folder
+from bench.frontend.stage import compute
+from bench.frontend.views import View, load_image_folder
+from bench.harness.config import RunConfig
 from bench.vocabulary import METHODS
 
 
@@ -46,51 +47,38 @@ class SelectRequest:
     """A COLMAP model with the intrinsics and poses (None: the focal-length prior)."""
     match: bool = False
     overlays: bool = False
-    policy_modules: tuple[str, ...] = ()
-    max_candidates: int = 8192
+    settings: RunConfig = field(default_factory=lambda: RunConfig(render=None))
+    """The detector, signal, policy and back-end settings, as `bench run` has them."""
 
 
-def strongest(cand: Candidates, k: int) -> Candidates:
-    """The k candidates of highest detector response (all if there are fewer), in their
-    original order."""
-    if len(cand) <= k:
-        return cand
-    keep = np.sort(np.argsort(-cand.response, kind="stable")[:k])
-    return Candidates(
-        cand.xy[keep],
-        cand.size[keep],
-        cand.angle[keep],
-        cand.response[keep],
-        cand.descriptors[keep],
-    )
-
-
-def select_to_database(request: SelectRequest, out: Path) -> Path:
-    """Write OUT/database.db (module docstring); returns its path."""
-    policy, budget = request.policy, request.budget
-    plugins.load(request.policy_modules)
-    check_policies([policy])
-    if policy not in POLICIES and policy != feedback.NAME:
-        raise BenchError(f"{policy} is not a selection policy; valid: a policy of `bench run`")
-    det, backend = DetectorConfig(), BackendConfig()
-    t = time.perf_counter()
-    views = load_image_folder(request.images, request.cameras)
-    if not all(v.posed for v in views):
-        log("no poses (no --cameras): the geometry of the signals is estimated from the images")
-    with progress("detect", len(views)) as bar:
-        pools = []
-        for v in views:
-            pools.append(strongest(detect(v, det), request.max_candidates))
-            bar.update()
-    sigs, _ = compute_signals(views, pools, det, SignalConfig(), METHODS[policy].reads)
-    cams = [v.camera for v in views]
-    inputs = [PolicyInput(v, c, g) for v, c, g in zip(views, pools, sigs)]
-    cfg = PolicyConfig(modules=tuple(request.policy_modules))
-    sel, _ = select_views(policy, inputs, budget, 0, cfg, matcher(cams, pools, backend))
-    pairs = matcher(cams, pools, backend)(sel) if request.match else []
+def select_to_database(request: SelectRequest, out: Path, seconds: dict | None = None) -> Path:
+    """Write OUT/database.db (module docstring); returns its path. `seconds`, if given,
+    receives the seconds of each step: read, the front end's (`stage.compute`), select,
+    write (the database and the overlays)."""
+    clock = {} if seconds is None else seconds
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise BenchError(f"--out {out} is a file; give a folder for database.db")
+    policy, budget, cfg = request.policy, request.budget, request.settings.validate()
+    plugins.load(cfg.policy.modules)
+    check_policies([policy])
+    if policy not in POLICIES and policy != feedback.NAME:
+        raise BenchError(f"{policy} is not a selection policy; valid: a policy of `bench run`")
+    t = time.perf_counter()
+    views = load_image_folder(request.images, request.cameras)
+    clock["read"] = time.perf_counter() - t
+    if not all(v.posed for v in views):
+        log("no poses (no --cameras): the geometry of the signals is estimated from the images")
+    views, pools, sigs, front = compute(views, cfg.detector, cfg.signals, METHODS[policy].reads)
+    clock |= {k: v for k, v in front.items() if v}
+    cams = [v.camera for v in views]
+    match = matcher(cams, pools, cfg.backend)
+    inputs = [PolicyInput(v, c, g) for v, c, g in zip(views, pools, sigs)]
+    step = time.perf_counter()
+    sel, _ = select_views(policy, inputs, budget, 0, cfg.policy, match)
+    pairs = match(sel) if request.match else []
+    clock["select"] = time.perf_counter() - step
+    step = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     db = out / "database.db"
     if db.exists():
@@ -105,6 +93,7 @@ def select_to_database(request: SelectRequest, out: Path) -> Path:
                 pairs,
                 [c.descriptors[s] for c, s in zip(pools, sel)],
             )
+            untrust_guessed_focals(tmp, views)
     except Exception as e:
         raise BenchError(f"cannot write {db}: {e}") from e
     shutil.rmtree(out / "overlays", ignore_errors=True)  # never beside another run's
@@ -116,16 +105,35 @@ def select_to_database(request: SelectRequest, out: Path) -> Path:
             for x, y in c.xy[s] - 0.5:
                 cv2.circle(img, (int(round(x)), int(round(y))), 3, (0, 255, 0), 1, cv2.LINE_AA)
             cv2.imwrite(str(path), img)
-    short = {v.name: len(c) for v, c in zip(views, pools) if len(c) < budget}
-    if short:
-        log(
-            f"{len(short)} image(s) have fewer candidates than the budget {budget} and hold "
-            f"all of them: {', '.join(f'{k} ({n})' for k, n in list(short.items())[:5])}"
+    clock["write"] = time.perf_counter() - step
+    n, kept = len(views), sum(len(s) for s in sel)
+    seconds = f"{(time.perf_counter() - t) / n:.2f} s per image"
+    if METHODS[policy].whole_pool:
+        summary = f"{kept} keypoints in {n} images: the whole pool (--budget does not apply)"
+    else:
+        short = {v.name: len(c) for v, c in zip(views, pools) if len(c) < budget}
+        if short:
+            log(
+                f"{len(short)} image(s) have fewer candidates than the budget {budget} and "
+                f"hold all of them: {', '.join(f'{k} ({m})' for k, m in list(short.items())[:5])}"
+            )
+        missing = sum(max(budget - len(s), 0) for s in sel)
+        summary = f"{kept} keypoints in {n} images" + (
+            f", {missing} short of {budget} per image" if missing else f", {budget} per image"
         )
-    n = len(views)
-    log(
-        f"{policy}: {sum(len(s) for s in sel)} keypoints in {n} images, "
-        f"{budget * n - sum(len(s) for s in sel)} short of {budget} per image "
-        f"({(time.perf_counter() - t) / n:.2f} s per image){', matched' if request.match else ''}"
-    )
+    log(f"{policy}: {summary} ({seconds}){', matched' if request.match else ''}")
     return db
+
+
+def untrust_guessed_focals(path: Path, views: list[View]) -> None:
+    """Mark the cameras of views whose focal length was guessed as COLMAP marks a guess:
+    `has_prior_focal_length` false (the database's `prior_focal_length` 0)."""
+    ids = camera_ids([v.camera for v in views])
+    db = pycolmap.Database.open(str(path))
+    try:
+        for cid in sorted({cid for cid, v in zip(ids, views) if not v.focal_known}):
+            cam = db.read_camera(cid)
+            cam.has_prior_focal_length = False
+            db.update_camera(cam)
+    finally:
+        db.close()

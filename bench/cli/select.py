@@ -3,19 +3,23 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 from bench import BenchError
 
 HELP = "select B keypoints per image of your own photographs into a COLMAP database"
 DESCRIPTION = (
-    "Detect the candidate pool on every JPEG/PNG image in DIR (two or more, any size), "
-    "compute the signals, select B per image with POLICY and write OUT/database.db: "
-    "cameras, images, the selected keypoints and their SIFT descriptors in COLMAP's format "
-    "(COLMAP's matchers and mapper accept it). Calibration from --cameras (a COLMAP model "
-    "with poses) or else one camera per image size from the focal-length prior (EXIF 35 mm "
-    "equivalent, else 1.2 x max(width, height)); without poses the geometry the signals "
-    "need is estimated from the images, like the sfm task's."
+    "Detect the candidate pool on every image in DIR (JPEG, PNG, TIFF, WebP; two or more, "
+    "any size; other files are named and skipped), compute the signals the policy reads, "
+    "select B per image with POLICY and write OUT/database.db: cameras, images, the "
+    "selected keypoints and their SIFT descriptors in COLMAP's format (COLMAP's matchers "
+    "and mapper accept it). The front end is `bench run`'s, with its settings (--set): "
+    "images larger than detector.max_image_size are detected downscaled. Calibration from "
+    "--cameras (a COLMAP model with poses) or else one camera per image size from the "
+    "focal-length prior (EXIF 35 mm equivalent; without it the focal length is guessed, "
+    "estimated from the images and written as an untrusted prior); without poses the "
+    "geometry the signals need is estimated from the images, like the sfm task's."
 )
 
 
@@ -48,19 +52,35 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--max-candidates",
         type=int,
-        default=8192,
-        help="candidate pool per image: the strongest detections (default: %(default)s)",
+        default=None,
+        help="candidate pool per image: the strongest detections; the setting "
+        "detector.max_features (default: 8192)",
     )
     parser.add_argument(
         "--policy-module", action="append", default=[], metavar="FILE", help="as for `bench run`"
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        dest="settings",
+        metavar="SECTION.FIELD=VALUE",
+        help="a setting of the detector, signals, policy or back end, as for `bench run` "
+        "(repeatable; e.g. --set detector.max_image_size=2000)",
     )
 
 
 def run(args: argparse.Namespace) -> None:
     from bench.backend.database import SelectRequest, select_to_database
+    from bench.cli.common import apply_settings
+    from bench.harness.config import RunConfig
 
-    if args.budget <= 0 or args.max_candidates <= 0:
+    if args.budget <= 0 or (args.max_candidates is not None and args.max_candidates <= 0):
         raise BenchError("--budget and --max-candidates must be positive")
+    cfg = RunConfig(render=None)
+    cfg = replace(cfg, policy=replace(cfg.policy, modules=tuple(args.policy_module)))
+    if args.max_candidates is not None:
+        cfg = replace(cfg, detector=replace(cfg.detector, max_features=args.max_candidates))
     request = SelectRequest(
         images=args.images,
         policy=args.policy,
@@ -68,7 +88,6 @@ def run(args: argparse.Namespace) -> None:
         cameras=args.cameras,
         match=args.match,
         overlays=args.overlays,
-        policy_modules=tuple(args.policy_module),
-        max_candidates=args.max_candidates,
+        settings=apply_settings(cfg, args.settings),
     )
     print(select_to_database(request, args.out))

@@ -4,7 +4,12 @@ the views without them, the geometry estimated from the images).
 
 A view larger than `DetectorConfig.max_image_size` is detected, and its signals computed,
 on a downscaled copy (so every pixel threshold of the signals means what it means on the
-rendered views); its candidates are returned in full-resolution pixels.
+rendered views); its candidates are returned in full-resolution pixels. Views whose focal
+length is a guess (photographs without EXIF) get the focal length estimated from the
+images (`bench.frontend.geometry.estimate_focal`) before the signals read the geometry.
+`compute` is this stage for any views (`bench select` calls it on a folder of
+photographs, with the signals its policy reads); `front_end` caches it for a render
+entry or dataset.
 
 Cached (npz beside the render cache) by the render entry, the geometry granted, the
 detector and signal settings and the code that computes them (`front_end` and what it
@@ -15,7 +20,7 @@ it, so reported front-end times do not depend on whether the cache was warm.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from functools import cache
 from pathlib import Path
 
@@ -28,8 +33,8 @@ from bench.console import log
 from bench.files import atomic_path, content_key
 from bench.frontend import features
 from bench.frontend.features import Candidates, DetectorConfig
-from bench.frontend.geometry import IMAGES, RIG
-from bench.frontend.signals import SIGNALS, TIMED, SignalConfig, Signals, compute_signals
+from bench.frontend.geometry import IMAGES, RIG, SignalConfig, estimate_focal, focal_camera
+from bench.frontend.signals import SIGNALS, TIMED, Signals, compute_signals
 from bench.frontend.views import View, load_views, source_key
 
 _CAND = [f.name for f in fields(Candidates)]
@@ -91,13 +96,7 @@ def front_end(
             return FrontEnd(views, pools, sigs, seconds, cached=True)
         except (OSError, ValueError, KeyError):
             log(f"damaged front-end cache {path.name}; computing it again")
-    t = time.perf_counter()
-    work = [v.scale_to(det.max_image_size) for v in views]
-    pools = [features.detect(v, det) for v, _, _ in work]
-    seconds = {"detect": time.perf_counter() - t}
-    sigs, sig_seconds = compute_signals([v for v, _, _ in work], pools, det, sig)
-    seconds.update(sig_seconds)
-    pools = [c.scaled(1 / sx, 1 / sy) for c, (_, sx, sy) in zip(pools, work)]
+    _, pools, sigs, seconds = compute(views, det, sig)
     arrays = {f"{f}_{v}": getattr(c, f) for v, c in enumerate(pools) for f in _CAND}
     arrays |= {f"{s}_{v}": getattr(g, s) for v, g in enumerate(sigs) for s in SIGNALS}
     arrays |= {f"seconds_{k}": np.float64(s) for k, s in seconds.items()}
@@ -108,3 +107,54 @@ def front_end(
     except OSError as e:
         raise BenchError(f"cannot write the front-end cache {path}: {e.strerror}") from e
     return FrontEnd(views, pools, sigs, seconds, cached=False)
+
+
+def with_focal(view: View, factor: float) -> View:
+    """The view with focal length factor x max(width, height)."""
+    return replace(view, camera=focal_camera(view.camera, factor))
+
+
+def compute(
+    views: list[View], det: DetectorConfig, sig: SignalConfig, wanted: tuple[str, ...] = SIGNALS
+) -> tuple[list[View], list[Candidates], list[Signals], dict[str, float]]:
+    """The stage on any views (module docstring): the views (with the focal length
+    estimated where it was guessed), their candidates in full-resolution pixels, the
+    signals (`wanted`: those a caller's policy reads, `compute_signals`) and the seconds."""
+    t = time.perf_counter()
+    work = [v.scale_to(det.max_image_size) for v in views]
+    pools = [features.detect(v, det) for v, _, _ in work]
+    seconds = {"detect": time.perf_counter() - t}
+    t = time.perf_counter()
+    if not all(v.focal_known for v in views):
+        views, work = _estimate_focal(views, work, pools, sig)
+    focal_s = time.perf_counter() - t
+    sigs, sig_seconds = compute_signals([v for v, _, _ in work], pools, det, sig, wanted)
+    seconds.update(sig_seconds)
+    seconds["geometry"] += focal_s
+    pools = [c.scaled(1 / sx, 1 / sy) for c, (_, sx, sy) in zip(pools, work)]
+    return views, pools, sigs, seconds
+
+
+def _estimate_focal(views, work, pools, sig):
+    """`views` and their working copies with the focal length of the guessed ones
+    estimated from the images (kept as guessed where it cannot be), said in one line."""
+    guessed = [v for v in views if not v.focal_known]
+    what = f"{len(guessed)} image(s) have no known focal length (no EXIF, no camera model)"
+    found = estimate_focal([v for v, _, _ in work], pools, sig)
+    if found is None:
+        log(
+            f"{what}: it is guessed, 1.2 x max(width, height), and the images do not determine "
+            "it (too few pairs, or views whose optical axes meet); the geometry of the "
+            "signals may be poor: give --cameras"
+        )
+        return views, work
+    factor, pairs = found
+    c = guessed[0].camera
+    log(
+        f"{what}: guessed, then estimated from {pairs} pairs of images: {factor:.3f} x "
+        f"max(width, height) ({factor * max(c.width, c.height):.0f} px at {c.width}x{c.height}); "
+        "recorded as an untrusted prior"
+    )
+    views = [v if v.focal_known else with_focal(v, factor) for v in views]
+    work = [(v if v.focal_known else with_focal(v, factor), sx, sy) for v, sx, sy in work]
+    return views, work

@@ -6,9 +6,15 @@ Three sources give the same list of `View`s:
 * a dataset in the COLMAP layout, `DIR/images/` and a model in `DIR/sparse/0/` or
   `DIR/sparse/` (text or binary, `bench.frontend.colmap_model`): the views of the model,
   posed;
-* a folder of images without poses (`bench select`): every JPEG or PNG in it, with a camera
-  from a COLMAP model when one is given, else from the focal-length prior (EXIF's 35 mm
-  equivalent focal length, or COLMAP's default 1.2 x max(width, height)).
+* a folder of images without poses (`bench select`): every image in it (`IMAGE_SUFFIXES`;
+  the other files are named in one log line), with a camera from a COLMAP model when one
+  is given, else from the focal-length prior (EXIF's 35 mm equivalent focal length, or
+  COLMAP's default 1.2 x max(width, height), a guess: `View.focal_known` False, and the
+  front end estimates it from the images, `bench.frontend.geometry.estimate_focal`).
+
+An image is read whole or refused: a file OpenCV cannot decode, and a JPEG that ends
+before its end-of-image marker (OpenCV would return its decoded part), are refused in one
+line naming the file.
 
 This module is the front end's and back end's only way into the data; it never opens
 ground-truth files.
@@ -25,10 +31,12 @@ import numpy as np
 
 from bench import BenchError
 from bench.camera import Camera
+from bench.console import log
 from bench.files import checksum, content_key, entry_problem
 from bench.frontend.colmap_model import check_images, find_model, read_model
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".webp")
+"""The image files a folder's views are read from (those OpenCV decodes)."""
 DEFAULT_FOCAL_FACTOR = 1.2
 """COLMAP's focal-length prior without EXIF: 1.2 x max(width, height)."""
 
@@ -64,6 +72,8 @@ class View:
     camera: Camera
     posed: bool = True
     """Whether `camera` holds a real pose (False: intrinsics only, identity pose)."""
+    focal_known: bool = True
+    """Whether the focal length is known (a model, EXIF); False: COLMAP's default guess."""
 
     @property
     def image(self) -> np.ndarray:
@@ -144,26 +154,41 @@ def _contents_key(root: Path, stats: tuple) -> str:
     )
 
 
+def truncated_jpeg(data: bytes) -> bool:
+    """Whether JPEG bytes end before the end-of-image marker (FFD9) of their last scan
+    (FFDA): inside entropy-coded data an FF byte is always stuffed, so neither marker can
+    appear there."""
+    return data[:2] == b"\xff\xd8" and data.rfind(b"\xff\xd9") < data.rfind(b"\xff\xda")
+
+
 def read_image(path: Path) -> np.ndarray:
-    """An image as 8-bit RGB, pixels as stored (EXIF orientation ignored, as COLMAP does)."""
-    img = cv2.imread(str(path), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+    """An image as 8-bit RGB, pixels as stored (EXIF orientation ignored, as COLMAP does);
+    a file not read whole is refused (module docstring)."""
+    try:
+        data = Path(path).read_bytes()
+    except OSError as e:
+        raise BenchError(f"cannot read image {path}: {e.strerror}") from None
+    if truncated_jpeg(data):
+        raise BenchError(
+            f"cannot read image {path}: the JPEG is truncated (no end-of-image marker)"
+        )
+    flags = cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), flags) if data else None
     if img is None:
         raise BenchError(f"cannot read image {path}")
     return img[..., ::-1].copy()
 
 
-def focal_prior(path: Path, width: int, height: int) -> float:
-    """Focal length in pixels: EXIF's 35 mm equivalent when present, else COLMAP's default."""
-    try:
-        from PIL import Image  # a dependency of matplotlib
+def exif_focal(path: Path, width: int, height: int) -> float | None:
+    """Focal length in pixels from EXIF's 35 mm equivalent, or None without it."""
+    from PIL import Image, UnidentifiedImageError
 
+    try:
         with Image.open(path) as im:
             f35 = im.getexif().get_ifd(0x8769).get(0xA405)
-        if f35:
-            return float(f35) / 36.0 * max(width, height)
-    except Exception:  # no EXIF, or a format PIL cannot read: the default prior
-        pass
-    return DEFAULT_FOCAL_FACTOR * max(width, height)
+    except (OSError, UnidentifiedImageError, ValueError):  # no EXIF PIL can read
+        return None
+    return float(f35) / 36.0 * max(width, height) if f35 else None
 
 
 def load_views(source: Path | Source) -> list[View]:
@@ -179,32 +204,46 @@ def load_views(source: Path | Source) -> list[View]:
     ]
 
 
-def image_files(folder: Path) -> list[str]:
-    """The JPEG and PNG files of a folder (recursively), as sorted relative names."""
+def folder_files(folder: Path) -> tuple[list[str], list[str]]:
+    """The image files (`IMAGE_SUFFIXES`) of a folder and its other files (recursively),
+    as sorted relative names."""
     folder = Path(folder)
     if not folder.is_dir():
         raise BenchError(f"image folder {folder} does not exist")
-    return sorted(
-        p.relative_to(folder).as_posix()
-        for p in folder.rglob("*")
-        if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()
-    )
+    files = sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
+    images = [f for f in files if Path(f).suffix.lower() in IMAGE_SUFFIXES]
+    return images, [f for f in files if f not in set(images)]
+
+
+def image_files(folder: Path) -> list[str]:
+    """The image files of a folder (recursively), as sorted relative names."""
+    return folder_files(folder)[0]
 
 
 def load_image_folder(folder: Path, model: Path | None = None) -> list[View]:
     """Every image of a folder: posed from a COLMAP model when one is given (only its
-    images), else unposed with the focal-length prior. At least two images."""
+    images), else unposed with the focal-length prior; the files it skips are named. At
+    least two images."""
     folder = Path(folder)
     if model is not None:
         views = load_views(Source(folder, Path(model)))
     else:
+        names, skipped = folder_files(folder)
+        if skipped:
+            log(
+                f"{folder}: skipped {len(skipped)} file(s) that are not images "
+                f"({'/'.join(IMAGE_SUFFIXES)}): {', '.join(skipped[:20])}"
+                + (f" and {len(skipped) - 20} more" if len(skipped) > 20 else "")
+            )
         views = []
-        for i, name in enumerate(image_files(folder)):
+        for i, name in enumerate(names):
             img = read_image(folder / name)
             h, w = img.shape[:2]
-            f = focal_prior(folder / name, w, h)
+            f = exif_focal(folder / name, w, h)
+            known = f is not None
+            f = f if known else DEFAULT_FOCAL_FACTOR * max(w, h)
             cam = Camera(w, h, f, f, w / 2, h / 2, np.eye(3), np.zeros(3))
-            views.append(View(i, name, img, cam, posed=False))
+            views.append(View(i, name, img, cam, posed=False, focal_known=known))
     if len(views) < 2:
         raise BenchError(f"{folder} holds {len(views)} usable image(s); at least two are needed")
     return views

@@ -1,0 +1,168 @@
+"""`bench select` on photographs: the front end of `bench run` (its settings, downscaling,
+declared signals), images read whole or refused, and an honest focal length."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pycolmap
+import pytest
+
+from bench import BenchError
+from bench.camera import look_at
+from bench.cli import main
+from bench.frontend.features import Candidates, DetectorConfig, detect
+from bench.frontend.geometry import SignalConfig, estimate_focal
+from bench.frontend.policies import PolicyConfig, PolicyInput
+from bench.frontend.selection import select_views
+from bench.frontend.stage import compute
+from bench.frontend.views import View, load_image_folder, read_image
+
+PEEKING = """
+from bench.frontend.policies import policy
+import numpy as np
+
+
+@policy("peeking", reads=("texture",))
+def peeking(inp, budget, rng, cfg):
+    return np.argsort(-(inp.signals.texture + inp.signals.epipolar))[:budget]
+"""
+
+
+def texture(height: int, width: int, seed: int = 0) -> np.ndarray:
+    """A smooth random texture (SIFT finds many keypoints on it), 8-bit BGR."""
+    rng = np.random.default_rng(seed)
+    img = cv2.GaussianBlur(rng.uniform(0, 255, (height, width)), (0, 0), 2.0)
+    img = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+
+
+def photos(folder, n=3, size=(160, 120), ext=".png"):
+    """`n` overlapping crops of one texture (a plane seen by a sliding camera)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    big = texture(size[1] + 40, size[0] + 20 * n)
+    for k in range(n):
+        cv2.imwrite(str(folder / f"p{k}{ext}"), big[20 : 20 + size[1], 20 * k : 20 * k + size[0]])
+    return folder
+
+
+def select(folder, out, *extra):
+    return main(["select", "--images", str(folder), "--out", str(out), "--budget", "40", *extra])
+
+
+def test_a_truncated_jpeg_is_refused_naming_the_file(tmp_path, capsys):
+    folder = photos(tmp_path / "im", ext=".jpg")
+    data = (folder / "p1.jpg").read_bytes()
+    (folder / "p1.jpg").write_bytes(data[: len(data) // 2])
+    with pytest.raises(BenchError, match="p1.jpg.*truncated"):
+        read_image(folder / "p1.jpg")
+    assert select(folder, tmp_path / "o") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "p1.jpg" in err and "truncated" in err
+    assert not (tmp_path / "o" / "database.db").exists()
+
+
+def test_tiff_and_webp_are_read_and_the_skipped_files_named(tmp_path, capsys):
+    folder = photos(tmp_path / "im", n=1)
+    img = texture(120, 160, seed=1)
+    cv2.imwrite(str(folder / "b.tif"), img)
+    cv2.imwrite(str(folder / "c.webp"), img, [cv2.IMWRITE_WEBP_QUALITY, 101])  # lossless
+    (folder / "notes.txt").write_text("not an image")
+    cv2.imwrite(str(folder / "d.bmp"), img)
+    views = load_image_folder(folder)
+    assert [v.name for v in views] == ["b.tif", "c.webp", "p0.png"]
+    assert np.array_equal(views[0].image, img[..., ::-1])
+    assert np.array_equal(views[1].image, img[..., ::-1])
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "skipped 2 file(s)" in err
+    assert "d.bmp" in err and "notes.txt" in err
+
+
+def test_a_guessed_focal_is_an_untrusted_prior_and_is_said(tmp_path, capsys):
+    folder = photos(tmp_path / "im")
+    assert select(folder, tmp_path / "o") == 0
+    assert "no known focal length" in capsys.readouterr().err
+    db = pycolmap.Database.open(str(tmp_path / "o" / "database.db"))
+    try:
+        cams = db.read_all_cameras()
+        assert len(cams) == 1 and not cams[0].has_prior_focal_length
+    finally:
+        db.close()
+
+
+def test_the_focal_length_is_estimated_from_a_general_motion():
+    """Synthetic correspondences of four cameras whose optical axes do not meet: the
+    estimate is the true focal length, the guess is 1.2 x max(width, height)."""
+    rng = np.random.default_rng(0)
+    X = rng.uniform(-2, 2, (300, 3)) + [0, 0, 1]
+    eyes = [(-3, -8, 1.5), (-1, -8.5, 0.5), (1.5, -7.5, 2), (3, -8, 1)]
+    targets = [(0.8, 0, 1.3), (-0.6, 0.5, 0.7), (0.4, -0.7, 1.8), (-1, 0.3, 0.5)]
+    cams = [look_at(e, t, width=640, height=480, fov_x_deg=55) for e, t in zip(eyes, targets)]
+    desc = rng.normal(size=(len(X), 128)).astype(np.float32)
+    desc /= np.linalg.norm(desc, axis=1, keepdims=True)
+    views, pools = [], []
+    for k, cam in enumerate(cams):
+        uv, z = cam.project(X)
+        seen = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < 640) & (uv[:, 1] >= 0) & (uv[:, 1] < 480)
+        uv = uv[seen] + rng.normal(0, 0.2, (seen.sum(), 2))
+        n = len(uv)
+        pools.append(Candidates(uv, np.full(n, 4.0), np.zeros(n), np.ones(n), desc[seen]))
+        f = 1.2 * 640
+        guess = look_at((0, 0, 0), (0, 1, 0), width=640, height=480)
+        guess = type(guess)(640, 480, f, f, 320, 240, guess.R, guess.t)
+        views.append(View(k, f"v{k}", np.zeros((480, 640, 3), np.uint8), guess, False, False))
+    factor, pairs = estimate_focal(views, pools, SignalConfig())
+    assert pairs == 6
+    assert factor * 640 == pytest.approx(cams[0].fx, rel=0.02)
+
+
+def test_out_file_is_refused_before_any_work(tmp_path, capsys):
+    folder = photos(tmp_path / "im")
+    (folder / "broken.png").write_bytes(b"not an image")  # would be refused on reading
+    (tmp_path / "file").write_text("x")
+    assert select(folder, tmp_path / "file") == 2
+    assert "is a file; give a folder" in capsys.readouterr().err
+
+
+def test_an_undeclared_signal_is_refused_in_run_and_select(tmp_path, capsys):
+    module = tmp_path / "peek.py"
+    module.write_text(PEEKING)
+    folder = photos(tmp_path / "im")
+    assert (
+        select(folder, tmp_path / "o", "--policy", "peeking", "--policy-module", str(module)) == 2
+    )
+    last = capsys.readouterr().err.splitlines()[-1]
+    assert "policy peeking reads the signal 'epipolar', which it did not declare" in last
+    # `bench run`'s selection: every signal computed, the same refusal
+    views, pools, sigs, _ = compute(load_image_folder(folder), DetectorConfig(), SignalConfig())
+    inputs = [PolicyInput(v, c, s) for v, c, s in zip(views, pools, sigs)]
+    assert sigs[0].epipolar.shape == (len(pools[0]),)
+    with pytest.raises(BenchError, match="'epipolar', which it did not declare"):
+        select_views("peeking", inputs, 20, 0, PolicyConfig(modules=(str(module),)), None)
+
+
+def test_select_takes_the_settings_and_downscales_as_run_does(tmp_path, capsys):
+    folder = photos(tmp_path / "im", size=(320, 240))
+    out = tmp_path / "o"
+    assert select(folder, out, "--policy", "all", "--set", "detector.max_image_size=160") == 0
+    err = capsys.readouterr().err
+    assert "the whole pool" in err and "short" not in err
+    small = [detect(v.scale_to(160)[0], DetectorConfig()) for v in load_image_folder(folder)]
+    db = pycolmap.Database.open(str(out / "database.db"))
+    try:
+        kps = [db.read_keypoints(k + 1) for k in range(3)]
+    finally:
+        db.close()
+    assert [len(k) for k in kps] == [len(c) for c in small]
+    for k, c in zip(kps, small):  # detected at half size, kept in full-resolution pixels
+        assert np.allclose(k[:, :2], c.xy * 2, atol=1e-3)
+    assert select(folder, out, "--policy", "all", "--max-candidates", "25") == 0
+    assert (
+        select(folder, tmp_path / "s", "--policy", "all", "--set", "detector.max_features=25") == 0
+    )
+    for o in (out, tmp_path / "s"):
+        db = pycolmap.Database.open(str(o / "database.db"))
+        try:
+            assert db.num_keypoints() == 3 * 25
+        finally:
+            db.close()
