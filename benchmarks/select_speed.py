@@ -19,9 +19,9 @@ from pathlib import Path
 import cv2
 import pycolmap
 
-from bench.backend.database import SelectRequest, select_to_database
 from bench.frontend.features import DetectorConfig
 from bench.frontend.views import image_files
+from bench.harness.select import SelectRequest, select_to_database
 
 
 def colmap_seconds(folder: Path, db: Path, threads: int) -> float:

@@ -15,7 +15,6 @@ import pytest
 from scipy.spatial import cKDTree
 
 from bench import BenchError
-from bench.backend.database import SelectRequest, select_to_database
 from bench.cli import main
 from bench.evaluation.export import export_dataset
 from bench.frontend.colmap_model import read_model
@@ -25,6 +24,7 @@ from bench.frontend.stage import front_end
 from bench.frontend.views import load_image_folder, load_views, source_key
 from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig
+from bench.harness.select import SelectRequest, select_to_database
 from bench.report.transfer import transfer
 from bench.vocabulary import KEY, Vocabulary
 from tests.conftest import MEDIUM, bench_run

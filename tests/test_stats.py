@@ -57,6 +57,18 @@ def test_a_one_seed_table_shows_no_interval_and_says_why():
     assert pooled["lo"] < pooled["mean_diff"] < pooled["hi"] and pooled["note"] == ""
 
 
+def test_table1_intervals_stay_within_the_metric_range():
+    """A t-interval of accuracy near 100 % reaches past 100 (and one of a small rmse below
+    0); Table 1 clips it to the declared range, which holds the mean."""
+    rows = _tri_rows(seeds=[0, 1, 2])
+    rows["accuracy_pct"] = [100.0, 100.0, 100.0, 100.0, 60.0, 100.0] * 4
+    t1 = table1(headline_frame(rows, Vocabulary.current()), Vocabulary.current())
+    raw = stratified_interval(rows[rows["policy"] == "texture"]["accuracy_pct"], rows["scene"][::2])
+    assert raw[2] > 100  # the interval as computed
+    texture = t1.set_index("policy").loc["texture"]
+    assert texture["accuracy_pct_hi"] == 100 and texture["accuracy_pct_lo"] == raw[1]
+
+
 def test_the_interval_is_the_stratified_t_interval_of_a_hand_made_case():
     # one scene, 1..5: mean 3, sd sqrt(2.5), 4 degrees of freedom
     mean, lo, hi, note = stratified_interval([1.0, 2.0, 3.0, 4.0, 5.0])

@@ -115,6 +115,20 @@ def with_oracle_share(df: pd.DataFrame) -> pd.DataFrame:
     return df.assign(completeness_vs_oracle_pct=np.where(ref > 0, share, math.nan))
 
 
+def _metric(column: str, others: list[str]) -> str:
+    """A Table 1 column's metric (`sfm_maa` -> `maa`)."""
+    task = next((t for t in others if column.startswith(f"{t}_")), None)
+    return column[len(task) + 1 :] if task else column
+
+
+def _within(lo: float, hi: float, bounds) -> tuple[float, float]:
+    """An interval clipped to the metric's declared range (the mean lies in it, so the
+    clipped interval covers it whenever the whole one does)."""
+    if bounds is None or math.isnan(lo):
+        return lo, hi
+    return max(lo, bounds[0]), hi if bounds[1] is None else min(hi, bounds[1])
+
+
 def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     """Per strategy and budget: every metric's mean and 95% interval over runs, the scenes
     as strata (`rows`: `headline_frame`, or the rows of one task and protocol)."""
@@ -136,9 +150,8 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
         for m in metrics:
             if m in g:
                 x = solvable(g, m)
-                row[m], row[f"{m}_lo"], row[f"{m}_hi"], note = stratified_interval(
-                    x[m].astype(float), x["scene"]
-                )
+                row[m], lo, hi, note = stratified_interval(x[m].astype(float), x["scene"])
+                row[f"{m}_lo"], row[f"{m}_hi"] = _within(lo, hi, vocab.range_of(_metric(m, others)))
                 notes += [note] if note and x[m].notna().any() else []
         row["note"] = "; ".join(dict.fromkeys(notes))
         out.append(row)
