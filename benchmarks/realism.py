@@ -38,7 +38,7 @@ from bench.render.config import RenderConfig
 from bench.render.entry import render_scene
 from bench.render.mitsuba import render_view, srgb8
 from bench.render.variant import resolve_variant
-from bench.scenes.spec import build_scene, load_spec
+from bench.scenes.catalog import build_scene, load_spec
 
 UNCAPPED = DetectorConfig(max_features=10**7)
 SIGMAS = 1.6 * 2.0 ** (np.arange(7) / 3)

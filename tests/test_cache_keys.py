@@ -257,15 +257,15 @@ def test_a_methods_own_setting_is_set_with_its_name():
 
 def test_a_scenes_render_key_covers_its_own_generator_and_the_render_code_alone():
     from bench.render.entry import RENDER_CODE, render_code_hash
-    from bench.scenes import spec
+    from bench.scenes import catalog
 
-    table = covered([*RENDER_CODE, spec.generator_of("table")])
+    table = covered([*RENDER_CODE, catalog.generator_of("table")])
     assert ("bench.scenes.generators", "table") in table
     assert ("bench.camera", "write_colmap_rig") in table
     assert ("bench.camera", "read_colmap_rig") not in table  # COLMAP I/O it does not use
     parts = covered(
-        [*RENDER_CODE, spec.generator_of("table")],
-        cut=[g for g in spec.generator_functions() if g is not spec.generator_of("table")],
+        [*RENDER_CODE, catalog.generator_of("table")],
+        cut=[g for g in catalog.generator_functions() if g is not catalog.generator_of("table")],
     )
     assert ("bench.scenes.generators", "facade") not in parts
     assert len({render_code_hash(s) for s in ("table", "facade", "corridor")}) == 3

@@ -16,7 +16,7 @@ from bench.camera import look_at, read_colmap_rig
 from bench.cli import main
 from bench.render import entry as render
 from bench.render import mitsuba, variant
-from bench.scenes.spec import build_scene, load_spec, scene_names
+from bench.scenes.catalog import build_scene, load_spec, scene_names
 from tests.conftest import TINY
 
 

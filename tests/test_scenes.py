@@ -9,7 +9,7 @@ from bench.camera import read_colmap_rig
 from bench.frontend.features import DetectorConfig, detect
 from bench.frontend.signals import DUPLICATE_DISTANCE, same_view_neighbours
 from bench.frontend.views import load_views
-from bench.scenes.spec import build_scene, load_spec, scene_names
+from bench.scenes.catalog import build_scene, load_spec, scene_names
 
 
 def test_all_four_scene_types_are_declared():

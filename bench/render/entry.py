@@ -20,9 +20,8 @@ from bench.console import log
 from bench.render.config import RenderConfig
 from bench.render.mitsuba import AOVS, GT_LAYERS, MITSUBA_FROM_OPENCV, render_view, srgb8
 from bench.render.variant import resolve_variant
-from bench.scenes import generators  # noqa: F401 (registers the scenes' generators)
-from bench.scenes import spec as scene_spec
-from bench.scenes.spec import SceneSpec, build_scene, load_spec
+from bench.scenes.catalog import build_scene, generator_functions, generator_of, load_spec
+from bench.scenes.spec import SceneSpec
 
 RENDER_CODE = (build_scene, render_view, srgb8, write_colmap_rig)
 """Where the code that decides a render entry's content starts (with the scene's own
@@ -34,8 +33,8 @@ def render_code_hash(scene: str) -> str:
     """Hash of the code that renders `scene`: `RENDER_CODE`, the scene's generator and
     what they reach; the other scenes' generators cut out (a new scene renders itself
     alone), and so is what no renderer reaches (COLMAP I/O beside the camera model)."""
-    own = scene_spec.generator_of(scene)
-    others = [g for g in scene_spec.generator_functions() if g is not own]
+    own = generator_of(scene)
+    others = [g for g in generator_functions() if g is not own]
     return code_hash([*RENDER_CODE, own], cut=others)
 
 

@@ -2,12 +2,9 @@
 parameters) and a seed. Out: a renderer-independent `SceneDescription` (meshes,
 materials, lights, the calibrated camera rig).
 
-`spec` holds the data types, the registry and `build_scene`; `generators` the builders
+`spec` holds the data types, the registry and `load_spec`; `generators` the builders
 of the scene types (a new scene type goes there); `shapes` and `textures` the numpy
-primitives they are made of.
+primitives they are made of; `catalog` the scene types by name with every builder
+registered (`build_scene` is imported from there). This package imports none of them,
+and they import each other by full module path only: no import runs back into its caller.
 """
-
-from bench.scenes import generators  # noqa: F401  (registers the scene builders)
-from bench.scenes.spec import SceneDescription, SceneSpec, build_scene, load_spec, scene_names
-
-__all__ = ["SceneDescription", "SceneSpec", "build_scene", "load_spec", "scene_names"]

@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
+import bench.scenes.shapes as shapes
+import bench.scenes.textures as textures
 from bench.camera import Camera, look_at
-from bench.scenes import shapes, textures
 from bench.scenes.shapes import Geom
 from bench.scenes.spec import Material, Mesh, generator
 

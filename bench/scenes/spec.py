@@ -88,16 +88,6 @@ def generator(name: str) -> Callable[[Generator], Generator]:
     return register
 
 
-def generator_of(name: str) -> Generator:
-    """The builder registered for scene type `name`."""
-    return _GENERATORS[name]
-
-
-def generator_functions() -> list[Generator]:
-    """The builders of every scene type registered."""
-    return list(_GENERATORS.values())
-
-
 def scene_names() -> list[str]:
     return sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
 
@@ -123,7 +113,7 @@ def build_scene(
     spec: SceneSpec, seed: int, width: int, height: int, views: int
 ) -> SceneDescription:
     """Generate the scene deterministically from its parameters and seed, seen by `views`
-    cameras."""
+    cameras (import it from `bench.scenes.catalog`, which registers the builders)."""
     rng = np.random.default_rng([seed, int.from_bytes(spec.name.encode()[:8], "little")])
     meshes, cameras, sun = _GENERATORS[spec.name](spec.params, rng, width, height, views)
     return SceneDescription(spec.name, seed, dict(spec.params), meshes, cameras, sun)

@@ -1,0 +1,21 @@
+"""The scene types by name, with every builder in `generators` registered: import
+`build_scene` and the lookups from here (the registry itself lives in `spec`, which the
+builders import; importing `generators` from here, not from the package, keeps the imports
+one-way)."""
+
+from __future__ import annotations
+
+import bench.scenes.generators  # noqa: F401  (importing it registers every scene type's builder)
+from bench.scenes.spec import _GENERATORS, Generator, build_scene, load_spec, scene_names
+
+__all__ = ["build_scene", "generator_functions", "generator_of", "load_spec", "scene_names"]
+
+
+def generator_of(name: str) -> Generator:
+    """The builder registered for scene type `name`."""
+    return _GENERATORS[name]
+
+
+def generator_functions() -> list[Generator]:
+    """The builders of every scene type registered."""
+    return list(_GENERATORS.values())
