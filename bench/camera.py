@@ -101,24 +101,3 @@ def write_colmap_rig(cameras: list[Camera], directory: Path, names: list[str]) -
         vals = " ".join(repr(float(v)) for v in (qw, qx, qy, qz, *c.t))
         lines += [f"{i} {vals} 1 {name}", ""]
     (directory / "images.txt").write_text("\n".join(lines) + "\n")
-
-
-def read_colmap_rig(directory: Path) -> list[Camera]:
-    """Read back the rig written by `write_colmap_rig` (PINHOLE cameras only)."""
-    directory = Path(directory)
-    intr = {}
-    for line in (directory / "cameras.txt").read_text().splitlines():
-        if line and not line.startswith("#"):
-            cid, model, w, h, *p = line.split()
-            if model != "PINHOLE":
-                raise ValueError(f"unsupported camera model {model}")
-            intr[cid] = (int(w), int(h), *map(float, p))
-    cams = []
-    lines = [
-        ln for ln in (directory / "images.txt").read_text().splitlines() if not ln.startswith("#")
-    ]
-    for line in lines[::2]:
-        _, qw, qx, qy, qz, tx, ty, tz, cid, _name = line.split()
-        R = Rotation.from_quat([float(qx), float(qy), float(qz), float(qw)]).as_matrix()
-        cams.append(Camera(*intr[cid], R=R, t=np.array([float(tx), float(ty), float(tz)])))
-    return cams

@@ -102,7 +102,9 @@ def entry_problem(entry: Path) -> str | None:
     stats, crcs = [], {}
     for name, rec in files.items():
         p = entry / name
-        size, crcs[name] = (rec, None) if isinstance(rec, int) else (rec["bytes"], rec["crc32"])
+        if not isinstance(rec, dict) or not {"bytes", "crc32"} <= rec.keys():
+            return f"meta.json unreadable (no size and checksum for {name})"
+        size, crcs[name] = rec["bytes"], rec["crc32"]
         if not p.is_file():
             return f"{name} missing"
         st = p.stat()
@@ -113,16 +115,10 @@ def entry_problem(entry: Path) -> str | None:
     if key in _VERIFIED:
         return None
     for name, crc in crcs.items():
-        if crc is not None and checksum(entry / name) != crc:
+        if checksum(entry / name) != crc:
             return f"{name} altered (its checksum differs from the one recorded)"
     _VERIFIED.add(key)
     return None
-
-
-def lacks_checksums(entry: Path) -> bool:
-    """Whether `entry` was written before checksums were recorded (sizes only)."""
-    files = json.loads((entry / "meta.json").read_text())["files"]
-    return any(isinstance(rec, int) for rec in files.values())
 
 
 def write_meta(directory: Path, meta: dict) -> None:

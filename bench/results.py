@@ -215,11 +215,6 @@ def check_runs(
     if not lines:
         raise DamagedRuns(f"{path} is damaged: it is empty", [1])
     header = next(csv.reader([lines[0]]))
-    if "config_hash" in header and "prediction_hash" not in header:
-        raise BenchError(
-            f"{path} was written by an earlier bench (one config_hash per row, no stored "
-            "predictions); compute it again with --overwrite, or use another --results folder"
-        )
     missing = [c for c in REQUIRED if c not in header]
     if missing:
         raise DamagedRuns(f"{path} is damaged: its header lacks {', '.join(missing)}", [1])

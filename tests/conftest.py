@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.camera import look_at
+from bench.camera import Camera, look_at
+from bench.frontend.colmap_model import read_model
 from bench.render.config import RenderConfig
 
 TINY = RenderConfig(width=96, height=72, spp=16, max_depth=2)
@@ -49,6 +50,11 @@ def medium_entry(renders_dir):
         return made[scene]
 
     return get
+
+
+def rig(entry: Path) -> list[Camera]:
+    """A render entry's cameras in view order, read back by the library's COLMAP reader."""
+    return [cam for _, cam in read_model(entry)]
 
 
 def synthetic_rig():

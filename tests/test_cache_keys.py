@@ -262,7 +262,6 @@ def test_a_scenes_render_key_covers_its_own_generator_and_the_render_code_alone(
     table = covered([*RENDER_CODE, catalog.generator_of("table")])
     assert ("bench.scenes.generators", "table") in table
     assert ("bench.camera", "write_colmap_rig") in table
-    assert ("bench.camera", "read_colmap_rig") not in table  # COLMAP I/O it does not use
     parts = covered(
         [*RENDER_CODE, catalog.generator_of("table")],
         cut=[g for g in catalog.generator_functions() if g is not catalog.generator_of("table")],

@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from bench import BenchError
-from bench.camera import look_at, read_colmap_rig
+from bench.camera import look_at
 from bench.cli import main
 from bench.render import entry as render
 from bench.render import mitsuba, variant
 from bench.scenes.catalog import build_scene, load_spec, scene_names
-from tests.conftest import TINY
+from tests.conftest import TINY, rig
 
 
 @pytest.mark.parametrize("scene", scene_names())
@@ -30,8 +30,8 @@ def test_views_sets_the_rig_and_enters_the_render_key(tiny_entry, renders_dir):
     assert three.name != tiny_entry("facade").name
     assert json.loads((three / "meta.json").read_text())["views"] == 3
     assert_ground_truth_projects(three, 3)
-    path = [c.center for c in read_colmap_rig(three)]
-    six = [c.center for c in read_colmap_rig(tiny_entry("facade"))]
+    path = [c.center for c in rig(three)]
+    six = [c.center for c in rig(tiny_entry("facade"))]
     np.testing.assert_allclose([path[0], path[-1]], [six[0], six[-1]])  # the same path
     with pytest.raises(BenchError, match="views must be at least 2"):
         render.render_scene("facade", 0, replace(TINY, views=1), renders_dir)
@@ -40,7 +40,7 @@ def test_views_sets_the_rig_and_enters_the_render_key(tiny_entry, renders_dir):
 def assert_ground_truth_projects(entry, views: int) -> None:
     """Every view's single-surface pixels project back onto themselves, and its range and
     z-depth agree with its intrinsics."""
-    cams = read_colmap_rig(entry)
+    cams = rig(entry)
     assert len(cams) == views
     for v, cam in enumerate(cams):
         gt = np.load(entry / f"gt_{v:02d}.npz")

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.camera import read_colmap_rig
 from bench.frontend.features import DetectorConfig, detect
 from bench.frontend.signals import DUPLICATE_DISTANCE, same_view_neighbours
 from bench.frontend.views import load_views
 from bench.scenes.catalog import build_scene, load_spec, scene_names
+from tests.conftest import rig
 
 
 def test_all_four_scene_types_are_declared():
@@ -28,7 +28,7 @@ def test_median_camera_to_surface_distance_is_5_to_10_units(tiny_entry, scene):
 
 
 def _median_parallax_deg(entry) -> float:
-    cams = read_colmap_rig(entry)
+    cams = rig(entry)
     angles = []
     for v in range(5):
         X = np.load(entry / f"gt_{v:02d}.npz")["position"].reshape(-1, 3)[::7]

@@ -23,8 +23,8 @@ Greedy (documented, deterministic):
    views first), then the rest by detector response.
 Within a track, a view's candidate is its one of highest detector response.
 
-`exact_track_count` solves the objective of step 1 exactly (an integer program, HiGHS via
-scipy) to measure the greedy's gap.
+The tests solve the objective of step 1 exactly (an integer program, HiGHS via scipy) to
+measure the greedy's gap.
 """
 
 from __future__ import annotations
@@ -32,7 +32,6 @@ from __future__ import annotations
 from itertools import combinations
 
 import numpy as np
-from scipy.optimize import Bounds, LinearConstraint, milp
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
@@ -106,43 +105,6 @@ def oracle_select(
                 chosen[v].append(k)
                 room[v] -= 1
     return [np.sort(np.array(c, dtype=np.int64)) for c in chosen]
-
-
-def tracks_in_three_views(track: list[np.ndarray], selections: list[np.ndarray]) -> int:
-    """How many ground-truth tracks have a selected candidate in at least three views."""
-    views_of: dict[int, set[int]] = {}
-    for v, (t, s) in enumerate(zip(track, selections)):
-        for tid in t[s].tolist():
-            views_of.setdefault(tid, set()).add(v)
-    return sum(len(vs) >= 3 for vs in views_of.values())
-
-
-def exact_track_count(track: list[np.ndarray], budget: int) -> int:
-    """The most tracks that can have a candidate in three views under the budget, solved
-    exactly: maximise sum x_t subject to sum_v y_tv >= 3 x_t and sum_t y_tv <= min(B, N_v)."""
-    spans: dict[int, list[int]] = {}
-    for v, t in enumerate(track):
-        for tid in np.unique(t).tolist():
-            spans.setdefault(tid, []).append(v)
-    tracks = [t for t in sorted(spans) if len(spans[t]) >= 3]
-    if not tracks:
-        return 0
-    y = [(i, v) for i, t in enumerate(tracks) for v in spans[t]]
-    n_x, n = len(tracks), len(tracks) + len(y)
-    rows_need = np.zeros((n_x, n))
-    rows_need[np.arange(n_x), np.arange(n_x)] = 3
-    rows_room = np.zeros((len(track), n))
-    for k, (i, v) in enumerate(y):
-        rows_need[i, n_x + k] = -1
-        rows_room[v, n_x + k] = 1
-    room = [min(budget, len(t)) for t in track]
-    res = milp(
-        c=np.r_[-np.ones(n_x), np.zeros(len(y))],
-        constraints=[LinearConstraint(rows_need, -np.inf, 0), LinearConstraint(rows_room, 0, room)],
-        integrality=np.ones(n),
-        bounds=Bounds(0, 1),
-    )
-    return int(round(-res.fun))
 
 
 implemented_by([ORACLE], matchable_tracks, oracle_select, load_truth)

@@ -38,7 +38,6 @@ LABEL_TAU = 0.10
 L2 = 1e-4
 PAPER = {k: (-1 if k == "ambiguity" else 1) * getattr(Weights(), k) for k in ADAPTIVE_SIGNALS}
 """The paper's weights as coefficients of the score (ambiguity counts against)."""
-"""The paper's weights as coefficients (ambiguity enters its score with a minus sign)."""
 
 
 def labelled_candidates(entry: Path, cfg: RunConfig, renders: Path) -> tuple[np.ndarray, ...]:

@@ -4,7 +4,6 @@ ground truth, the rig), rendered through `bench.render.mitsuba` only when missin
 
 from __future__ import annotations
 
-import json
 import time
 from functools import cache
 from importlib.metadata import version
@@ -94,9 +93,6 @@ def render_scene(
     with files.locked(entry):
         problem = files.entry_problem(entry) if entry.exists() else None
         if entry.exists() and problem is None and not force:
-            if files.lacks_checksums(entry):  # written before checksums were recorded
-                meta = json.loads((entry / "meta.json").read_text())
-                files.write_meta(entry, {k: v for k, v in meta.items() if k != "files"})
             return entry
         if problem:
             log(f"damaged cache entry {entry.name} ({problem}); rendering it again")

@@ -98,13 +98,6 @@ def solvable(rows: pd.DataFrame, metric: str) -> pd.DataFrame:
     return rows[rows[REFERENCE_MAPS].ne(0)]
 
 
-def unsolved_cells(rows: pd.DataFrame) -> int:
-    """How many (scene, seed) cells stock COLMAP with all features does not map."""
-    if REFERENCE_MAPS not in rows:
-        return 0
-    return int(rows[rows[REFERENCE_MAPS].eq(0)][["scene", "seed"]].drop_duplicates().shape[0])
-
-
 def with_oracle_share(df: pd.DataFrame) -> pd.DataFrame:
     """Add `completeness_vs_oracle_pct` (NaN where there is no oracle run or it is 0)."""
     keys = ["scene", "seed", "budget", "task", "protocol"]
