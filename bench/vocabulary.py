@@ -143,6 +143,11 @@ class Job(NamedTuple):
     task: str
     protocol: str
 
+    @property
+    def key(self) -> str:
+        """`task/protocol`: the job's entry in its unit's `prediction.json`."""
+        return f"{self.task}/{self.protocol}"
+
 
 METHODS: dict[str, Method] = {}
 TASKS: dict[str, Task] = {}
@@ -177,9 +182,12 @@ def implemented_by(names, *functions) -> None:
 
 
 def declare_task(task: Task) -> Task:
+    """Register a task under a name no other task has."""
     if task.grant not in GRANTS:
         raise BenchError(f"task {task.name}: unknown grant {task.grant!r}")
-    TASKS.setdefault(task.name, task)
+    if task.name in TASKS:
+        raise BenchError(f"task name {task.name!r} is taken; give the task another name")
+    TASKS[task.name] = task
     return task
 
 

@@ -911,10 +911,10 @@ def test_figure2_is_drawn_from_the_exported_model_alone(quick_results, renders_d
         assert observed.sum() == sum(p.has_point3D() for p in image.points2D)
 
 
-def test_a_task_is_added_in_one_place(renders_dir, tmp_path, monkeypatch):
+def test_a_task_is_added_in_one_place(renders_dir, tmp_path):
     """A new task is one registration in the task registry: the grid runs it, its rows
     are checked against its required metrics and their declared ranges, and Table 1 shows
-    its columns."""
+    its columns; a second task of the same name is refused."""
     from bench.backend.reconstruction import known_pose_task
     from bench.harness import tasks
 
@@ -934,12 +934,16 @@ def test_a_task_is_added_in_one_place(renders_dir, tmp_path, monkeypatch):
         ),
         evaluate=count_points,
     )
-    monkeypatch.setitem(tasks.RUNNERS, "count", runner)
-    monkeypatch.setitem(vocabulary.TASKS, "count", runner.spec)
-    grid = dataclasses.replace(
-        SMALL, scenes=("table",), policies=("texture",), tasks=("tri", "count")
-    )
-    runs = bench_run(grid, tmp_path, renders_dir)
+    tasks.register(runner)
+    try:
+        with pytest.raises(BenchError, match="task name 'count' is taken"):
+            tasks.register(runner)
+        grid = dataclasses.replace(
+            SMALL, scenes=("table",), policies=("texture",), tasks=("tri", "count")
+        )
+        runs = bench_run(grid, tmp_path, renders_dir)
+    finally:  # the registry as it was, for the other tests
+        del tasks.RUNNERS["count"], vocabulary.TASKS["count"]
     counted = runs[runs["task"] == "count"].set_index("protocol")["observed_points"]
     tri = runs[runs["task"] == "tri"].set_index("protocol")["points"]
     assert (counted == tri).all() and counted.sum() > 0

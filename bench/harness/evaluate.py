@@ -53,11 +53,11 @@ def evaluate(
     record = read_record(folder)
     names = record["names"]
     shared = {}
-    for grant in {record["jobs"][_key(j)]["grant"] for j in jobs}:
+    for grant in {record["jobs"][j.key]["grant"] for j in jobs}:
         shared[grant] = _shared(scene, unit, record, grant, folder)
     rows = []
     for job in jobs:
-        done = record["jobs"][_key(job)]
+        done = record["jobs"][job.key]
         metrics_of, seconds = shared[done["grant"]]
         out = ws.model_dir(unit, job)
         model = pycolmap.Reconstruction(str(out)) if done["model"] else None
@@ -69,10 +69,6 @@ def evaluate(
         ident = identity(scene.entry, unit, job, cfg)
         rows.append(make_row(ident, metrics_of | scores, timing, done["failure"], scene.entry))
     return rows
-
-
-def _key(job: Job) -> str:
-    return f"{job.task}/{job.protocol}"
 
 
 def _shared(scene: LoadedScene, unit: Unit, record: dict, grant: str, folder: Path):

@@ -217,7 +217,7 @@ def _predict_policy(scene, unit, jobs, cfg, ws, record) -> None:
             if model is None and runner.record is not None:
                 model = runner.record(m)  # the exported model still records the selection
             _export_or_clear(model, ws.model_dir(unit, job))
-            record["jobs"][_job_key(job)] = {
+            record["jobs"][job.key] = {
                 "grant": grant,
                 "failure": rec.failure,
                 "task_s": rec.seconds,
@@ -243,16 +243,12 @@ def _predict_peer(scene, unit, jobs, cfg, ws, record) -> None:
     for job in jobs:
         rec = run.recs[job.protocol]
         _export_or_clear(rec.model, ws.model_dir(unit, job))
-        record["jobs"][_job_key(job)] = {
+        record["jobs"][job.key] = {
             "grant": "peer",
             "failure": rec.failure,
             "task_s": rec.seconds,
             "model": rec.model is not None,
         }
-
-
-def _job_key(job: Job) -> str:
-    return f"{job.task}/{job.protocol}"
 
 
 def read_record(folder: Path) -> dict:
@@ -267,7 +263,7 @@ def has_prediction(ws: Workspace, unit: Unit, jobs: list[Job], cfg: RunConfig) -
     """Whether the unit's folder holds a current prediction of every job in `jobs`."""
     record = read_record(ws.unit_dir(unit))
     return record.get("hash") == prediction_hash(cfg, unit.policy) and all(
-        _job_key(j) in record.get("jobs", {}) for j in jobs
+        j.key in record.get("jobs", {}) for j in jobs
     )
 
 
