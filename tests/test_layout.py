@@ -4,6 +4,7 @@ firewall (front end and back end never reach ground truth)."""
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -146,3 +147,10 @@ def test_no_function_takes_more_than_seven_parameters():
                 if n > 7:
                     too_many.append(f"{name}.{node.name} ({n})")
     assert too_many == []
+
+
+def test_render_entry_or_dataset_is_told_apart_in_one_place():
+    """Whether a folder is a render entry is `Source.kind`'s to say (by its `meta.json`)."""
+    tests = re.compile(r"meta(\.json\"\))?\.is_file\(\)")
+    deciders = [name for name, path in MODULES.items() if tests.search(path.read_text())]
+    assert deciders == ["bench.frontend.views"]

@@ -273,7 +273,7 @@ def datasets_arg(paths: list[Path]) -> tuple[Path, ...]:
 
     out = []
     for path in map(Path, paths):
-        if (path / "meta.json").is_file():
+        if Source.kind(path) == "render":
             raise BenchError(
                 f"{path} is a render entry; --dataset takes DIR with images/ and sparse/"
             )

@@ -16,6 +16,7 @@ from scipy.spatial import cKDTree
 from bench.camera import Camera
 from bench.evaluation.groundtruth import GroundTruth, load_dataset_truth, load_ground_truth
 from bench.frontend.features import Candidates
+from bench.frontend.views import Source
 
 CORRESPONDENCE_PX = 3.0
 """Ground-truth correspondence: reprojection within this many pixels."""
@@ -163,7 +164,7 @@ class SceneTruth:
 
 def load_truth(source: Path, cams: list[Camera], names: list[str], pools) -> SceneTruth:
     """The truth of a render entry, or whatever truth a dataset folder holds."""
-    if (Path(source) / "meta.json").is_file():
+    if Source.kind(source) == "render":
         return SceneTruth.build(cams, load_ground_truth(source), pools)
     cloud, gts = load_dataset_truth(source, names, cams)
     truth = SceneTruth.build(cams, gts, pools, cloud)

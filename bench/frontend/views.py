@@ -115,10 +115,16 @@ class Source:
     """A dataset's folder: the model must pose exactly the images in `images`."""
 
     @staticmethod
+    def kind(path: Path) -> str:
+        """'render' for a render entry (it has a `meta.json`), else 'dataset': the one place
+        that tells them apart."""
+        return "render" if (Path(path) / "meta.json").is_file() else "dataset"
+
+    @staticmethod
     def of(path: Path) -> Source:
         """A render entry, or a dataset folder with `images/` and `sparse/`."""
         path = Path(path)
-        if (path / "meta.json").is_file():
+        if Source.kind(path) == "render":
             problem = entry_problem(path)
             if problem:
                 raise BenchError(f"render entry {path} is not usable: {problem}")
@@ -138,7 +144,7 @@ def source_key(path: Path) -> str:
     name), so a dataset whose contents change is computed again."""
     path = Path(path)
     src = Source.of(path)
-    if src.model == path and (path / "meta.json").is_file():
+    if Source.kind(path) == "render":
         return path.name
     files = sorted(p for p in src.model.iterdir() if p.is_file())
     files += sorted(p for p in src.images.rglob("*") if p.is_file())

@@ -144,10 +144,9 @@ def identity(entry: Path, unit: Unit, job: Job, cfg: RunConfig) -> dict:
 def make_row(
     ident: dict, scores: dict, timing: dict[str, float], failure: str | None, entry: Path
 ) -> dict:
-    meta = Path(entry) / "meta.json"  # a render entry's; a dataset has none
     render_s = (
-        float(np.mean(json.loads(meta.read_text())["seconds_per_view"]))
-        if meta.is_file()
+        float(np.mean(json.loads((Path(entry) / "meta.json").read_text())["seconds_per_view"]))
+        if Source.kind(entry) == "render"
         else math.nan
     )
     row = {

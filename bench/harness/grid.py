@@ -31,7 +31,7 @@ from bench.console import log, progress
 from bench.files import write_text_atomic
 from bench.frontend import plugins
 from bench.frontend.policies import check_policies, learned_weights
-from bench.frontend.views import source_key
+from bench.frontend.views import Source, source_key
 from bench.harness.config import RunConfig
 from bench.harness.evaluate import evaluation_hash
 from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
@@ -396,7 +396,7 @@ def write_manifest(ws: Workspace, cfg: BenchConfig, invocation: dict, rows: pd.D
             total[k] = total.get(k, 0.0) + v
     entries = [ws.renders / k for k in rows["render_key"].unique()]
     metas = [
-        json.loads((e / "meta.json").read_text()) for e in entries if (e / "meta.json").is_file()
+        json.loads((e / "meta.json").read_text()) for e in entries if Source.kind(e) == "render"
     ]
     packages = [
         "mitsuba",
