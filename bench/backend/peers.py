@@ -28,6 +28,7 @@ import pycolmap
 from bench.backend.matching import BackendConfig
 from bench.backend.reconstruction import Reconstruction, map_database, quiet_colmap, write_images
 from bench.camera import Camera
+from bench.frontend.features import strongest_first
 from bench.vocabulary import Method, declare_method, implemented_by
 
 PEERS = tuple(
@@ -64,7 +65,7 @@ def keypoint_scales(keypoints: np.ndarray) -> np.ndarray:
 
 def hard_cap(keypoints: np.ndarray, budget: int) -> np.ndarray:
     """Indices of the `budget` largest-scale keypoints, ties by index, in COLMAP's order."""
-    order = np.lexsort((np.arange(len(keypoints)), -keypoint_scales(keypoints)))
+    order = strongest_first(keypoint_scales(keypoints))
     return np.sort(order[:budget])
 
 

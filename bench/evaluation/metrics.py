@@ -57,7 +57,7 @@ import numpy as np
 from bench.backend.matching import PairMatches, expected_ransac_iterations
 from bench.camera import Camera
 from bench.evaluation.truth import SceneTruth, Surface
-from bench.frontend.features import Candidates
+from bench.frontend.features import Candidates, tile_of
 
 THRESHOLDS = (0.02, 0.05, 0.10, 0.20)
 COVERAGE_GRID = (16, 12)
@@ -79,10 +79,8 @@ def completeness_pct(errors: np.ndarray, reconstructable: int, tau: float) -> fl
 def coverage_pct(xy_per_view: list[np.ndarray], cams: list[Camera], grid=COVERAGE_GRID) -> float:
     shares = []
     for xy, cam in zip(xy_per_view, cams):
-        width, height = cam.width, cam.height
-        cx = np.clip((xy[:, 0] / width * grid[0]).astype(int), 0, grid[0] - 1)
-        cy = np.clip((xy[:, 1] / height * grid[1]).astype(int), 0, grid[1] - 1)
-        shares.append(len(set(zip(cx.tolist(), cy.tolist()))) / (grid[0] * grid[1]))
+        tiles = tile_of(xy, cam.width, cam.height, grid)
+        shares.append(len(np.unique(tiles)) / (grid[0] * grid[1]))
     return 100.0 * float(np.mean(shares))
 
 

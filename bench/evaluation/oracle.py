@@ -37,7 +37,7 @@ from scipy.sparse.csgraph import connected_components
 
 from bench.backend.matching import tentative_matches
 from bench.evaluation.truth import SceneTruth, load_truth
-from bench.frontend.features import Candidates
+from bench.frontend.features import Candidates, strongest_first
 from bench.vocabulary import ORACLE, Method, declare_method, implemented_by
 
 declare_method(Method(ORACLE, "Oracle (ground truth, reference)", "reference"))
@@ -64,7 +64,7 @@ def _representatives(track: list[np.ndarray], response: list[np.ndarray]) -> dic
     """{(track id, view): the view's candidate of that track with the highest response}."""
     rep = {}
     for v, (t, r) in enumerate(zip(track, response)):
-        order = np.lexsort((np.arange(len(t)), -r))  # strongest first, then index
+        order = strongest_first(r)
         for k in order[::-1]:  # later (weaker) writes are overwritten by stronger ones
             rep[int(t[k]), v] = int(k)
     return rep
@@ -96,7 +96,7 @@ def oracle_select(
             (t for t in spans if t not in taken and len(spans[t]) >= 2 and v in spans[t]),
             key=lambda t: (-len(spans[t]), t),
         )
-        rest = np.lexsort((np.arange(len(track[v])), -response[v]))
+        rest = strongest_first(response[v])
         for k in [*extend, *(rep[t, v] for t in pairs), *rest.tolist()]:
             if room[v] == 0:
                 break

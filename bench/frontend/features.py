@@ -87,6 +87,19 @@ class Candidates:
         return replace(self, xy=self.xy * [sx, sy], size=self.size * math.sqrt(sx * sy))
 
 
+def strongest_first(values: np.ndarray) -> np.ndarray:
+    """Indices by descending value (a response, a score); ties by index, so selection is
+    deterministic."""
+    return np.lexsort((np.arange(len(values)), -np.asarray(values)))
+
+
+def tile_of(xy: np.ndarray, width: int, height: int, tiles: tuple[int, int]) -> np.ndarray:
+    """Index of the tile (row-major, tiles = columns x rows) holding each point."""
+    cx = np.clip((xy[:, 0] / width * tiles[0]).astype(int), 0, tiles[0] - 1)
+    cy = np.clip((xy[:, 1] / height * tiles[1]).astype(int), 0, tiles[1] - 1)
+    return cy * tiles[0] + cx
+
+
 def keypoint_arrays(kps) -> tuple[np.ndarray, ...]:
     xy = np.array([k.pt for k in kps], float).reshape(-1, 2) + 0.5
     return (
@@ -102,7 +115,7 @@ def detect(view: View, cfg: DetectorConfig) -> Candidates:
     detector's order)."""
     kps, desc = cfg.create().detectAndCompute(view.gray, None)
     if len(kps) > cfg.max_features:
-        order = np.argsort([-k.response for k in kps], kind="stable")
+        order = strongest_first([k.response for k in kps])
         keep = np.sort(order[: cfg.max_features])
         kps, desc = [kps[k] for k in keep], desc[keep]
     xy, size, angle, response = keypoint_arrays(kps)

@@ -34,6 +34,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from bench import BenchError
+from bench.frontend.features import strongest_first, tile_of
 from bench.frontend.policies import (
     ADAPTIVE_SIGNALS,
     PolicyConfig,
@@ -42,7 +43,6 @@ from bench.frontend.policies import (
     capped_greedy,
     contract_violation,
     settings_for,
-    tile_of,
 )
 from bench.vocabulary import Method, declare_method, implemented_by
 
@@ -170,10 +170,10 @@ def revise(
     picks = [keep]
     for t in np.flatnonzero(quota):
         members = np.flatnonzero(open_ & (tile == t))
-        picks.append(members[np.lexsort((members, -score[members]))][: quota[t]])
+        picks.append(members[strongest_first(score[members])][: quota[t]])
     chosen = np.concatenate(picks).astype(np.int64)
     if len(chosen) < want:  # not enough untried candidates above threshold: best of the rest
-        order = np.lexsort((np.arange(len(score)), -score))
+        order = strongest_first(score)
         rest = order[~np.isin(order, chosen)]
         chosen = np.concatenate([chosen, rest[: want - len(chosen)]])
     log = {

@@ -65,7 +65,12 @@ import pycolmap
 
 from bench.camera import Camera
 from bench.console import log
-from bench.frontend.features import Candidates, descriptor_distances, tentative_matches
+from bench.frontend.features import (
+    Candidates,
+    descriptor_distances,
+    strongest_first,
+    tentative_matches,
+)
 from bench.frontend.views import View
 
 RIG, IMAGES = "rig", "images"
@@ -308,7 +313,7 @@ def view_geometry(views: list[View], pools: list[Candidates], cfg: SignalConfig)
 
 
 def _strongest(pools: list[Candidates], k: int) -> list[np.ndarray]:
-    return [np.argsort(-c.response, kind="stable")[:k] for c in pools]
+    return [strongest_first(c.response)[:k] for c in pools]
 
 
 def depth_priors(views: list[View], pools: list[Candidates], cfg: SignalConfig) -> list[float]:

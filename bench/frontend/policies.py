@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from bench import BenchError
-from bench.frontend.features import Candidates
+from bench.frontend.features import Candidates, strongest_first, tile_of
 from bench.frontend.signals import SIGNALS, Signals
 from bench.frontend.views import View
 from bench.vocabulary import METHODS, SETTINGS, Method, declare_method
@@ -233,13 +233,6 @@ def select(
     return np.sort(idx)
 
 
-def tile_of(xy: np.ndarray, width: int, height: int, tiles: tuple[int, int]) -> np.ndarray:
-    """Index of the tile (row-major, tiles = columns x rows) holding each point."""
-    cx = np.clip((xy[:, 0] / width * tiles[0]).astype(int), 0, tiles[0] - 1)
-    cy = np.clip((xy[:, 1] / height * tiles[1]).astype(int), 0, tiles[1] - 1)
-    return cy * tiles[0] + cx
-
-
 def adaptive_score(s: Signals, w: Weights, repeatability: np.ndarray | None = None) -> np.ndarray:
     """The paper's score s; `repeatability` replaces the cheap estimate (`adaptive` passes
     the re-detection signal)."""
@@ -253,11 +246,6 @@ def adaptive_score(s: Signals, w: Weights, repeatability: np.ndarray | None = No
     )
 
 
-def _order(score: np.ndarray) -> np.ndarray:
-    """Indices by descending score; ties broken by index, so selection is deterministic."""
-    return np.lexsort((np.arange(len(score)), -score))
-
-
 @policy("random", "Random budget", role="baseline")
 def random_policy(inp, budget, rng, cfg):
     """A uniform random subset."""
@@ -267,7 +255,7 @@ def random_policy(inp, budget, rng, cfg):
 @policy("texture", "Texture-only", role="baseline", reads=("texture",))
 def texture_policy(inp, budget, rng, cfg):
     """The B candidates of highest texture."""
-    return _order(inp.signals.texture)[:budget]
+    return strongest_first(inp.signals.texture)[:budget]
 
 
 @policy("grid", "Uniform grid", role="baseline", reads=("texture",))
@@ -276,7 +264,7 @@ def grid_policy(inp, budget, rng, cfg):
     goes to the others: round k takes every tile's k-th best candidate, ordered by texture."""
     cam = inp.view.camera
     tile = tile_of(inp.candidates.xy, cam.width, cam.height, cfg.tiles)
-    order = _order(inp.signals.texture)
+    order = strongest_first(inp.signals.texture)
     rank = np.empty(len(order), int)
     for t in np.unique(tile):
         members = order[tile[order] == t]
@@ -298,7 +286,7 @@ def capped_greedy(
     raised, one step at a time, until the budget is met."""
     cam = inp.view.camera
     tile = tile_of(inp.candidates.xy, cam.width, cam.height, cfg.tiles)
-    order = _order(score)
+    order = strongest_first(score)
     want = min(budget, len(order))
     cap = math.ceil(cfg.cap_factor * budget / max(len(np.unique(tile)), 1))
     picked: list[int] = []
@@ -409,7 +397,7 @@ def learned_policy(inp, budget, rng, cfg):
 @policy("response", "Detector response (top-B)", role="baseline")
 def response_policy(inp, budget, rng, cfg):
     """The B strongest detector responses: what COLMAP-style and learned pipelines keep."""
-    return _order(inp.candidates.response)[:budget]
+    return strongest_first(inp.candidates.response)[:budget]
 
 
 @policy("ssc", "SSC (Bailo 2018)", role="baseline")
@@ -420,7 +408,7 @@ def ssc_policy(inp, budget, rng, cfg):
     kept one covers its cell (a kept keypoint covers the grid cells of side w/2 within w
     of its own); binary search for the widest w that keeps at least B, whose first B (by
     response) are returned."""
-    order = _order(inp.candidates.response)
+    order = strongest_first(inp.candidates.response)
     xy = inp.candidates.xy[order]
     want = min(budget, len(order))
     cam = inp.view.camera
@@ -483,11 +471,11 @@ def quadtree_policy(inp, budget, rng, cfg):
             inside = members[(p[:, 0] >= ax) & (p[:, 0] < bx) & (p[:, 1] >= ay) & (p[:, 1] < by)]
             if len(inside):
                 cells.append((ax, ay, bx, by, inside))
-    best = np.array([c[4][_order(resp[c[4]])[0]] for c in cells], dtype=np.int64)
-    best = best[_order(resp[best])][:want]
+    best = np.array([c[4][strongest_first(resp[c[4]])[0]] for c in cells], dtype=np.int64)
+    best = best[strongest_first(resp[best])][:want]
     if len(best) < want:
-        rest = np.setdiff1d(_order(resp), best, assume_unique=True)
-        rest = rest[_order(resp[rest])]
+        rest = np.setdiff1d(strongest_first(resp), best, assume_unique=True)
+        rest = rest[strongest_first(resp[rest])]
         best = np.concatenate([best, rest[: want - len(best)]])
     return best
 
