@@ -207,6 +207,11 @@ class Vocabulary:
         m = self.methods.get(policy)
         return m.label if m else policy
 
+    @property
+    def peer_task(self) -> str | None:
+        """The task the stock-COLMAP peers run (the pose-free one), if any is declared."""
+        return next((n for n, t in self.tasks.items() if t.peers), None)
+
     def with_role(self, *roles: str) -> list[str]:
         return [n for n, m in self.methods.items() if m.role in roles]
 

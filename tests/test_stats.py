@@ -210,3 +210,28 @@ def test_a_dataset_run_with_colmap_keeps_its_sfm_means_and_its_transfer_table(
     assert main(["plot", "--results", str(out), "--rendered", "nowhere"]) == 0
     missing = "no transfer.csv: no rendered results to compare with (nowhere/runs.csv is missing"
     assert missing in capsys.readouterr().err
+
+
+def test_the_front_end_cost_reads_its_tasks_from_the_vocabulary():
+    """The posed and the pose-free task are the headline task and the peers' task of the
+    rows' vocabulary, whatever they are named."""
+    from bench.report.tables import frontend_cost
+    from bench.vocabulary import Method, Task
+
+    tasks = {
+        "tri": Task("tri", "rig", needs=(), columns=()),
+        "free": Task("free", "images", needs=(), columns=(), peers=True),
+    }
+    vocab = Vocabulary({"texture": Method("texture", "Texture", "baseline")}, tasks)
+    assert vocab.peer_task == "free"
+    df = pd.DataFrame(
+        [
+            {"scene": "table", "seed": s, "budget": 64, "policy": "texture", "task": task}
+            | {"protocol": "multiview", "detect_ms": ms, "signals_ms": 0.0, "select_ms": 0.0}
+            for s in (0, 1)
+            for task, ms in (("tri", 10.0), ("free", 30.0))
+        ]
+    )
+    row = frontend_cost(df, vocab).iloc[0]
+    assert row["frontend_ms"] == 10.0 and row["frontend_ms_posefree"] == 30.0
+    assert row["posefree_to_posed"] == 3.0

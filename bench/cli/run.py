@@ -310,14 +310,14 @@ def run(args: argparse.Namespace) -> None:
     from bench.results import Workspace
     from bench.scenes.spec import scene_names
     from bench.summary import errors
-    from bench.vocabulary import ORACLE, Vocabulary
+    from bench.vocabulary import HEADLINE, ORACLE, Vocabulary
 
     if args.scheduler is not None and args.workers is not None:
         raise BenchError("--workers does not apply with --scheduler: the cluster has its workers")
     run_cfg = run_config(args)
     policies = parse_list("--policies", args.policies, str, "texture,adaptive")
     datasets = datasets_arg(args.dataset) if args.dataset else ()
-    tasks = parse_list("--tasks", args.tasks, str, "tri")
+    tasks = parse_list("--tasks", args.tasks, str, HEADLINE[0])
     if args.rendered is not None and not datasets:
         log("--rendered is ignored without --dataset: it is what datasets are compared with")
     if datasets:

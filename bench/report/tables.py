@@ -80,7 +80,7 @@ def headline_frame(
         frame = frame.merge(
             part.rename(columns={c: f"{task}_{c}" for c in cols}), on=UNIT, how="outer"
         )
-    rule = sfm_rule(df, dataset) if (df["task"] == "sfm").any() else None
+    rule = sfm_rule(df, dataset) if (df["task"] == vocab.peer_task).any() else None
     if rule is not None:
         frame[SFM_RULE] = rule
     if rule == "applied":  # a property of the (scene, seed): on every unit of it
@@ -295,7 +295,8 @@ def frontend_cost(df: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     out = []
     for policy in dict.fromkeys(rows["policy"]):
         row = {"policy": policy}
-        for task, suffix in (("tri", ""), ("sfm", "_posefree")):
+        posed_task, free_task = HEADLINE[0], vocab.peer_task
+        for task, suffix in ((posed_task, ""), (free_task, "_posefree")):
             f = front[task]
             units = f[f.index.get_level_values("policy") == policy].droplevel("policy")
             has_texture = "texture" in set(f.index.get_level_values("policy"))
@@ -304,8 +305,8 @@ def frontend_cost(df: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
             row[f"ratio_to_texture{suffix}"] = (
                 (units / tex.reindex(units.index)).mean() if tex is not None else math.nan
             )
-        posed = front["tri"][front["tri"].index.get_level_values("policy") == policy]
-        free = front["sfm"][front["sfm"].index.get_level_values("policy") == policy]
+        posed = front[posed_task][front[posed_task].index.get_level_values("policy") == policy]
+        free = front[free_task][front[free_task].index.get_level_values("policy") == policy]
         row["posefree_to_posed"] = (free / posed.reindex(free.index)).mean()
         out.append(row)
     t = pd.DataFrame(out)
