@@ -12,6 +12,14 @@ verified matches (`prediction-<grant>.npz`, a peer's keypoints in `prediction-pe
 the models exported per job, and `prediction.json` (written last: the prediction hash,
 the view names, each stage's seconds, each job's failure). `bench.harness.evaluate`
 scores it; nothing here scores.
+
+The arrays, by key: `prediction-<grant>.npz` holds `selection_{v}` (the indices into view
+v's candidate pool that the policy selected, ascending) and, for the k-th pair of
+`prediction.json`'s `grants[<grant>]["pairs"]` (views i < j, COLMAP's two-view
+configuration), `tentative_{k}` and `verified_{k}` (matches as (M, 2) rows of indices into
+the selections of views i and j); `prediction-peer.npz` holds `keypoints_{v}` (the (N, 2)
+pixel positions of the peer's keypoints in view v, as COLMAP's database holds them). `prediction.json`'s `jobs` are keyed by
+`Job.key` (`<task>/<protocol>`).
 """
 
 from __future__ import annotations
