@@ -18,8 +18,8 @@ v's candidate pool that the policy selected, ascending) and, for the k-th pair o
 `prediction.json`'s `grants[<grant>]["pairs"]` (views i < j, COLMAP's two-view
 configuration), `tentative_{k}` and `verified_{k}` (matches as (M, 2) rows of indices into
 the selections of views i and j); `prediction-peer.npz` holds `keypoints_{v}` (the (N, 2)
-pixel positions of the peer's keypoints in view v, as COLMAP's database holds them). `prediction.json`'s `jobs` are keyed by
-`Job.key` (`<task>/<protocol>`).
+pixel positions of the peer's keypoints in view v, as COLMAP's database holds them).
+`prediction.json`'s `jobs` are keyed by `Job.key` (`<task>/<protocol>`).
 """
 
 from __future__ import annotations
