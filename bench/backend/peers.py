@@ -31,17 +31,6 @@ from bench.camera import Camera
 from bench.frontend.features import strongest_first
 from bench.vocabulary import Method, declare_method, implemented_by
 
-PEERS = tuple(
-    declare_method(m).name
-    for m in (
-        Method("colmap", "COLMAP default SIFT (peer)", "peer", whole_pool=True),
-        Method("colmap-b", "COLMAP SIFT, B largest-scale (peer)", "peer"),
-        Method("colmap-soft-b", "COLMAP SIFT soft limit B (peer)", "peer"),
-    )
-)
-"""Peer rows: `colmap` (budget 0: COLMAP's default), `colmap-b` and `colmap-soft-b` (one per
-budget)."""
-
 
 @dataclass
 class PeerRun:
@@ -148,4 +137,14 @@ def run_peer(
         shutil.rmtree(work, ignore_errors=True)
 
 
-implemented_by(PEERS, run_peer)
+implemented_by(
+    [  # peer rows: `colmap` (budget 0: COLMAP's default), the others one per budget
+        declare_method(m).name
+        for m in (
+            Method("colmap", "COLMAP default SIFT (peer)", "peer", whole_pool=True),
+            Method("colmap-b", "COLMAP SIFT, B largest-scale (peer)", "peer"),
+            Method("colmap-soft-b", "COLMAP SIFT soft limit B (peer)", "peer"),
+        )
+    ],
+    run_peer,
+)
