@@ -4,13 +4,17 @@ checksums and invocations left out): how many values differ exactly and beyond 1
     .venv/bin/python benchmarks/compare_runs.py results/published/runs.csv results/latest/runs.csv
 """
 
-import sys
+import argparse
 
 import numpy as np
 import pandas as pd
 
 KEY = ["scene", "seed", "policy", "budget", "task", "protocol"]
-a, b = (pd.read_csv(p, keep_default_na=False, na_values=[""]) for p in sys.argv[1:3])
+ap = argparse.ArgumentParser(
+    description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+)
+ap.add_argument("runs", nargs=2, metavar="RUNS_CSV", help="the two runs.csv files")
+a, b = (pd.read_csv(p, keep_default_na=False, na_values=[""]) for p in ap.parse_args().runs)
 skip = {
     "render_key",
     "config_hash",

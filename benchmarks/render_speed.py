@@ -17,7 +17,7 @@ from bench.render.config import RenderConfig
 from bench.render.variant import resolve_variant
 
 
-def stage_timing(scene: str, cfg: RenderConfig, views: int, tmp: Path) -> tuple[float, float]:
+def stage_timing(scene: str, cfg: RenderConfig, tmp: Path) -> tuple[float, float]:
     """(stage seconds per view, seconds per view inside mitsuba's load_dict + render)."""
     import mitsuba as mi
 
@@ -35,15 +35,14 @@ def stage_timing(scene: str, cfg: RenderConfig, views: int, tmp: Path) -> tuple[
 
         return wrapper
 
-    n = render.N_VIEWS
-    mi.load_dict, mi.render, render.N_VIEWS = timed(real_load), timed(real_render), views
+    mi.load_dict, mi.render = timed(real_load), timed(real_render)
     try:
         t = time.perf_counter()
         render.render_scene(scene, 0, cfg, tmp, force=True)
         total = time.perf_counter() - t
     finally:
-        mi.load_dict, mi.render, render.N_VIEWS = real_load, real_render, n
-    return total / views, inside[0] / views
+        mi.load_dict, mi.render = real_load, real_render
+    return total / cfg.views, inside[0] / cfg.views
 
 
 def main() -> None:
@@ -55,13 +54,13 @@ def main() -> None:
         tmp = Path(d)
         auto, _ = resolve_variant("auto", tmp)
         for variant in dict.fromkeys([auto, "scalar_rgb"]):
-            cfg = RenderConfig(variant=variant)
-            stage, inside = stage_timing(a.scene, cfg, a.views, tmp)
+            cfg = RenderConfig(variant=variant, views=a.views)
+            stage, inside = stage_timing(a.scene, cfg, tmp)
             print(
                 f"{a.scene} {variant}: {stage:.2f} s/view for the stage, {inside:.2f} s/view in "
                 f"mitsuba load_dict + render, overhead {100 * (stage / inside - 1):.1f}%"
             )
-        cfg = RenderConfig(variant=auto)
+        cfg = RenderConfig(variant=auto, views=a.views)
         render.render_scene(a.scene, 0, cfg, tmp)
         t = time.perf_counter()
         render.render_scene(a.scene, 0, cfg, tmp)

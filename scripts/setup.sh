@@ -19,11 +19,13 @@ fi
 
 PY=${PYTHON:-python3}
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
+# installed again whenever pyproject.toml or the pinned versions (constraints.txt) change
 stamp=.venv/.bench-installed
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+want=$(cat pyproject.toml constraints.txt | sha256sum)
+if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
     echo "setup: installing the package and its dependencies into .venv"
     # the distribution was called `bench` before 0.2 (a name PyPI gives to another project)
     .venv/bin/python -m pip uninstall -q -y bench >/dev/null 2>&1 || true
-    .venv/bin/python -m pip install -q --disable-pip-version-check -e '.[test]'
-    touch "$stamp"
+    .venv/bin/python -m pip install -q --disable-pip-version-check -c constraints.txt -e '.[test]'
+    echo "$want" >"$stamp"
 fi

@@ -3,6 +3,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-.venv/bin/ruff check bench tests
-.venv/bin/ruff format --check bench tests
+.venv/bin/ruff check bench tests benchmarks
+.venv/bin/ruff format --check bench tests benchmarks
 exec .venv/bin/python -m pytest "$@"

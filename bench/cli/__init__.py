@@ -77,8 +77,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bench: error: {e}", file=sys.stderr)
         return 2
     # our handler, not the one COLMAP's logging library installs (it aborts the process,
-    # leaving lock files and half-written entries behind)
-    signal.signal(signal.SIGTERM, _terminate)
+    # leaving lock files and half-written entries behind); the caller's again on return
+    previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         args.func(args)
     except BenchError as e:
@@ -93,6 +93,8 @@ def main(argv: list[str] | None = None) -> int:
             return 143
         print("bench: interrupted; finished work is kept", file=sys.stderr)
         return 130
+    finally:  # None: a handler not set from Python, which cannot be set back
+        signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
     return 0
 
 

@@ -199,7 +199,9 @@ def _result(future):
 
 def _local_cluster(workers: int):
     """A local cluster of single-threaded worker processes that start with Ctrl-C ignored
-    (it reaches this process alone, which stops them) and log only critical errors."""
+    (it reaches this process alone, which stops them) and log only critical errors. No
+    dashboard; the scheduler's HTTP server (Dask's health and metrics routes) takes a free
+    port of this machine's own, not 8787, so nobody is told that 8787 is in use."""
     import logging
 
     from distributed import LocalCluster
@@ -211,6 +213,7 @@ def _local_cluster(workers: int):
             threads_per_worker=1,
             processes=True,
             dashboard_address=None,
+            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
             silence_logs=logging.CRITICAL,
         )
     finally:
@@ -218,13 +221,36 @@ def _local_cluster(workers: int):
 
 
 def check_scheduler(address: str) -> None:
-    """Refuse, in one line and within seconds, a Dask scheduler that cannot be reached."""
-    from distributed import Client
+    """Refuse, in one line and within seconds, a Dask scheduler that cannot be reached.
+
+    The scheduler is asked for its identity over one connection, in an event loop of
+    this call's own that is closed before it returns. No `Client` is made: one that fails
+    half-built is left for the garbage collector, whose clean-up then deadlocks the next
+    client started in this process (on `distributed`'s `LoopRunner` lock).
+    """
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def identity():
+        comm = await connect(address, timeout="10s")
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            await comm.close()
 
     try:
-        Client(address, timeout="10s").close()
+        reply = asyncio.run(asyncio.wait_for(identity(), 20))
+    except TimeoutError:
+        why = "no answer within 20 s"
     except (OSError, ValueError, TypeError) as e:
-        raise BenchError(f"cannot reach the Dask scheduler {address}: {e}") from None
+        why = str(e)
+    else:
+        if isinstance(reply, dict) and str(reply.get("type")).endswith("Scheduler"):
+            return
+        why = "it answers, but is not a Dask scheduler"
+    raise BenchError(f"cannot reach the Dask scheduler {address}: {why}")
 
 
 def _on_dask(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, on_scene: OnScene):
