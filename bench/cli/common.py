@@ -210,6 +210,18 @@ def settings_help(cls: type, prefix: str = "") -> list[str]:
     return out
 
 
+def settings_arg(parser: argparse.ArgumentParser, help: str) -> None:
+    """`--set SECTION.FIELD=VALUE` (repeatable), into `args.settings` (`apply_settings`)."""
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        dest="settings",
+        metavar="SECTION.FIELD=VALUE",
+        help=help,
+    )
+
+
 def renders_arg(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--renders",

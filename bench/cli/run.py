@@ -19,6 +19,7 @@ from bench.cli.common import (
     parse_list,
     renders_arg,
     results_arg,
+    settings_arg,
     settings_help,
 )
 from bench.console import log
@@ -95,13 +96,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "W1,...,W5",
         field_docs(PolicyConfig)["weights"].rstrip("."),
     )
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        dest="settings",
-        metavar="SECTION.FIELD=VALUE",
-        help="any setting of the run, applied after the options above and recorded in "
+    settings_arg(
+        parser,
+        "any setting of the run, applied after the options above and recorded in "
         "config.json (repeatable; e.g. --set backend.ratio=0.7, --set policy.tiles=8,6, "
         "--set signals.depth_prior=none); settings: "
         + ", ".join(settings_help(RunConfig))

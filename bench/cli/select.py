@@ -7,6 +7,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from bench import BenchError
+from bench.cli.common import settings_arg
 
 HELP = "select B keypoints per image of your own photographs into a COLMAP database"
 DESCRIPTION = (
@@ -59,13 +60,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--policy-module", action="append", default=[], metavar="FILE", help="as for `bench run`"
     )
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        dest="settings",
-        metavar="SECTION.FIELD=VALUE",
-        help="a setting of the detector, signals, policy or back end, as for `bench run` "
+    settings_arg(
+        parser,
+        "a setting of the detector, signals, policy or back end, as for `bench run` "
         "(repeatable; e.g. --set detector.max_image_size=2000)",
     )
 
