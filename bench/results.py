@@ -43,7 +43,7 @@ import os
 import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager, nullcontext
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import pandas as pd
@@ -57,6 +57,7 @@ from bench.vocabulary import (
     REFERENCE_MAPS,
     REFERENCE_MIN_MAA,
     REFERENCE_PEER,
+    REPORT_FIELDS,
     VOCABULARY_FILE,
     Job,
     Unit,
@@ -289,20 +290,20 @@ def _frame(header: list[str], good: list[tuple[int, str]]) -> pd.DataFrame:
 
 def mark_reference(table: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     """`REFERENCE_MAPS` on every row: whether stock COLMAP with all features maps the row's
-    (scene, seed) in the task that admits peers (headline protocol; see the vocabulary)."""
+    (scene, seed) in the tasks with the exclusion rule (`Task.exclusion_reference`; in
+    every one of them, under the headline protocol; see the vocabulary)."""
     if not {"views", "registered_views", "maa"} <= set(table):
         return table
-    peers = [t for t, task in vocab.tasks.items() if task.peers]
     ref = table[
         (table["policy"] == REFERENCE_PEER)
-        & table["task"].isin(peers)
+        & table["task"].isin(vocab.exclusion_tasks)
         & (table["protocol"] == HEADLINE[1])
     ]
-    maps = {
-        (r.scene, r.seed): int(r.registered_views >= r.views and r.maa >= REFERENCE_MIN_MAA)
-        for r in ref.itertuples()
-        if pd.notna(r.registered_views)
-    }
+    maps: dict[tuple, int] = {}
+    for r in ref.itertuples():
+        if pd.notna(r.registered_views):
+            ok = int(r.registered_views >= r.views and r.maa >= REFERENCE_MIN_MAA)
+            maps[r.scene, r.seed] = min(ok, maps.get((r.scene, r.seed), 1))
     cells = zip(table["scene"], table["seed"])
     return table.assign(**{REFERENCE_MAPS: [maps.get(c) for c in cells]})
 
@@ -520,3 +521,31 @@ def bind_results_dir(results: Path, settings: dict, vocab: Vocabulary, overwrite
     if (results / VOCABULARY_FILE).is_file():
         vocab = vocab.merged(Vocabulary.load(results))
     write_text_atomic(results / VOCABULARY_FILE, vocab.to_json())
+
+
+def upgrade(results: Path, current: Vocabulary) -> list[str]:
+    """Bring a results folder written by an older bench up to date, in place (`bench
+    upgrade`): its recorded tasks get what the report reads of them (`REPORT_FIELDS`),
+    taken from `current`'s declarations of the same names. What it changed, one item each
+    (empty: the folder was up to date)."""
+    results = Path(results)
+    path = results / VOCABULARY_FILE
+    if not path.is_file():
+        raise BenchError(f"{path} not found: not a results folder of `bench run`")
+    data = json.loads(path.read_text())
+    changed = []
+    for name, task in data["tasks"].items():
+        missing = [f for f in REPORT_FIELDS if f not in task]
+        if not missing:
+            continue
+        if name not in current.tasks:
+            raise BenchError(
+                f"{path}: task {name!r} lacks {', '.join(missing)} and this bench does not "
+                "declare it; run the folder again with a bench that does"
+            )
+        declared = asdict(current.tasks[name])
+        task.update({f: declared[f] for f in missing})
+        changed.append(f"{VOCABULARY_FILE}: task {name} gets {', '.join(missing)}")
+    if changed:
+        write_text_atomic(path, Vocabulary.from_json(json.dumps(data)).to_json())
+    return changed

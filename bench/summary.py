@@ -1,6 +1,6 @@
 """What a run's rows say went wrong, in a line: the rows that failed (by reason), the rows
 that could not be computed (a method raised or broke its contract, a worker died), and the
-(scene, seed) cells left out of the sfm means. For `bench run`'s summary and Figure 3."""
+(scene, seed) cells left out of the means of the tasks with the exclusion rule (sfm). For `bench run`'s summary and Figure 3."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import re
 
 import pandas as pd
 
-from bench.vocabulary import REFERENCE_MAPS, REFERENCE_PEER
+from bench.vocabulary import REFERENCE_MAPS, REFERENCE_PEER, Vocabulary
 
 ERROR = "error: "
 """How the failure of a row that could not be computed starts (`bench.harness.execute`);
@@ -44,34 +44,37 @@ def errors(rows: pd.DataFrame) -> str:
     return f"{len(bad)} row(s) could not be computed, of {methods}; the first: {first}"
 
 
-def sfm_rule(df: pd.DataFrame, dataset: bool = False) -> str:
-    """Whether the sfm exclusion rule is applied to the rows `df` ("applied") or why not:
-    on a dataset (its poses are the truth), or where stock COLMAP with all features did
-    not run in every (scene, seed) cell of the sfm task (the rule is all or nothing, so
-    that a mean never depends on which cells it ran in)."""
+def exclusion_rule(df: pd.DataFrame, vocab: Vocabulary, dataset: bool = False) -> str:
+    """Whether the exclusion rule of the tasks with it (`Task.exclusion_reference`: sfm)
+    is applied to the rows `df` ("applied") or why not: on a dataset (its poses are the
+    truth), or where stock COLMAP with all features did not run in every (scene, seed)
+    cell of those tasks (the rule is all or nothing, so that a mean never depends on which
+    cells it ran in)."""
     if dataset:
         return "not applied: a dataset's poses are the truth"
-    cells = df[df["task"] == "sfm"].drop_duplicates(["scene", "seed"])
+    cells = df[df["task"].isin(vocab.exclusion_tasks)].drop_duplicates(["scene", "seed"])
     known = cells[REFERENCE_MAPS].notna().sum() if REFERENCE_MAPS in cells else 0
     if known < len(cells):
         return f"not applied: {REFERENCE_PEER} did not run in {len(cells) - known} of {len(cells)} cells"
     return "applied"
 
 
-def sfm_exclusions(rows: pd.DataFrame, dataset: bool = False) -> str:
-    """Which (scene, seed) cells the sfm means leave out and why, why none is left out
-    where the rule does not apply, or '' without the sfm task."""
-    if not (rows["task"] == "sfm").any():
+def exclusions(rows: pd.DataFrame, vocab: Vocabulary, dataset: bool = False) -> str:
+    """Which (scene, seed) cells the means of the tasks with the exclusion rule leave out
+    and why, why none is left out where the rule does not apply, or '' without such a
+    task."""
+    ruled = [t for t in vocab.exclusion_tasks if (rows["task"] == t).any()]
+    if not ruled:
         return ""
-    rule = sfm_rule(rows, dataset)
+    rule, names = exclusion_rule(rows, vocab, dataset), "/".join(ruled)
     if rule != "applied":
-        return f"sfm exclusion rule {rule}"
+        return f"{names} exclusion rule {rule}"
     cells = rows[rows[REFERENCE_MAPS].eq(0)][["scene", "seed"]].drop_duplicates()
     if cells.empty:
         return ""
-    names = ", ".join(f"{s} seed {d}" for s, d in sorted(map(tuple, cells.to_numpy())))
+    which = ", ".join(f"{s} seed {d}" for s, d in sorted(map(tuple, cells.to_numpy())))
     total = len(rows[["scene", "seed"]].drop_duplicates())
     return (
-        f"sfm means leave out {len(cells)} of {total} (scene, seed): {names} "
+        f"{names} means leave out {len(cells)} of {total} (scene, seed): {which} "
         f"({REFERENCE_PEER} with all features does not map them)"
     )

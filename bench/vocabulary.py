@@ -117,6 +117,22 @@ class Task:
     doc: str = ""
     ranges: dict[str, tuple[float, float | None]] = field(default_factory=dict)
     """The range of each metric of its own that `RANGES` does not declare."""
+    headline: tuple[str, ...] = ()
+    """The metrics the report compares methods in: `paired.csv` and `table2.csv`, the
+    figures and the page; its first is the one the results page shows paired and the one
+    `transfer.csv` ranks by."""
+    lower_better: tuple[str, ...] = ()
+    """Its metrics where lower is better (the paired wins and the best baseline)."""
+    summary: tuple[str, ...] = ()
+    """Its metrics in `table_scenes.csv` and, for a task the peers run, in the paired
+    comparison with them (`paired_sfm.csv`); empty: the headline."""
+    titles: dict[str, str] = field(default_factory=dict)
+    """The figures' panel title of each metric they draw, in drawing order (a headline
+    metric without one is drawn under its column name)."""
+    exclusion_reference: bool = False
+    """Whether a (scene, seed) that stock COLMAP with all its features (`REFERENCE_PEER`)
+    does not map is left out of this task's means and paired differences (the task's
+    rows hold `registered_views` and `maa`, `REFERENCE_MAPS`; the peers run it)."""
 
 
 @dataclass(frozen=True)
@@ -207,10 +223,59 @@ class Vocabulary:
         m = self.methods.get(policy)
         return m.label if m else policy
 
+    def column(self, task: str, metric: str) -> str:
+        """A task's metric as the report's tables name it: bare for the headline task,
+        `<task>_<metric>` for another (`bench.report.tables.headline_frame`)."""
+        return metric if task == HEADLINE[0] else f"{task}_{metric}"
+
+    def headline_metrics(self) -> list[str]:
+        """Every task's headline metrics (`Task.headline`), as the tables name them."""
+        return [self.column(n, m) for n, t in self.tasks.items() for m in t.headline]
+
+    def first_headline(self) -> list[str]:
+        """Each task's first headline metric (the page's and the transfer's)."""
+        return [self.column(n, t.headline[0]) for n, t in self.tasks.items() if t.headline]
+
+    def summary_metrics(self, task: str) -> list[str]:
+        """A task's metrics in the per-scene table and the peer comparison."""
+        t = self.tasks[task]
+        return [self.column(task, m) for m in t.summary or t.headline]
+
+    def lower_better(self) -> set[str]:
+        """The metrics (as the tables name them) where lower is better."""
+        return {self.column(n, m) for n, t in self.tasks.items() for m in t.lower_better}
+
+    def panels(self) -> list[tuple[str, str]]:
+        """(metric, title) of every panel the figures draw: each task's titled metrics,
+        then its headline metrics without a title, under their names."""
+        out = []
+        for n, t in self.tasks.items():
+            titled = {**t.titles, **{m: t.titles.get(m, m) for m in t.headline}}
+            out += [(self.column(n, m), title) for m, title in titled.items()]
+        return list(dict(out).items())
+
     @property
-    def peer_task(self) -> str | None:
-        """The task the stock-COLMAP peers run (the pose-free one), if any is declared."""
-        return next((n for n, t in self.tasks.items() if t.peers), None)
+    def posefree_task(self) -> str | None:
+        """The first task whose selection sees the images only (`GRANTS`), if any."""
+        return next((n for n, t in self.tasks.items() if t.grant == GRANTS[1]), None)
+
+    @property
+    def exclusion_tasks(self) -> list[str]:
+        """The tasks whose means leave out the cells stock COLMAP does not map."""
+        return [n for n, t in self.tasks.items() if t.exclusion_reference]
+
+    def split(self, column: str) -> tuple[str, str]:
+        """(task, metric) of a table column (`column`'s inverse): another task's if its
+        name and `_` prefix the column, else the headline task's."""
+        for n in self.tasks:
+            if n != HEADLINE[0] and column.startswith(f"{n}_"):
+                return n, column[len(n) + 1 :]
+        return HEADLINE[0], column
+
+    def excluded(self, column: str) -> bool:
+        """Whether a table column is a metric of a task with the exclusion rule."""
+        task = self.tasks.get(self.split(column)[0])
+        return bool(task and task.exclusion_reference)
 
     def with_role(self, *roles: str) -> list[str]:
         return [n for n, m in self.methods.items() if m.role in roles]
@@ -254,6 +319,7 @@ class Vocabulary:
                     **t,
                     "needs": tuple(t["needs"]),
                     "columns": tuple(t["columns"]),
+                    **{f: tuple(t.get(f, ())) for f in ("headline", "lower_better", "summary")},
                     "ranges": {k: tuple(r) for k, r in t.get("ranges", {}).items()},
                 }
             )
@@ -263,10 +329,20 @@ class Vocabulary:
 
     @classmethod
     def load(cls, results: Path) -> Vocabulary:
-        """The vocabulary recorded in a results folder (`vocabulary.json`)."""
+        """The vocabulary recorded in a results folder (`vocabulary.json`); one recorded
+        before tasks declared what the report reads of them (`REPORT_FIELDS`) is refused,
+        with `bench upgrade` as the remedy."""
         path = Path(results) / VOCABULARY_FILE
         try:
-            return cls.from_json(path.read_text())
+            text = path.read_text()
+            tasks = json.loads(text)["tasks"].values()
+            older = sorted({f for t in tasks for f in REPORT_FIELDS if f not in t})
+            if older:
+                raise BenchError(
+                    f"{path} was written by an older bench (its tasks lack {', '.join(older)}); "
+                    f"`bench upgrade --results {results}` brings the folder up to date"
+                )
+            return cls.from_json(text)
         except FileNotFoundError:
             raise BenchError(
                 f"{path} not found: these results were not written by this version of "
@@ -277,3 +353,5 @@ class Vocabulary:
 
 
 VOCABULARY_FILE = "vocabulary.json"
+REPORT_FIELDS = ("headline", "lower_better", "summary", "titles", "exclusion_reference")
+"""What the report reads of a task (`Task`); a recorded vocabulary without them is older."""

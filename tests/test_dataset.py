@@ -72,7 +72,7 @@ def test_dataset_run_gives_the_metrics_and_the_ranking_of_the_rendered_path(
     assert a["acc_completeness_pct"].notna().any() and a["maa"].notna().any()
     # the export of a render ranks the methods as the render does
     summary, ranks = transfer(data, Vocabulary.load(tmp_path / "d"), tmp_path / "r")
-    assert set(summary["metric"]) == {"sfm mAA", "tri completeness"}
+    assert set(summary["metric"]) == {"sfm_maa", "acc_completeness_pct"}
     assert (ranks["rank_shift"] == 0).all() and len(ranks) == 3 + 4
     tau = summary["kendall_tau"].dropna()
     assert len(tau) and np.allclose(tau, 1.0)
@@ -418,6 +418,6 @@ def test_several_datasets_run_at_once_with_tables_per_dataset_and_a_transfer_tab
         }
     summary, ranks = pd.read_csv(out / "transfer.csv"), pd.read_csv(out / "transfer_ranks.csv")
     assert set(summary["dataset"]) == {"table-ds", "facade-ds"}
-    assert set(summary["metric"]) == {"tri completeness"} and (summary["methods"] == 3).all()
+    assert set(summary["metric"]) == {"acc_completeness_pct"} and (summary["methods"] == 3).all()
     assert (ranks.loc[ranks["dataset"] == "table-ds", "rank_shift"] == 0).all()
     assert (out / "figure_transfer.png").is_file()

@@ -19,10 +19,9 @@ from bench.frontend.policies import POLICIES, PolicyFailed, PolicyInput, policy,
 from bench.frontend.signals import SIGNALS, Signals
 from bench.frontend.views import View
 from bench.report import figures
-from bench.report.figures import PANELS
 from bench.results import read_runs
-from bench.summary import failures, sfm_exclusions
-from bench.vocabulary import METHODS, REFERENCE_MAPS
+from bench.summary import exclusions, failures
+from bench.vocabulary import METHODS, REFERENCE_MAPS, Vocabulary
 
 LATE = """\
 from bench.frontend.policies import policy
@@ -120,7 +119,7 @@ def test_list_options_ignore_spaces_around_items():
 
 def _table1(policies: list[str], metrics: dict[str, list[float]], budget: int = 256):
     t = pd.DataFrame({"policy": policies, "strategy": policies, "budget": budget})
-    for m, _ in PANELS:
+    for m, _ in Vocabulary.current().panels():
         values = metrics.get(m, [math.nan] * len(policies))
         t[m], t[f"{m}_lo"], t[f"{m}_hi"] = values, values, values
     return t
@@ -135,13 +134,15 @@ def _drawn(monkeypatch) -> dict:
 def test_figure3_of_an_sfm_only_run_draws_its_panels_alone_with_n_a_inside(monkeypatch, tmp_path):
     drawn = _drawn(monkeypatch)
     t1 = _table1(["texture", "random", "colmap"], {"sfm_maa": [0.4, 0.3, math.nan]})
-    figures.figure3(t1, tmp_path / "figure3")
+    figures.figure3(t1, Vocabulary.current(), tmp_path / "figure3")
     (ax,) = drawn["fig"].axes  # one panel: no empty ones for the task that did not run
     assert "mAA" in ax.get_title()
     (na,) = [t for t in ax.texts if t.get_text() == "n/a"]
     lo, hi = ax.get_xlim()
     assert lo < na.get_position()[0] - 0.4 and na.get_position()[0] + 0.4 < hi
-    figures.figure3(t1, tmp_path / "figure3", note="3 failed (2 sfm: the mapper ...)")
+    figures.figure3(
+        t1, Vocabulary.current(), tmp_path / "figure3", note="3 failed (2 sfm: the mapper ...)"
+    )
     assert "3 failed (2 sfm: the mapper ...)" in [t.get_text() for t in drawn["fig"].texts]
 
 
@@ -151,7 +152,7 @@ def test_the_budget_figures_lines_never_share_a_hue_and_a_style(monkeypatch, tmp
     t1 = pd.concat(
         [_table1(names, {"acc_completeness_pct": list(range(12))}, budget=b) for b in (128, 256)]
     )
-    figures.figure_budget(t1, tmp_path / "figure_budget")
+    figures.figure_budget(t1, Vocabulary.current(), tmp_path / "figure_budget")
     lines = drawn["fig"].axes[0].get_lines()
     assert len(lines) == 12
     seen = {}
@@ -191,7 +192,7 @@ def test_the_summary_says_what_failed_by_reason_and_which_cells_sfm_leaves_out()
         "3 failed (2 sfm: the mapper registered N view(s); "
         "1 tri: no pair of views has verified matches)"
     )
-    assert sfm_exclusions(rows) == (
+    assert exclusions(rows, Vocabulary.current()) == (
         "sfm means leave out 2 of 3 (scene, seed): corridor seed 1, table seed 0 "
         "(colmap with all features does not map them)"
     )

@@ -817,7 +817,7 @@ def test_the_budget_figure_says_n_a_for_a_panel_without_values(monkeypatch, tmp_
     )
     drawn = {}
     monkeypatch.setattr(figures, "save", lambda fig, out, fmts: drawn.update(fig=fig))
-    figures.figure_budget(t1, tmp_path / "figure_budget")
+    figures.figure_budget(t1, Vocabulary.current(), tmp_path / "figure_budget")
     texts = {
         ax.get_title(): [t.get_text() for t in ax.texts]
         for ax in drawn["fig"].axes

@@ -3,6 +3,7 @@ applied the same way whatever the grid holds."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -10,12 +11,13 @@ import pandas as pd
 import pytest
 from scipy import stats as scipy_stats
 
+from bench import BenchError
 from bench.cli import main
 from bench.evaluation.export import export_dataset
 from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig, with_reference
 from bench.report.stats import paired_difference, stratified_interval
-from bench.report.tables import SFM_RULE, headline_frame, paired, paired_sfm, table1
+from bench.report.tables import headline_frame, paired, paired_sfm, table1, with_oracle_share
 from bench.results import ROW_CHECKSUM, append_runs, mark_reference, read_runs
 from bench.vocabulary import REFERENCE_MAPS, Vocabulary
 from tests.conftest import MEDIUM, bench_run
@@ -107,11 +109,11 @@ def test_wins_ties_and_losses_follow_the_metric_direction():
     strata = pd.Series(units.get_level_values(0), index=units)
     base = pd.Series(10.0, index=units)
     better = base + pd.Series([1, 2, 1, 5, 4, 5], index=units, dtype=float)
-    r = paired_difference(better, base, strata, "acc_completeness_pct")
+    r = paired_difference(better, base, strata, lower_better=False)
     assert (r["n"], r["mean_diff"], r["wins"], r["ties"], r["losses"]) == (6, 3.0, 6, 0, 0)
     assert r["lo"] < 3.0 < r["hi"]
-    assert paired_difference(better, base, strata, "rmse")["losses"] == 6
-    tied = paired_difference(base, base, strata, "accuracy_pct")
+    assert paired_difference(better, base, strata, lower_better=True)["losses"] == 6
+    tied = paired_difference(base, base, strata, lower_better=False)
     assert (tied["ties"], tied["note"]) == (6, "n/a (no spread)") and math.isnan(tied["lo"])
 
 
@@ -141,13 +143,13 @@ def test_the_sfm_rule_is_applied_in_all_cells_or_none_and_said(cells):
     frame = headline_frame(_sfm_rows(cells), vocab)
     t1 = table1(frame, vocab).set_index("policy")
     if cells == (0, 1):
-        assert t1.loc["texture", SFM_RULE] == "applied"
+        assert t1.loc["texture", "sfm_exclusion"] == "applied"
         assert t1.loc["texture", "sfm_maa"] == pytest.approx(0.4)
         assert t1.loc["texture", "sfm_excluded_runs"] == 1
     else:
         missing = 2 - len(cells)
         assert (
-            t1.loc["texture", SFM_RULE]
+            t1.loc["texture", "sfm_exclusion"]
             == f"not applied: colmap did not run in {missing} of 2 cells"
         )
         assert t1.loc["texture", "sfm_maa"] == pytest.approx(0.9)  # both seeds
@@ -195,7 +197,7 @@ def test_a_dataset_run_with_colmap_keeps_its_sfm_means_and_its_transfer_table(
     t1 = pd.read_csv(out / "table1.csv").set_index("policy")
     sfm = runs[runs["policy"] == "texture"]["maa"]
     assert t1.loc["texture", "sfm_maa"] == pytest.approx(sfm.mean())
-    assert t1.loc["texture", SFM_RULE] == "not applied: a dataset's poses are the truth"
+    assert t1.loc["texture", "sfm_exclusion"] == "not applied: a dataset's poses are the truth"
     summary = pd.read_csv(out / "transfer.csv")
     assert summary["methods"].tolist() == [3]
     # from another folder, the default --rendered is the package's published snapshot
@@ -213,8 +215,8 @@ def test_a_dataset_run_with_colmap_keeps_its_sfm_means_and_its_transfer_table(
 
 
 def test_the_front_end_cost_reads_its_tasks_from_the_vocabulary():
-    """The posed and the pose-free task are the headline task and the peers' task of the
-    rows' vocabulary, whatever they are named."""
+    """The posed and the pose-free task are the headline task and the first task granted
+    the images only of the rows' vocabulary, whatever they are named."""
     from bench.report.tables import frontend_cost
     from bench.vocabulary import Method, Task
 
@@ -223,7 +225,7 @@ def test_the_front_end_cost_reads_its_tasks_from_the_vocabulary():
         "free": Task("free", "images", needs=(), columns=(), peers=True),
     }
     vocab = Vocabulary({"texture": Method("texture", "Texture", "baseline")}, tasks)
-    assert vocab.peer_task == "free"
+    assert vocab.posefree_task == "free"
     df = pd.DataFrame(
         [
             {"scene": "table", "seed": s, "budget": 64, "policy": "texture", "task": task}
@@ -235,3 +237,85 @@ def test_the_front_end_cost_reads_its_tasks_from_the_vocabulary():
     row = frontend_cost(df, vocab).iloc[0]
     assert row["frontend_ms"] == 10.0 and row["frontend_ms_posefree"] == 30.0
     assert row["posefree_to_posed"] == 3.0
+
+
+# --- a task is one declaration -----------------------------------------------------
+
+
+def test_a_task_declared_once_is_in_every_table_figure_and_the_page(tmp_path, monkeypatch):
+    """A task declares what the report shows of it (`Task.headline`, `lower_better`,
+    `titles`): a new one, with a headline metric of its own where lower is better, is in
+    Table 1, the paired tables, Table 2, the per-scene table, the figures and the page,
+    with no other change."""
+    from bench.harness.tasks import RUNNERS, TaskRunner, register
+    from bench.report import figures
+    from bench.report.page import results_page
+    from bench.report.write import write_tables
+    from bench.vocabulary import TASKS, VOCABULARY_FILE, Task
+
+    toy = Task(
+        "toy",
+        "images",
+        needs=("score",),
+        columns=("score",),
+        ranges={"score": (0.0, 1.0)},
+        headline=("score",),
+        lower_better=("score",),
+        titles={"score": "Toy score"},
+    )
+    register(TaskRunner(toy, reconstruct=None, evaluate=None))
+    try:
+        vocab = Vocabulary.current()
+    finally:
+        RUNNERS.pop("toy"), TASKS.pop("toy")
+    assert "toy" not in Vocabulary.current().tasks  # the other tests see the package's
+    rows = []
+    for seed in range(3):
+        cell = dict(scene="s", seed=seed, budget=256, protocol="multiview", status="ok")
+        for policy, completeness, score in (
+            ("adaptive", 50.0, 0.1),
+            ("texture", 45.0, 0.4),
+            ("random", 30.0, 0.2),
+        ):
+            tri = dict(acc_completeness_pct=completeness + seed, accuracy_pct=80.0 + seed)
+            rows.append(cell | dict(policy=policy, task="tri", **tri))
+            rows.append(cell | dict(policy=policy, task="toy", score=score + 0.01 * seed))
+    (tmp_path / VOCABULARY_FILE).write_text(vocab.to_json())
+    assert Vocabulary.load(tmp_path).tasks["toy"] == toy  # recorded as declared
+    df = with_oracle_share(pd.DataFrame(rows))
+    t1 = write_tables(df, tmp_path, vocab).set_index("policy")
+    assert t1.loc["adaptive", "toy_score"] == pytest.approx(0.11)
+    pairs = pd.read_csv(tmp_path / "paired.csv").set_index(["scene", "baseline", "metric"])
+    # adaptive's score is the lowest in every unit: a win, lower being better
+    won = pairs.loc[("all scenes", "random", "toy_score"), ["n", "wins", "losses"]]
+    assert won.tolist() == [3, 3, 0]
+    t2 = pd.read_csv(tmp_path / "table2.csv").set_index("scene")
+    assert t2.loc["all scenes", "best_baseline_toy_score_policy"] == "random"  # the lower
+    assert t2.loc["all scenes", "diff_toy_score"] == pytest.approx(-0.1)
+    assert "toy_score" in pd.read_csv(tmp_path / "table_scenes.csv")
+    drawn = {}
+    monkeypatch.setattr(figures, "save", lambda fig, out, fmts: drawn.update(fig=fig))
+    figures.figure3(t1.reset_index(), vocab, tmp_path / "figure3")
+    assert "Toy score" in [ax.get_title() for ax in drawn["fig"].axes]
+    page = results_page(tmp_path, df)
+    assert "| adaptive | random | toy_score | 3 |" in page
+
+
+def test_a_folder_recorded_before_the_report_fields_is_refused_and_upgraded(tmp_path, capsys):
+    """A `vocabulary.json` whose tasks lack what the report reads would give tables
+    without their headline metrics: refused in one line naming `bench upgrade`, which
+    records the fields as the package declares them."""
+    from bench.vocabulary import REPORT_FIELDS, VOCABULARY_FILE
+
+    data = json.loads(Vocabulary.current().to_json())
+    for task in data["tasks"].values():
+        for f in REPORT_FIELDS:
+            task.pop(f)
+    (tmp_path / VOCABULARY_FILE).write_text(json.dumps(data))
+    with pytest.raises(BenchError, match=f"`bench upgrade --results {tmp_path}`"):
+        Vocabulary.load(tmp_path)
+    assert main(["upgrade", "--results", str(tmp_path)]) == 0
+    assert "task sfm gets headline" in capsys.readouterr().out
+    assert Vocabulary.load(tmp_path).tasks == Vocabulary.current().tasks
+    assert main(["upgrade", "--results", str(tmp_path)]) == 0
+    assert "up to date" in capsys.readouterr().out

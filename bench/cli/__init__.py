@@ -23,6 +23,7 @@ COMMANDS = (
     "run",
     "plot",
     "publish",
+    "upgrade",
     "train-weights",
     "select",
     "export",

@@ -361,16 +361,10 @@ def run(args: argparse.Namespace) -> None:
     vocab = Vocabulary.load(results)
     t = table1(headline_frame(with_oracle_share(df), vocab, protocol, bool(datasets)), vocab)
     print(f"Table 1 ({protocol} protocol; {', '.join(cfg.tasks)}):")
-    cols = ["strategy", "budget", "runs", "acc_completeness_pct", "completeness_vs_oracle_pct"]
-    cols += [
-        "accuracy_pct",
-        "rmse",
-        "median_error",
-        "inlier_pct",
-        "sfm_maa",
-        "sfm_registered_views",
-        "sfm_excluded_runs",
-    ]
+    cols = ["strategy", "budget", "runs"]  # each task's headline and summary metrics
+    cols += [vocab.column(n, m) for n, t in vocab.tasks.items() for m in (*t.headline, *t.summary)]
+    cols += [vocab.column(n, "excluded_runs") for n in vocab.exclusion_tasks]
+    cols = list(dict.fromkeys(cols))
     print(t[[c for c in cols if c in t]].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
     failed = errors(in_grid(cfg, df))
     if failed:  # after every other row and the tables are written

@@ -51,7 +51,7 @@ from bench.results import (
     set_aside_damaged,
 )
 from bench.scenes.spec import load_spec, scene_names
-from bench.summary import ERROR, failures, sfm_exclusions
+from bench.summary import ERROR, exclusions, failures
 from bench.vocabulary import (
     KEY,
     METHODS,
@@ -72,10 +72,11 @@ def default_policies() -> tuple[str, ...]:
 
 def with_reference(policies: tuple[str, ...], tasks: tuple[str, ...]) -> tuple[str, ...]:
     """`policies`, with stock COLMAP with all features (`REFERENCE_PEER`) added when the
-    grid runs a task that admits peers (sfm) on rendered scenes: the sfm means leave out
+    grid runs a task with the exclusion rule (sfm) on rendered scenes: its means leave out
     the cells it does not map, and the rule holds only when it ran in every cell. (Said by
     `bench run --help`; the run's closing line names the cells it left out.)"""
-    if REFERENCE_PEER in policies or not any(RUNNERS[t].spec.peers for t in tasks if t in RUNNERS):
+    ruled = any(RUNNERS[t].spec.exclusion_reference for t in tasks if t in RUNNERS)
+    if REFERENCE_PEER in policies or not ruled:
         return policies
     return (*policies, REFERENCE_PEER)
 
@@ -309,7 +310,8 @@ def _run_in(
     invocation |= {"rows": n_rows, "seconds": {"total": time.perf_counter() - t_start, **stage_s}}
     write_manifest(ws, cfg, invocation, out)
     ours = in_grid(cfg, out)
-    said = [s for s in (failures(ours), sfm_exclusions(ours, bool(cfg.datasets))) if s]
+    said = [failures(ours), exclusions(ours, Vocabulary.current(), bool(cfg.datasets))]
+    said = [s for s in said if s]
     log(
         f"{n_rows} rows done, {len(done)} reused, in {invocation['seconds']['total']:.0f} s"
         + (f"; of the grid's {len(ours)} rows, " + "; ".join(said) if said else "")

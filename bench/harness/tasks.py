@@ -1,6 +1,9 @@
 """The task registry: for each reconstruction task, what its selection may see, how it
 reconstructs from the selected keypoints and verified matches, how its model is scored
-and which metrics its rows must hold. Adding a task is one `register` call here.
+and which metrics its rows must hold. Adding a task is one `register` call here; what the
+report shows of it (its headline metrics in the paired tables, the figures, the page and
+the transfer table; which are lower-better; whether the stock-COLMAP exclusion rule holds)
+is declared on its `Task` and read from the results folder's recorded vocabulary.
 
 * `tri`: triangulation with the rig's known poses, scored against the ground-truth
   surface (`bench.evaluation.metrics`).
@@ -118,6 +121,19 @@ register(
             needs=("points", "acc_completeness_pct"),
             columns=TRI_COLUMNS,
             doc="known poses, scored against the ground-truth surface",
+            headline=("acc_completeness_pct", "accuracy_pct", "rmse", "median_error"),
+            lower_better=("rmse", "median_error", "runtime_proxy", "wall_ms", "task_ms"),
+            summary=("acc_completeness_pct", "accuracy_pct", "rmse", "points", "coverage_pct"),
+            titles={
+                "acc_completeness_pct": "Acc. completeness % (e < 0.10)",
+                "completeness_vs_oracle_pct": "Completeness, % of the oracle's",
+                "accuracy_pct": "Accuracy % (points with e < 0.10)",
+                "rmse": "RMSE (scene units)",
+                "median_error": "Median error (scene units)",
+                "inlier_pct": "Inlier %",
+                "coverage_pct": "Coverage %",
+                "runtime_proxy": "Runtime proxy (k ops)",
+            },
         ),
         reconstruct=lambda m, cfg, protocol: known_pose_task(
             m.image_dir, m.cams, m.names, m.xy, m.pairs, cfg, protocol
@@ -137,6 +153,19 @@ register(
             columns=SFM_COLUMNS,
             peers=True,
             doc="unknown poses, scored by pose mAA",
+            headline=("maa",),
+            lower_better=(
+                "rmse",
+                "median_error",
+                "median_pose_err_deg",
+                "cam_center_err",
+                "mean_reproj_px",
+                "wall_ms",
+                "task_ms",
+            ),
+            summary=("maa", "registered_views"),
+            titles={"maa": "SfM pose mAA (1-10 deg), unknown poses"},
+            exclusion_reference=True,
         ),
         reconstruct=lambda m, cfg, protocol: mapping_task(
             m.image_dir, m.cams, m.names, m.xy, m.pairs, cfg, protocol

@@ -19,19 +19,8 @@ from matplotlib.ticker import FixedLocator, NullLocator  # noqa: E402
 
 from bench.files import atomic_path  # noqa: E402
 from bench.results import Workspace  # noqa: E402
-from bench.vocabulary import HEADLINE, HEADLINE_BUDGET, ORACLE, Job, Unit  # noqa: E402
+from bench.vocabulary import HEADLINE, HEADLINE_BUDGET, ORACLE, Job, Unit, Vocabulary  # noqa: E402
 
-PANELS = (
-    ("acc_completeness_pct", "Acc. completeness % (e < 0.10)"),
-    ("completeness_vs_oracle_pct", "Completeness, % of the oracle's"),
-    ("accuracy_pct", "Accuracy % (points with e < 0.10)"),
-    ("rmse", "RMSE (scene units)"),
-    ("median_error", "Median error (scene units)"),
-    ("inlier_pct", "Inlier %"),
-    ("coverage_pct", "Coverage %"),
-    ("runtime_proxy", "Runtime proxy (k ops)"),
-    ("sfm_maa", "SfM pose mAA (1-10 deg), unknown poses"),
-)
 LOG_SCALE = {"runtime_proxy", "rmse"}
 
 
@@ -50,15 +39,18 @@ def _errors(t: pd.DataFrame, m: str) -> np.ndarray:
     return np.nan_to_num(np.vstack([lo, hi]))
 
 
-def figure3(t1: pd.DataFrame, out: Path, title: str = "", note: str = "") -> None:
+def figure3(
+    t1: pd.DataFrame, vocab: Vocabulary, out: Path, title: str = "", note: str = ""
+) -> None:
     """Aggregate metrics per strategy at the headline budget (references included), with
     95% intervals; bars are labelled by policy id (the display names are long).
-    One panel per metric that has a value (the panels of the tasks that ran); `note`
-    (what failed, what the means leave out) below them."""
+    One panel per metric the tasks draw (`Vocabulary.panels`) that has a value (the panels
+    of the tasks that ran); `note` (what failed, what the means leave out) below them."""
     b = headline_budget(t1)
     t = t1[(t1["budget"] == b) | (t1["budget"] == 0)].reset_index(drop=True)
-    panels = [(m, label) for m, label in PANELS if m in t and np.isfinite(t[m].astype(float)).any()]
-    panels = panels or [(m, label) for m, label in PANELS if m in t][:1]
+    every = vocab.panels()
+    panels = [(m, label) for m, label in every if m in t and np.isfinite(t[m].astype(float)).any()]
+    panels = panels or [(m, label) for m, label in every if m in t][:1]
     cols = min(3, len(panels))
     rows = -(-len(panels) // cols)
     width = max(5.0, len(t) / 3)
@@ -110,12 +102,16 @@ def _line_style(k: int) -> dict:
     }
 
 
-def figure_budget(t1: pd.DataFrame, out: Path) -> None:
-    """Each headline metric against the budget per policy (oracle included), with 95%
-    interval bands; the `all` reference as a dashed line."""
-    fig, axes = plt.subplots(3, 3, figsize=(15, 11))
+def figure_budget(t1: pd.DataFrame, vocab: Vocabulary, out: Path) -> None:
+    """Each metric the tasks draw (`Vocabulary.panels`) against the budget per policy
+    (oracle included), with 95% interval bands; the `all` reference as a dashed line."""
+    panels = vocab.panels()
+    rows = max(3, -(-len(panels) // 3))
+    fig, axes = plt.subplots(rows, 3, figsize=(15, 11 / 3 * rows))
+    for ax in axes.ravel()[len(panels) :]:
+        ax.set_visible(False)
     budgets = sorted(b for b in t1["budget"].unique() if b > 0)
-    for ax, (m, label) in zip(axes.ravel(), PANELS):
+    for ax, (m, label) in zip(axes.ravel(), panels):
         if m not in t1:
             ax.set_visible(False)
             continue

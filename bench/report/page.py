@@ -18,8 +18,6 @@ from bench.vocabulary import HEADLINE, HEADLINE_BUDGET, HEADLINE_POLICY, PAIRED_
 PAGE = "README.md"
 POOLED = ("all", "all scenes")
 """How the tables name the pooled rows."""
-PAGE_METRICS = ("acc_completeness_pct", "sfm_maa")
-"""The paired metrics the page shows (the CSVs have every headline metric)."""
 TASK_COLUMNS = 3
 """How many of a task's Table 1 columns (its first, in the task registry's order) the
 page shows; the CSV has them all."""
@@ -156,13 +154,16 @@ def _table2_section(t2: pd.DataFrame) -> list[str]:
     return [title, ""] + _table(header, body) + [""]
 
 
-def _paired_section(paired: pd.DataFrame, title: str, baseline: str | None) -> list[str]:
-    """The pooled rows (all scenes) at the headline budget in the headline metrics, against
-    `baseline` if given."""
+def _paired_section(
+    paired: pd.DataFrame, vocab: Vocabulary, title: str, baseline: str | None
+) -> list[str]:
+    """The pooled rows (all scenes) at the headline budget in each task's first headline
+    metric (`Vocabulary.first_headline`; the CSVs have them all), against `baseline` if
+    given."""
     if paired.empty:
         return []
     pooled = paired["scene"].isin(POOLED) & (paired["budget"] == HEADLINE_BUDGET)
-    rows = paired[pooled & paired["metric"].isin(PAGE_METRICS)]
+    rows = paired[pooled & paired["metric"].isin(vocab.first_headline())]
     if baseline is not None:
         rows = rows[rows["baseline"] == baseline]
     if rows.empty:
@@ -190,7 +191,7 @@ def _transfer_section(transfer: pd.DataFrame) -> list[str]:
     return ["## Transfer: the rendered ranking on each dataset", ""] + _table(shown, body) + [""]
 
 
-def _exclusions(runs: pd.DataFrame, t1: pd.DataFrame) -> list[str]:
+def _exclusions(runs: pd.DataFrame, t1: pd.DataFrame, vocab: Vocabulary) -> list[str]:
     out = ["## What was excluded or failed, and why", ""]
     failed = runs[runs["status"] == "failed"]
     if failed.empty:
@@ -198,12 +199,14 @@ def _exclusions(runs: pd.DataFrame, t1: pd.DataFrame) -> list[str]:
     else:
         reasons = failed["failure"].fillna("").str.split(":").str[0].value_counts()
         out += [f"- {n} rows failed: {why}" for why, n in reasons.items()]
-    if "sfm_excluded_runs" in t1 and t1["sfm_excluded_runs"].fillna(0).sum():
-        n = int(t1.groupby("policy")["sfm_excluded_runs"].max().max())
-        out.append(
-            f"- up to {n} runs per method left out of the sfm means: their (scene, seed) "
-            "is not mapped by stock COLMAP with all its features (`reference_maps` 0)"
-        )
+    for task in vocab.exclusion_tasks:
+        excluded = vocab.column(task, "excluded_runs")
+        if excluded in t1 and t1[excluded].fillna(0).sum():
+            n = int(t1.groupby("policy")[excluded].max().max())
+            out.append(
+                f"- up to {n} runs per method left out of the {task} means: their (scene, "
+                "seed) is not mapped by stock COLMAP with all its features (`reference_maps` 0)"
+            )
     return out + [""]
 
 
@@ -227,11 +230,13 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
     out += _table2_section(_read(results, "table2.csv"))
     out += _paired_section(
         _read(results, "paired.csv"),
+        vocab,
         f"Paired: {HEADLINE_POLICY} against every method, all scenes",
         None,
     )
     out += _paired_section(
         _read(results, "paired_sfm.csv"),
+        vocab,
         f"Paired sfm: every method against `{PAIRED_PEER}`, all scenes",
         PAIRED_PEER,
     )
@@ -239,7 +244,7 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
     figures = [(n, t) for n, t in FIGURES.items() if (results / n).is_file()]
     if figures:
         out += ["## Figures", ""] + [f"![{t}]({n})" + "\n" for n, t in figures]
-    out += _exclusions(runs, t1)
+    out += _exclusions(runs, t1, vocab)
     out.append(
         "Every table is a CSV beside this page with every column; the definitions are in "
         "the project's `docs/protocol.md`."

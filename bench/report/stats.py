@@ -19,7 +19,7 @@ skewed noise or an mAA in [0, 1] (76-80%), 81-84% with very skewed noise or an m
 at 0 (50-73%): read a single scene's interval of mAA as indicative.
 
 Paired units are also counted as wins, ties (equal values) and losses for A, by the
-metric's direction.
+metric's direction (declared by its task, `bench.vocabulary.Task.lower_better`).
 """
 
 from __future__ import annotations
@@ -31,16 +31,6 @@ import pandas as pd
 from scipy.special import stdtrit
 
 LEVEL = 0.95
-LOWER_IS_BETTER = {
-    "rmse",
-    "median_error",
-    "runtime_proxy",
-    "wall_ms",
-    "sfm_rmse",
-    "sfm_median_error",
-    "sfm_median_pose_err_deg",
-    "sfm_cam_center_err",
-}
 
 
 def stratified_interval(x, strata=None) -> tuple[float, float, float, str]:
@@ -68,11 +58,12 @@ def stratified_interval(x, strata=None) -> tuple[float, float, float, str]:
     return mean, mean - half, mean + half, ""
 
 
-def paired_difference(a: pd.Series, b: pd.Series, strata: pd.Series, metric: str) -> dict:
+def paired_difference(a: pd.Series, b: pd.Series, strata: pd.Series, lower_better: bool) -> dict:
     """A - B over the units (index) both have: its mean with the stratified interval
-    (`stratified_interval`, `strata` the units' scenes), and wins / ties / losses of A."""
+    (`stratified_interval`, `strata` the units' scenes), and wins / ties / losses of A
+    (`lower_better`: the metric's direction, `Task.lower_better`)."""
     d = (a - b).dropna()
-    better = -d if metric in LOWER_IS_BETTER else d
+    better = -d if lower_better else d
     mean, lo, hi, note = stratified_interval(d.to_numpy(), strata.loc[d.index].to_numpy())
     return {
         "n": len(d),

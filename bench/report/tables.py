@@ -45,8 +45,8 @@ import math
 import numpy as np
 import pandas as pd
 
-from bench.report.stats import LOWER_IS_BETTER, paired_difference, stratified_interval
-from bench.summary import sfm_rule
+from bench.report.stats import paired_difference, stratified_interval
+from bench.summary import exclusion_rule
 from bench.vocabulary import (
     HEADLINE,
     HEADLINE_POLICY,
@@ -57,12 +57,13 @@ from bench.vocabulary import (
     Vocabulary,
 )
 
-PAIRED_METRICS = ("acc_completeness_pct", "accuracy_pct", "rmse", "median_error", "sfm_maa")
-"""The headline metrics that paired statistics compare."""
 UNIT = list(UNIT_KEY)
-SFM_RULE = "sfm_exclusion"
-"""The `headline_frame` column (and Table 1's) saying whether the sfm exclusion rule is
-applied (`sfm_rule`)."""
+
+
+def rule_column(vocab: Vocabulary, task: str) -> str:
+    """The `headline_frame` column (and Table 1's) saying whether the exclusion rule is
+    applied to a task with it (`exclusion_rule`): `sfm_exclusion` for the sfm task."""
+    return vocab.column(task, "exclusion")
 
 
 def headline_frame(
@@ -70,8 +71,9 @@ def headline_frame(
 ) -> pd.DataFrame:
     """One row per (scene, seed, policy, budget) under a track protocol: the headline
     task's columns, and every other task's as `<task>_<name>` (a unit without one of the
-    tasks has NaN for it); with the sfm task, `SFM_RULE` and, where the rule is applied,
-    `REFERENCE_MAPS` (`dataset`: the rows are of datasets)."""
+    tasks has NaN for it); with a task with the exclusion rule (`Task.exclusion_reference`),
+    its `rule_column` and, where the rule is applied, `REFERENCE_MAPS` (`dataset`: the rows
+    are of datasets)."""
     rows = df[df["protocol"] == protocol]
     frame = rows[rows["task"] == HEADLINE[0]].drop(columns=REFERENCE_MAPS, errors="ignore")
     for task in (t for t in vocab.tasks if t != HEADLINE[0]):
@@ -80,9 +82,10 @@ def headline_frame(
         frame = frame.merge(
             part.rename(columns={c: f"{task}_{c}" for c in cols}), on=UNIT, how="outer"
         )
-    rule = sfm_rule(df, dataset) if (df["task"] == vocab.peer_task).any() else None
-    if rule is not None:
-        frame[SFM_RULE] = rule
+    ruled = [t for t in vocab.exclusion_tasks if (df["task"] == t).any()]
+    rule = exclusion_rule(df, vocab, dataset) if ruled else None
+    for task in ruled:
+        frame[rule_column(vocab, task)] = rule
     if rule == "applied":  # a property of the (scene, seed): on every unit of it
         cells = df.dropna(subset=[REFERENCE_MAPS]).groupby(["scene", "seed"])[REFERENCE_MAPS]
         maps = cells.first()
@@ -90,10 +93,11 @@ def headline_frame(
     return frame
 
 
-def solvable(rows: pd.DataFrame, metric: str) -> pd.DataFrame:
-    """The rows that count for `metric`: for an sfm metric, those of (scene, seed) cells
-    that stock COLMAP with all features maps (a cell it does not map measures nothing)."""
-    if not metric.startswith("sfm_") or REFERENCE_MAPS not in rows:
+def solvable(rows: pd.DataFrame, metric: str, vocab: Vocabulary) -> pd.DataFrame:
+    """The rows that count for `metric`: for a metric of a task with the exclusion rule
+    (sfm), those of (scene, seed) cells that stock COLMAP with all features maps (a cell
+    it does not map measures nothing)."""
+    if REFERENCE_MAPS not in rows or not vocab.excluded(metric):
         return rows
     return rows[rows[REFERENCE_MAPS].ne(0)]
 
@@ -106,12 +110,6 @@ def with_oracle_share(df: pd.DataFrame) -> pd.DataFrame:
     with np.errstate(divide="ignore", invalid="ignore"):
         share = 100.0 * df["acc_completeness_pct"].to_numpy(dtype=float) / ref
     return df.assign(completeness_vs_oracle_pct=np.where(ref > 0, share, math.nan))
-
-
-def _metric(column: str, others: list[str]) -> str:
-    """A Table 1 column's metric (`sfm_maa` -> `maa`)."""
-    task = next((t for t in others if column.startswith(f"{t}_")), None)
-    return column[len(task) + 1 :] if task else column
 
 
 def _within(lo: float, hi: float, bounds) -> tuple[float, float]:
@@ -128,23 +126,25 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     out = []
     others = [t for t in vocab.tasks if t != HEADLINE[0]]
     metrics = [*vocab.tasks[HEADLINE[0]].columns]
-    metrics += [f"{t}_{m}" for t in others for m in vocab.tasks[t].columns]
+    metrics += [vocab.column(t, m) for t in others for m in vocab.tasks[t].columns]
     for (policy, budget), g in rows.groupby(["policy", "budget"], sort=False):
         row = {"strategy": vocab.label(policy), "policy": policy, "budget": budget}
         row["runs"] = len(g)
         row["failed_runs"] = int((g["status"] == "failed").sum())
         for t in (t for t in others if f"{t}_status" in g):
             row[f"{t}_failed_runs"] = int((g[f"{t}_status"] == "failed").sum())
-        if SFM_RULE in g:
-            row[SFM_RULE] = g[SFM_RULE].iloc[0]
-        if REFERENCE_MAPS in g:
-            row["sfm_excluded_runs"] = int(g[REFERENCE_MAPS].eq(0).sum())
+        for task in vocab.exclusion_tasks:
+            if rule_column(vocab, task) in g:
+                row[rule_column(vocab, task)] = g[rule_column(vocab, task)].iloc[0]
+        for task in vocab.exclusion_tasks if REFERENCE_MAPS in g else ():
+            row[vocab.column(task, "excluded_runs")] = int(g[REFERENCE_MAPS].eq(0).sum())
         notes = []
         for m in metrics:
             if m in g:
-                x = solvable(g, m)
+                x = solvable(g, m, vocab)
                 row[m], lo, hi, note = stratified_interval(x[m].astype(float), x["scene"])
-                row[f"{m}_lo"], row[f"{m}_hi"] = _within(lo, hi, vocab.range_of(_metric(m, others)))
+                bounds = vocab.range_of(vocab.split(m)[1])
+                row[f"{m}_lo"], row[f"{m}_hi"] = _within(lo, hi, bounds)
                 notes += [note] if note and x[m].notna().any() else []
         row["note"] = "; ".join(dict.fromkeys(notes))
         out.append(row)
@@ -162,19 +162,22 @@ def _units(df: pd.DataFrame, policy: str, budget: int, metric: str) -> pd.Series
     return g.set_index(["scene", "seed"])[metric].astype(float)
 
 
-def _paired(rows: pd.DataFrame, pairs: list[tuple[str, str]], metrics) -> pd.DataFrame:
+def _paired(
+    rows: pd.DataFrame, pairs: list[tuple[str, str]], metrics, vocab: Vocabulary
+) -> pd.DataFrame:
     """Policy minus baseline for each (policy, baseline) of `pairs`, per scene and pooled,
     per budget and metric, over the (scene, seed) units both ran."""
     out = []
+    lower = vocab.lower_better()
     for budget in sorted(b for b in pd.unique(rows["budget"]) if b > 0):
         for scope in [*pd.unique(rows["scene"]), "all scenes"]:
             part = rows if scope == "all scenes" else rows[rows["scene"] == scope]
             for policy, base in pairs:
                 for m in (m for m in metrics if m in part):
-                    counted = solvable(part, m)
+                    counted = solvable(part, m, vocab)
                     a, b = _units(counted, policy, budget, m), _units(counted, base, budget, m)
                     strata = pd.Series(a.index.get_level_values("scene"), index=a.index)
-                    res = paired_difference(a, b, strata, m)  # n = 0 when either is missing
+                    res = paired_difference(a, b, strata, m in lower)  # n = 0: one is missing
                     out.append(
                         {
                             "scene": scope,
@@ -193,23 +196,25 @@ def paired(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     and pooled, per budget and headline metric (`rows`: `headline_frame`)."""
     ranked = set(vocab.with_role("baseline", "contender")) - {HEADLINE_POLICY}
     others = [p for p in pd.unique(rows["policy"]) if p in ranked]
-    return _paired(rows, [(HEADLINE_POLICY, b) for b in others], PAIRED_METRICS)
+    return _paired(rows, [(HEADLINE_POLICY, b) for b in others], vocab.headline_metrics(), vocab)
 
 
 def paired_sfm(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
-    """In the sfm task's mAA and registered views, per scene and pooled, per budget
-    (`rows`: `headline_frame`): every budgeted policy (and the oracle) minus the peer
-    held to the budget, `colmap-b`, and every contender (and the oracle) minus every
-    baseline. Cells stock COLMAP does not map are left out (`solvable`)."""
+    """In the summary metrics (`Task.summary`) of the tasks the peers run (sfm: mAA and
+    registered views), per scene and pooled, per budget (`rows`: `headline_frame`): every
+    budgeted policy (and the oracle) minus the peer held to the budget, `colmap-b`, and
+    every contender (and the oracle) minus every baseline. Cells stock COLMAP does not
+    map are left out (`solvable`)."""
     present = list(pd.unique(rows["policy"]))
     ranked = {*vocab.with_role("baseline", "contender"), ORACLE}
     policies = [p for p in present if p in ranked]
     pairs = [(p, PAIRED_PEER) for p in policies] if PAIRED_PEER in present else []
     bases = [p for p in present if p in vocab.with_role("baseline")]
     pairs += [(p, b) for p in policies if p not in bases for b in bases]
-    if not pairs:
+    metrics = [m for n, t in vocab.tasks.items() if t.peers for m in vocab.summary_metrics(n)]
+    if not pairs or not metrics:
         return pd.DataFrame()
-    return _paired(rows, pairs, ("sfm_maa", "sfm_registered_views"))
+    return _paired(rows, pairs, metrics, vocab)
 
 
 def table2(rows: pd.DataFrame, pairs: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
@@ -217,25 +222,24 @@ def table2(rows: pd.DataFrame, pairs: pd.DataFrame, vocab: Vocabulary) -> pd.Dat
     and the paired difference to it, plus the oracle's completeness (`rows`:
     `headline_frame`)."""
     out = []
+    metrics, lower = vocab.headline_metrics(), vocab.lower_better()
     for budget in sorted(b for b in pd.unique(rows["budget"]) if b > 0):
         for scope in [*pd.unique(rows["scene"]), "all scenes"]:
             part = rows[rows["budget"] == budget]
             part = part if scope == "all scenes" else part[part["scene"] == scope]
             means = pd.DataFrame(
                 {
-                    m: solvable(part, m).groupby("policy")[m].mean()
-                    for m in PAIRED_METRICS
+                    m: solvable(part, m, vocab).groupby("policy")[m].mean()
+                    for m in metrics
                     if m in part
                 }
             )
             row = {"scene": scope, "budget": budget}
-            for m in (m for m in PAIRED_METRICS if m in means):
+            for m in (m for m in metrics if m in means):
                 row[f"adaptive_{m}"] = means[m].get(HEADLINE_POLICY, math.nan)
                 baselines = vocab.with_role("baseline")
                 base = means.loc[[p for p in baselines if p in means.index], m].dropna()
-                best = (
-                    (base.idxmin() if m in LOWER_IS_BETTER else base.idxmax()) if len(base) else ""
-                )
+                best = (base.idxmin() if m in lower else base.idxmax()) if len(base) else ""
                 row[f"best_baseline_{m}"] = base.get(best, math.nan) if best else math.nan
                 row[f"best_baseline_{m}_policy"] = best
                 p = pairs[
@@ -261,19 +265,20 @@ def table2(rows: pd.DataFrame, pairs: pd.DataFrame, vocab: Vocabulary) -> pd.Dat
     )
 
 
-SCENE_METRICS = ("acc_completeness_pct", "accuracy_pct", "rmse", "points", "coverage_pct")
-
-
 def table_scenes(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
-    """Per scene, policy and budget: means over seeds (`rows`: `headline_frame`)."""
-    cols = [m for m in (*SCENE_METRICS, "sfm_maa", "sfm_registered_views") if m in rows]
+    """Per scene, policy and budget: means over seeds of every task's summary metrics
+    (`Task.summary`; `rows`: `headline_frame`)."""
+    cols = [m for n in vocab.tasks for m in vocab.summary_metrics(n) if m in rows]
     keys = ["scene", "policy", "budget"]
-    t = pd.DataFrame({m: solvable(rows, m).groupby(keys, sort=False)[m].mean() for m in cols})
+    t = pd.DataFrame(
+        {m: solvable(rows, m, vocab).groupby(keys, sort=False)[m].mean() for m in cols}
+    )
     t = t.reindex(rows.groupby(keys, sort=False).size().index).reset_index()
     t.insert(3, "seeds", rows.groupby(keys, sort=False).size().values)
     if REFERENCE_MAPS in rows:
         excluded = rows[REFERENCE_MAPS].eq(0).groupby([rows[k] for k in keys], sort=False)
-        t.insert(4, "sfm_excluded_seeds", excluded.sum().astype(int).values)
+        for k, task in enumerate(vocab.exclusion_tasks):
+            t.insert(4 + k, vocab.column(task, "excluded_seeds"), excluded.sum().astype(int).values)
     order = t.apply(lambda r: (r["scene"], r["budget"], vocab.order(r["policy"])), axis=1)
     return t.loc[order.sort_values().index].reset_index(drop=True)
 
@@ -281,8 +286,9 @@ def table_scenes(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
 def frontend_cost(df: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     """Per policy: mean front-end ms of a run (detect + its signals + select) with the
     rig's poses (the `tri` task) and the mean ratio to texture-only over the units both
-    ran; the same with the geometry from the images (the `sfm` task, `_posefree`) and the
-    mean ratio of the pose-free to the posed front end over the units both ran."""
+    ran; the same with the geometry from the images (the first task granted the images
+    only, `Vocabulary.posefree_task`: sfm, `_posefree`) and the mean ratio of the
+    pose-free to the posed front end over the units both ran."""
     parts = ["detect_ms", "signals_ms", "select_ms"]
     ranked = vocab.with_role("baseline", "contender")
     rows = df[(df["protocol"] == HEADLINE[1]) & df["policy"].isin(ranked)]
@@ -295,7 +301,7 @@ def frontend_cost(df: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     out = []
     for policy in dict.fromkeys(rows["policy"]):
         row = {"policy": policy}
-        posed_task, free_task = HEADLINE[0], vocab.peer_task
+        posed_task, free_task = HEADLINE[0], vocab.posefree_task
         for task, suffix in ((posed_task, ""), (free_task, "_posefree")):
             f = front[task]
             units = f[f.index.get_level_values("policy") == policy].droplevel("policy")

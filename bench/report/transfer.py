@@ -1,13 +1,15 @@
 """Whether the rendered ranking holds on photographs: `transfer.csv`,
 `transfer_ranks.csv` and `figure_transfer.png` of a results folder of datasets.
 
-For each dataset, budget and ranking metric (the `sfm` task's mAA; the `tri` task's
-completeness where the dataset has per-pixel truth), the budgeted methods that both
-results folders hold are ranked by their mean, best first, on the dataset and on the
-rendered benchmark (all its scenes and seeds pooled, at the same budget, under the headline
-protocol; for sfm, without the cells stock COLMAP does not map where that rule holds,
-`bench.summary.sfm_rule`; a dataset's cells are never left out); tied means share
-their mean rank. `transfer.csv` has Kendall's tau-b between the
+For each dataset, budget and ranking metric (each task's first headline metric,
+`bench.vocabulary.Task.headline`, named as in `paired.csv`: the `tri` task's
+`acc_completeness_pct` where the dataset has per-pixel truth, the `sfm` task's `sfm_maa`),
+the budgeted methods that both results folders hold are ranked by their mean, best first
+(by the metric's direction, `Task.lower_better`), on the dataset and on the rendered
+benchmark (all its scenes and seeds pooled, at the same budget, under the headline
+protocol; for a task with the exclusion rule, without the cells stock COLMAP does not map
+where that rule holds, `bench.summary.exclusion_rule`; a dataset's cells are never left
+out); tied means share their mean rank. `transfer.csv` has Kendall's tau-b between the
 two rankings with a 95% percentile bootstrap interval (the methods resampled with
 replacement, `DRAWS` draws, seed 0), the winner on each side and the methods whose rank
 moves most; `transfer_ranks.csv` has every method's values and ranks.
@@ -25,8 +27,6 @@ from bench.report.tables import headline_frame, solvable
 from bench.results import read_runs
 from bench.vocabulary import Vocabulary
 
-RANKED = {"sfm_maa": "sfm mAA", "acc_completeness_pct": "tri completeness"}
-"""The ranking metrics (columns of `headline_frame`), higher is better."""
 DRAWS = 2000
 MOVERS = 2
 
@@ -54,10 +54,10 @@ def tau_interval(x: np.ndarray, y: np.ndarray, seed: int = 0) -> tuple[float, fl
     return float(lo), float(hi)
 
 
-def _means(frame: pd.DataFrame, metric: str) -> pd.DataFrame:
+def _means(frame: pd.DataFrame, metric: str, vocab: Vocabulary) -> pd.DataFrame:
     """Mean of `metric` per budget and budgeted method over the cells that count for it
     (`solvable`; budget 0, a whole-pool method, has no budget to rank at)."""
-    frame = solvable(frame, metric)
+    frame = solvable(frame, metric, vocab)
     rows = frame[(frame["budget"] > 0) & frame[metric].notna()]
     return rows.groupby(["budget", "policy"])[metric].mean().unstack("policy")
 
@@ -70,26 +70,27 @@ def transfer(
     mine = headline_frame(dataset_rows, vocab, dataset=True)
     theirs = headline_frame(read_runs(Path(rendered) / "runs.csv"), Vocabulary.load(rendered))
     summary, ranks = [], []
+    sign = {m: 1 if m in vocab.lower_better() else -1 for m in vocab.first_headline()}
     for dataset, rows in mine.groupby("scene", sort=False):
-        for metric, label in RANKED.items():
+        for metric in vocab.first_headline():
             if metric not in rows or metric not in theirs:
                 continue
-            real, ref = _means(rows, metric), _means(theirs, metric)
+            real, ref = _means(rows, metric, vocab), _means(theirs, metric, vocab)
             for budget in real.index.intersection(ref.index):
                 a, b = real.loc[budget].dropna(), ref.loc[budget].dropna()
                 methods = [m for m in a.index if m in b.index]
                 if len(methods) < 3:
                     continue
                 x, y = a[methods].to_numpy(), b[methods].to_numpy()
-                rank_x = pd.Series(-x, index=methods).rank(method="average")
-                rank_y = pd.Series(-y, index=methods).rank(method="average")
+                rank_x = pd.Series(sign[metric] * x, index=methods).rank(method="average")
+                rank_y = pd.Series(sign[metric] * y, index=methods).rank(method="average")
                 shift = rank_x - rank_y
                 movers = shift.abs().sort_values(ascending=False, kind="stable").index[:MOVERS]
                 lo, hi = tau_interval(x, y)
                 summary.append(
                     {
                         "dataset": dataset,
-                        "metric": label,
+                        "metric": metric,
                         "budget": int(budget),
                         "methods": len(methods),
                         "kendall_tau": kendall_tau(x, y),
@@ -106,7 +107,7 @@ def transfer(
                     ranks.append(
                         {
                             "dataset": dataset,
-                            "metric": label,
+                            "metric": metric,
                             "budget": int(budget),
                             "policy": m,
                             "value_dataset": a[m],

@@ -33,11 +33,11 @@ from bench.report.figures import (
 )
 from bench.report.page import PAGE, results_page
 from bench.report.tables import (
-    SFM_RULE,
     frontend_cost,
     headline_frame,
     paired,
     paired_sfm,
+    rule_column,
     table1,
     table2,
     table_scenes,
@@ -45,7 +45,7 @@ from bench.report.tables import (
 )
 from bench.report.transfer import transfer
 from bench.results import read_runs
-from bench.summary import failures, sfm_exclusions
+from bench.summary import exclusions, failures
 from bench.vocabulary import VOCABULARY_FILE, Vocabulary
 
 
@@ -87,8 +87,9 @@ def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> pd.DataF
     datasets = is_dataset_run(results)
     frame = headline_frame(df, vocab, dataset=datasets)
     t1, pairs = table1(frame, vocab), paired(frame, vocab)
-    if SFM_RULE in frame and len(frame):
-        log(f"sfm exclusion rule (cells stock COLMAP does not map): {frame[SFM_RULE].iloc[0]}")
+    for task in (t for t in vocab.exclusion_tasks if rule_column(vocab, t) in frame and len(frame)):
+        rule = frame[rule_column(vocab, task)].iloc[0]
+        log(f"{task} exclusion rule (cells stock COLMAP does not map): {rule}")
     if datasets:
         _write_tables(results, _per_dataset(frame, vocab, results))
     tables = {
@@ -105,9 +106,11 @@ def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> pd.DataF
 
 
 def _write_figures(df: pd.DataFrame, t1: pd.DataFrame, results: Path, renders: Path) -> None:
-    figure3(t1, results / "figure3", note=figure3_note(df, is_dataset_run(results)))
+    vocab = Vocabulary.load(results)
+    note = figure3_note(df, vocab, is_dataset_run(results))
+    figure3(t1, vocab, results / "figure3", note=note)
     if (t1["budget"] > 0).sum() and t1.loc[t1["budget"] > 0, "budget"].nunique() > 1:
-        figure_budget(t1, results / "figure_budget")
+        figure_budget(t1, vocab, results / "figure_budget")
     else:
         _drop(results / "figure_budget.png")
     why = figure2(df, results, renders, results / "figure2")
@@ -117,9 +120,9 @@ def _write_figures(df: pd.DataFrame, t1: pd.DataFrame, results: Path, renders: P
         _drop(results / "figure2.png")
 
 
-def figure3_note(df: pd.DataFrame, dataset: bool = False) -> str:
+def figure3_note(df: pd.DataFrame, vocab: Vocabulary, dataset: bool = False) -> str:
     """Figure 3's note: the rows that failed, and the cells the sfm means leave out."""
-    said = [s for s in (failures(df), sfm_exclusions(df, dataset)) if s]
+    said = [s for s in (failures(df), exclusions(df, vocab, dataset)) if s]
     return f"Of {len(df)} rows: " + "\n".join(said) if said else ""
 
 
