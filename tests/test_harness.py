@@ -918,7 +918,7 @@ def test_a_task_is_added_in_one_place(renders_dir, tmp_path):
     from bench.backend.reconstruction import known_pose_task
     from bench.harness import tasks
 
-    def count_points(truth, model, names, protocol):
+    def count_points(truth, model, names, protocol, poses):
         return {"observed_points": 0 if model is None else model.num_points3D()}
 
     runner = tasks.TaskRunner(

@@ -3,7 +3,8 @@
 1. Tentative matches: mutual nearest neighbours in descriptor space that also pass Lowe's
    ratio test (d1 < ratio * d2).
 2. Verification per pair with COLMAP's calibrated two-view geometry (RANSAC on the
-   essential matrix, homography checks) using the known intrinsics; inliers are kept.
+   essential matrix, homography checks) using the known intrinsics; inliers are kept,
+   with the relative pose COLMAP estimates from them (the `pairs` task's prediction).
 RANSAC is seeded, so a run is reproducible.
 """
 
@@ -53,8 +54,14 @@ class PairMatches:
     verified: np.ndarray
     config: str
     """COLMAP's two-view configuration (e.g. CALIBRATED, PLANAR, DEGENERATE)."""
-    rotation: np.ndarray | None = None
-    """Rotation of view j's camera from view i's, as COLMAP's verification estimated it."""
+    pose: np.ndarray | None = None
+    """View j's camera from view i's, [R | t] (3, 4) with a unit translation t, as COLMAP's
+    verification estimated it (None where it kept no inliers or estimated no pose)."""
+
+    @property
+    def rotation(self) -> np.ndarray | None:
+        """The rotation of `pose` (None without one)."""
+        return None if self.pose is None else self.pose[:, :3]
 
 
 def verify(
@@ -66,14 +73,17 @@ def verify(
     cfg: BackendConfig,
 ) -> tuple[np.ndarray, str, np.ndarray | None]:
     """COLMAP's calibrated two-view geometry on the tentative matches: (inliers,
-    configuration, rotation of b from a where COLMAP estimated the relative pose)."""
+    configuration, [R | t] of b from a where COLMAP estimated the relative pose from them)."""
     if len(matches) < 5:
         return np.zeros((0, 2), np.int64), "TOO_FEW_MATCHES", None
     opts = verification_options(cfg.ransac_max_error, cfg.seed)
     tvg = two_view_geometry(cam_a, xy_a, cam_b, xy_b, matches, opts)
     inliers = np.asarray(tvg.inlier_matches, np.int64).reshape(-1, 2)
-    R = np.asarray(tvg.cam2_from_cam1.rotation.matrix()) if len(inliers) else None
-    return inliers, configuration(tvg), R
+    rel = tvg.cam2_from_cam1
+    if not len(inliers) or rel is None:
+        return inliers, configuration(tvg), None
+    pose = np.c_[np.asarray(rel.rotation.matrix()), np.asarray(rel.translation)]
+    return inliers, configuration(tvg), pose
 
 
 def match_and_verify(
@@ -85,9 +95,9 @@ def match_and_verify(
         m = tentative_matches(desc[i], desc[j], cfg.ratio)
         seconds["match"] += time.perf_counter() - t
         t = time.perf_counter()
-        inliers, config, R = verify(cams[i], xy[i], cams[j], xy[j], m, cfg)
+        inliers, config, pose = verify(cams[i], xy[i], cams[j], xy[j], m, cfg)
         seconds["verify"] += time.perf_counter() - t
-        pairs.append(PairMatches(i, j, m, inliers, config, R))
+        pairs.append(PairMatches(i, j, m, inliers, config, pose))
     return pairs, seconds
 
 

@@ -1,5 +1,5 @@
-"""Stock COLMAP as the peer of the `sfm` task: what a user would run instead of a selection
-policy, on the same images, scored the same way.
+"""Stock COLMAP as the peer of the `sfm` and `pairs` tasks: what a user would run instead of
+a selection policy, on the same images, scored the same way.
 
 * `colmap`: pycolmap's own SIFT extraction at its default settings (8192 features at most),
   exhaustive matching with COLMAP's own verification, incremental mapping with the same
@@ -11,6 +11,11 @@ policy, on the same images, scored the same way.
   keeps whole scale levels (octaves) until the limit is reached, so a view holds more (up
   to about twice) or fewer features than B; its rows record how many.
 
+For the `pairs` task, each pair's relative pose is estimated from the pair's verified
+matches (COLMAP's own verification, read back from its database) by the policies'
+verification (`bench.backend.matching.verify`: COLMAP's calibrated two-view geometry with
+the known intrinsics, seeded); COLMAP's matcher stores no pose.
+
 The peers read the images and the intrinsics only, like every back end.
 """
 
@@ -20,12 +25,13 @@ import shutil
 import tempfile
 import time
 from dataclasses import dataclass
+from itertools import combinations
 from pathlib import Path
 
 import numpy as np
 import pycolmap
 
-from bench.backend.matching import BackendConfig
+from bench.backend.matching import BackendConfig, PairMatches, verify
 from bench.backend.reconstruction import Reconstruction, map_database, quiet_colmap, write_images
 from bench.camera import Camera
 from bench.frontend.features import strongest_first
@@ -43,6 +49,10 @@ class PeerRun:
     tentative: int
     verified: int
     seconds: dict[str, float]
+    pairs: list[PairMatches]
+    """The verified pairs with their relative poses (empty: none asked for)."""
+    pose_s: float = 0.0
+    """The seconds their poses took."""
 
 
 def keypoint_scales(keypoints: np.ndarray) -> np.ndarray:
@@ -77,6 +87,27 @@ def _cap_database(db_path: Path, names: list[str], budget: int) -> None:
         db.close()
 
 
+def verified_pairs(
+    db: pycolmap.Database,
+    ids: list[int],
+    cams: list[Camera],
+    keypoints: list[np.ndarray],
+    cfg: BackendConfig,
+) -> list[PairMatches]:
+    """Every pair of views (i < j, image ids `ids`) with COLMAP's verified matches, and the
+    relative pose of those matches (module docstring)."""
+    out = []
+    for i, j in combinations(range(len(ids)), 2):
+        if not db.exists_two_view_geometry(ids[i], ids[j]):
+            continue
+        tvg = db.read_two_view_geometry(ids[i], ids[j])
+        inliers = np.asarray(tvg.inlier_matches, np.int64).reshape(-1, 2)
+        pose = verify(cams[i], keypoints[i], cams[j], keypoints[j], inliers, cfg)[2]
+        config = pycolmap.TwoViewGeometryConfiguration(int(tvg.config)).name
+        out.append(PairMatches(i, j, inliers[:0], inliers, config, pose))
+    return out
+
+
 def run_peer(
     image_dir: Path,
     names: list[str],
@@ -85,9 +116,11 @@ def run_peer(
     budget: int,
     cfg: BackendConfig,
     protocols: list[str],
+    poses: bool = False,
 ) -> PeerRun:
     """Extract (and cap) and match once with stock COLMAP, then map under each track
-    protocol (see the module docstring)."""
+    protocol, and with `poses` estimate each verified pair's relative pose (see the module
+    docstring)."""
     work = Path(tempfile.mkdtemp(prefix="bench-peer-"))
     db_path = work / "database.db"
     db = pycolmap.Database.open(str(db_path))
@@ -129,10 +162,16 @@ def run_peer(
             ids = {img.name: img.image_id for img in db.read_all_images()}
             keypoints = [db.read_keypoints(ids[n])[:, :2] for n in names]
             tentative, verified = db.num_matches(), db.num_inlier_matches()
+            t = time.perf_counter()
+            pairs = (
+                verified_pairs(db, [ids[n] for n in names], cams, keypoints, cfg) if poses else []
+            )
+            pose_s = time.perf_counter() - t
         finally:
             db.close()
         recs = {pr: map_database(db_path, image_dir, cfg, pr) for pr in protocols}
-        return PeerRun(recs, keypoints, tentative, verified, {"detect": detect_s, "match": match_s})
+        seconds = {"detect": detect_s, "match": match_s}
+        return PeerRun(recs, keypoints, tentative, verified, seconds, pairs, pose_s)
     finally:
         shutil.rmtree(work, ignore_errors=True)
 

@@ -6,6 +6,7 @@ so editing a metric never changes what the oracle selects."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import combinations
 from pathlib import Path
 
 import numpy as np
@@ -151,6 +152,19 @@ class SceneTruth:
         """Ground-truth tracks spanning at least `min_views` views (None without per-pixel
         truth)."""
         return None if self.track_views is None else int(np.sum(self.track_views >= min_views))
+
+    def shared_pairs(self, min_shared: int) -> list[tuple[int, int]] | None:
+        """The pairs of views (i < j) whose candidates share at least `min_shared`
+        ground-truth tracks (ground-truth points seen by both; None without per-pixel
+        truth)."""
+        if self.track is None:
+            return None
+        seen = [np.unique(t) for t in self.track]
+        return [
+            (i, j)
+            for i, j in combinations(range(len(seen)), 2)
+            if len(np.intersect1d(seen[i], seen[j], assume_unique=True)) >= min_shared
+        ]
 
     def correspondences(self, i: int, j: int, ki: np.ndarray, kj: np.ndarray) -> np.ndarray:
         """Whether candidate ki[m] of view i and kj[m] of view j correspond (ground truth)."""

@@ -28,7 +28,13 @@ from bench.frontend.colmap_model import read_model
 from bench.frontend.signals import seconds_of
 from bench.frontend.views import Source, source_key
 from bench.harness.config import RunConfig
-from bench.harness.predict import LoadedScene, prediction_hash, read_record, stored_pairs
+from bench.harness.predict import (
+    LoadedScene,
+    prediction_hash,
+    read_record,
+    stored_pairs,
+    stored_poses,
+)
 from bench.harness.tasks import RUNNERS
 from bench.results import PREDICTION, Workspace
 from bench.vocabulary import CODE, HEADLINE, METHODS, Job, Unit
@@ -58,11 +64,11 @@ def evaluate(
     rows = []
     for job in jobs:
         done = record["jobs"][job.key]
-        metrics_of, seconds = shared[done["grant"]]
+        metrics_of, seconds, poses = shared[done["grant"]]
         out = ws.model_dir(unit, job)
         model = pycolmap.Reconstruction(str(out)) if done["model"] else None
         t = time.perf_counter()
-        scores = RUNNERS[job.task].evaluate(scene.truth, model, names, job.protocol)
+        scores = RUNNERS[job.task].evaluate(scene.truth, model, names, job.protocol, poses)
         if job.task == HEADLINE[0] and model is not None and scene.truth.surface is not None:
             _write_point_errors(model, scene, out)
         timing = seconds | {"task": done["task_s"], "evaluate": time.perf_counter() - t}
@@ -72,13 +78,14 @@ def evaluate(
 
 
 def _shared(scene: LoadedScene, unit: Unit, record: dict, grant: str, folder: Path):
-    """The metrics a grant's jobs share (of the selection and its matches) and the seconds
-    of the stages before the task."""
+    """The metrics a grant's jobs share (of the selection and its matches), the seconds of
+    the stages before the task, and the stored relative poses of its verified pairs."""
     t = time.perf_counter()
     with np.load(folder / f"{PREDICTION}-{grant}.npz") as arrays:
         if grant == "peer":
             keypoints = [arrays[f"keypoints_{v}"] for v in range(len(record["names"]))]
             peer = record["peer"]
+            poses = stored_poses(peer.get("pairs", []), arrays)
             cams = scene.truth.cams
             shared = {
                 "tentative_matches": peer["tentative"],
@@ -90,10 +97,11 @@ def _shared(scene: LoadedScene, unit: Unit, record: dict, grant: str, folder: Pa
                 "keypoints_per_view": float(np.mean([len(k) for k in keypoints])),
                 "ground_truth": scene.truth.kind,
             }
-            return shared, dict(peer["seconds"])
+            return shared, dict(peer["seconds"]), poses
         stored = record["grants"][grant]
         selections = [arrays[f"selection_{v}"] for v in range(len(record["names"]))]
         pairs = stored_pairs(record, grant, arrays)
+        poses = stored_poses(stored["pairs"], arrays)
     fe = scene.fronts[grant]
     reads = METHODS[unit.policy].reads
     earlier = [(r["selected"], r["pair_tentative"], r["pair_verified"]) for r in stored["rounds"]]
@@ -105,7 +113,7 @@ def _shared(scene: LoadedScene, unit: Unit, record: dict, grant: str, folder: Pa
         **stored["seconds"],
         "evaluate_matches": time.perf_counter() - t,
     }
-    return shared, seconds
+    return shared, seconds, poses
 
 
 def _write_point_errors(model, scene: LoadedScene, out: Path) -> None:

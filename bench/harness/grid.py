@@ -271,7 +271,8 @@ def _run_in(
     if not cfg.units():
         raise BenchError(
             f"nothing to compute: no policy of {', '.join(cfg.policies)} runs a task of "
-            f"{', '.join(cfg.tasks)} (the COLMAP peers run the sfm task only)"
+            f"{', '.join(cfg.tasks)} (the COLMAP peers run only "
+            f"{', '.join(t for t, r in RUNNERS.items() if r.spec.peers)})"
         )
     stage_s = dict.fromkeys(
         ["render", "frontend", "select", "match", "verify", "task", "evaluate_matches", "evaluate"],

@@ -17,9 +17,12 @@ The arrays, by key: `prediction-<grant>.npz` holds `selection_{v}` (the indices 
 v's candidate pool that the policy selected, ascending) and, for the k-th pair of
 `prediction.json`'s `grants[<grant>]["pairs"]` (views i < j, COLMAP's two-view
 configuration), `tentative_{k}` and `verified_{k}` (matches as (M, 2) rows of indices into
-the selections of views i and j); `prediction-peer.npz` holds `keypoints_{v}` (the (N, 2)
-pixel positions of the peer's keypoints in view v, as COLMAP's database holds them).
-`prediction.json`'s `jobs` are keyed by `Job.key` (`<task>/<protocol>`).
+the selections of views i and j) and, where the verification estimated one, `pose_{k}`
+(the relative pose [R | t], (3, 4), of view j's camera from view i's, unit t: what the
+`pairs` task scores); `prediction-peer.npz` holds `keypoints_{v}` (the (N, 2) pixel
+positions of the peer's keypoints in view v, as COLMAP's database holds them) and, with a
+task that does not map (`pairs`), `pose_{k}` of the k-th pair of `prediction.json`'s
+`peer["pairs"]`. `prediction.json`'s `jobs` are keyed by `Job.key` (`<task>/<protocol>`).
 """
 
 from __future__ import annotations
@@ -212,6 +215,7 @@ def _predict_policy(scene, unit, jobs, cfg, ws, record) -> None:
         arrays = {f"selection_{v}": s for v, s in enumerate(selections)}
         for k, p in enumerate(pairs):
             arrays |= {f"tentative_{k}": p.tentative, f"verified_{k}": p.verified}
+        arrays |= pose_arrays(pairs)
         with atomic_path(folder / f"{PREDICTION}-{grant}.npz") as tmp:
             np.savez(tmp, **arrays)
         m = Matched(
@@ -238,23 +242,36 @@ def _predict_policy(scene, unit, jobs, cfg, ws, record) -> None:
 
 
 def _predict_peer(scene, unit, jobs, cfg, ws, record) -> None:
+    """A peer maps its own database for a task that maps (`TaskRunner.maps`); a task that
+    does not is given the peer's keypoints and verified pairs, with their poses (estimated
+    too where an earlier job of the unit's record needs them: the arrays are rewritten)."""
     fe = next(iter(scene.fronts.values()))
     names, cams = [v.name for v in fe.views], [v.camera for v in fe.views]
     image_dir = Source.of(scene.entry).images
-    run = run_peer(
-        image_dir, names, cams, unit.policy, unit.budget, cfg.backend, [j.protocol for j in jobs]
-    )
+    mapped = list(dict.fromkeys(j.protocol for j in jobs if RUNNERS[j.task].maps))
+    tasks = {j.task for j in jobs} | {k.split("/")[0] for k in record["jobs"]}
+    poses = any(t in RUNNERS and not RUNNERS[t].maps for t in tasks)
+    run = run_peer(image_dir, names, cams, unit.policy, unit.budget, cfg.backend, mapped, poses)
     record["names"] = names
     record["peer"] = {"tentative": run.tentative, "verified": run.verified, "seconds": run.seconds}
+    arrays = {f"keypoints_{v}": k for v, k in enumerate(run.keypoints)}
+    if poses:
+        record["peer"]["pairs"] = [{"i": p.i, "j": p.j, "config": p.config} for p in run.pairs]
+        arrays |= pose_arrays(run.pairs)
     with atomic_path(ws.unit_dir(unit) / f"{PREDICTION}-peer.npz") as tmp:
-        np.savez(tmp, **{f"keypoints_{v}": k for v, k in enumerate(run.keypoints)})
+        np.savez(tmp, **arrays)
+    matched = Matched(image_dir, cams, names, run.keypoints, run.pairs)
     for job in jobs:
-        rec = run.recs[job.protocol]
+        runner = RUNNERS[job.task]
+        if runner.maps:
+            rec, extra_s = run.recs[job.protocol], 0.0
+        else:
+            rec, extra_s = runner.reconstruct(matched, cfg.backend, job.protocol), run.pose_s
         _export_or_clear(rec.model, ws.model_dir(unit, job))
         record["jobs"][job.key] = {
             "grant": "peer",
             "failure": rec.failure,
-            "task_s": rec.seconds,
+            "task_s": rec.seconds + extra_s,
             "model": rec.model is not None,
         }
 
@@ -273,6 +290,18 @@ def has_prediction(ws: Workspace, unit: Unit, jobs: list[Job], cfg: RunConfig) -
     return record.get("hash") == prediction_hash(cfg, unit.policy) and all(
         j.key in record.get("jobs", {}) for j in jobs
     )
+
+
+def pose_arrays(pairs: list[PairMatches]) -> dict[str, np.ndarray]:
+    """`pose_{k}` of the k-th pair, for the pairs with a relative pose."""
+    return {f"pose_{k}": p.pose for k, p in enumerate(pairs) if p.pose is not None}
+
+
+def stored_poses(pairs: list[dict], arrays) -> dict[tuple[int, int], np.ndarray]:
+    """{(i, j): [R | t]} of the stored pairs (`pairs`: their records) with a pose."""
+    return {
+        (p["i"], p["j"]): arrays[f"pose_{k}"] for k, p in enumerate(pairs) if f"pose_{k}" in arrays
+    }
 
 
 def stored_pairs(record: dict, grant: str, arrays) -> list[PairMatches]:

@@ -9,6 +9,10 @@ is declared on its `Task` and read from the results folder's recorded vocabulary
   surface (`bench.evaluation.metrics`).
 * `sfm`: incremental mapping with unknown poses, scored by pose accuracy
   (`bench.evaluation.poses`).
+* `pairs`: no reconstruction; the relative pose of every pair, as the verification of the
+  selection's matches estimated it (stored with the prediction), scored by relative-pose
+  AUC and mAA (`bench.evaluation.relative`). The track protocol does not apply: its rows
+  under each protocol hold the same scores.
 """
 
 from __future__ import annotations
@@ -29,9 +33,10 @@ from bench.backend.reconstruction import (
 from bench.camera import Camera
 from bench.evaluation.metrics import evaluate_known_pose
 from bench.evaluation.poses import evaluate_mapping
+from bench.evaluation.relative import AUC_THRESHOLDS_DEG, RelativePoses, evaluate_pairs
 from bench.evaluation.truth import SceneTruth
 from bench.frontend.geometry import IMAGES, RIG
-from bench.vocabulary import PROTOCOLS, Task, declare_task
+from bench.vocabulary import AT_LEAST_0, FRACTION, PROTOCOLS, Task, declare_task
 
 
 @dataclass(frozen=True)
@@ -46,8 +51,9 @@ class Matched:
 
 
 Reconstruct = Callable[[Matched, BackendConfig, str], Reconstruction]
-Evaluate = Callable[[SceneTruth, object, list[str], str], dict[str, float]]
-"""(truth, the exported model or None, the view names, the track protocol) -> metrics."""
+Evaluate = Callable[[SceneTruth, object, list[str], str, RelativePoses], dict[str, float]]
+"""(truth, the exported model or None, the view names, the track protocol, the stored
+relative poses of the verified pairs) -> metrics."""
 
 
 @dataclass(frozen=True)
@@ -57,6 +63,10 @@ class TaskRunner:
     evaluate: Evaluate
     record: Callable[[Matched], object] | None = None
     """The model exported when the task reconstructs nothing (None: nothing is)."""
+    maps: bool = False
+    """Whether it runs COLMAP's incremental mapper: a stock-COLMAP peer maps its own
+    database for it (`bench.backend.peers.run_peer`); a peer gives a task that does not
+    its keypoints and verified pairs (`Matched`), as a policy does."""
 
 
 RUNNERS: dict[str, TaskRunner] = {}
@@ -138,7 +148,7 @@ register(
         reconstruct=lambda m, cfg, protocol: known_pose_task(
             m.image_dir, m.cams, m.names, m.xy, m.pairs, cfg, protocol
         ),
-        evaluate=lambda truth, model, names, protocol: evaluate_known_pose(
+        evaluate=lambda truth, model, names, protocol, poses: evaluate_known_pose(
             truth, model, PROTOCOLS[protocol]
         ),
         record=lambda m: known_pose_model(m.cams, m.names, m.xy),
@@ -170,8 +180,62 @@ register(
         reconstruct=lambda m, cfg, protocol: mapping_task(
             m.image_dir, m.cams, m.names, m.xy, m.pairs, cfg, protocol
         ),
-        evaluate=lambda truth, model, names, protocol: evaluate_mapping(
+        evaluate=lambda truth, model, names, protocol, poses: evaluate_mapping(
             truth, model, view_of_name(names)
         ),
+        maps=True,
+    )
+)
+
+
+def relative_poses(m: Matched, cfg: BackendConfig, protocol: str) -> Reconstruction:
+    """Task `pairs`: nothing to reconstruct, the verification estimated each pair's
+    relative pose; a unit without any is failed (its rows still scored: every pair missing)."""
+    if sum(len(p.verified) for p in m.pairs) == 0:
+        return Reconstruction(None, "no pair of views has verified matches", 0.0)
+    if all(p.pose is None for p in m.pairs):
+        return Reconstruction(None, "no pair of views has a relative pose", 0.0)
+    return Reconstruction(None, None, 0.0)
+
+
+PAIRS_COLUMNS = (
+    "auc_5",
+    "auc_10",
+    "auc_20",
+    "maa_pairs",
+    "median_pose_err_deg",
+    "pairs_scored",
+    "pairs_estimated",
+    "task_ms",
+    "wall_ms",
+)
+
+register(
+    TaskRunner(
+        Task(
+            "pairs",
+            IMAGES,
+            needs=("auc_10", "maa_pairs", "pairs_scored"),
+            columns=PAIRS_COLUMNS,
+            peers=True,
+            doc="relative poses of the verified pairs, scored by pose AUC",
+            ranges={
+                **{f"auc_{t}": FRACTION for t in AUC_THRESHOLDS_DEG},
+                "maa_pairs": FRACTION,
+                "pairs_scored": AT_LEAST_0,
+                "pairs_estimated": AT_LEAST_0,
+            },
+            headline=("auc_10", "auc_5", "auc_20", "maa_pairs"),
+            lower_better=("median_pose_err_deg", "wall_ms", "task_ms"),
+            summary=("auc_10", "maa_pairs", "pairs_estimated"),
+            titles={
+                "auc_10": "Relative-pose AUC @10 deg, unknown poses",
+                "auc_5": "Relative-pose AUC @5 deg",
+                "auc_20": "Relative-pose AUC @20 deg",
+                "maa_pairs": "Relative-pose mAA (1-10 deg)",
+            },
+        ),
+        reconstruct=relative_poses,
+        evaluate=lambda truth, model, names, protocol, poses: evaluate_pairs(truth, poses),
     )
 )
