@@ -63,7 +63,7 @@ def test_dataset_run_gives_the_metrics_and_the_ranking_of_the_rendered_path(
         renders_dir,
         workers=1,
     )
-    assert len(rendered) == len(data) == 3 * 4 + 2
+    assert len(rendered) == len(data) == 3 * 6 + 4  # tri, sfm, pairs; colmap-b: sfm, pairs
     timing = {c for c in rendered if c.endswith("_ms")}
     cols = [c for c in rendered.columns if c not in NOT_COMPARED | timing]
     a = rendered[cols].sort_values(list(KEY[2:]), ignore_index=True)
@@ -72,8 +72,8 @@ def test_dataset_run_gives_the_metrics_and_the_ranking_of_the_rendered_path(
     assert a["acc_completeness_pct"].notna().any() and a["maa"].notna().any()
     # the export of a render ranks the methods as the render does
     summary, ranks = transfer(data, Vocabulary.load(tmp_path / "d"), tmp_path / "r")
-    assert set(summary["metric"]) == {"sfm_maa", "acc_completeness_pct"}
-    assert (ranks["rank_shift"] == 0).all() and len(ranks) == 3 + 4
+    assert set(summary["metric"]) == {"sfm_maa", "acc_completeness_pct", "pairs_auc_10"}
+    assert (ranks["rank_shift"] == 0).all() and len(ranks) == 3 + 4 + 4
     tau = summary["kendall_tau"].dropna()
     assert len(tau) and np.allclose(tau, 1.0)
     assert (summary["winner_dataset"] == summary["winner_rendered"]).all()

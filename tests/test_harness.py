@@ -198,7 +198,7 @@ TIMING = [
     "row_checksum",
 ]
 POLICIES = ["random", "texture", "grid", "adaptive", "oracle", "colmap-b", "all", "colmap"]
-ROWS = 2 * (6 * 2 * 2 + 2 * 2)  # scenes x (selections x tasks x protocols + peers x protocols)
+ROWS = 2 * (6 * 3 * 2 + 2 * 2 * 2)  # scenes x (selections x 3 tasks + peers x 2) x protocols
 
 
 @pytest.fixture(scope="module")
@@ -226,9 +226,11 @@ def test_quick_run_writes_every_file_with_documented_columns(quick_results):
     assert len(runs) == ROWS and set(runs["policy"]) == set(POLICIES)
     assert set(runs.loc[runs["policy"] == "all", "budget"]) == {0}  # one run, the whole pool
     assert set(zip(runs["task"], runs["protocol"])) == {
-        (t, p) for t in ("tri", "sfm") for p in ("multiview", "twoview")
+        (t, p) for t in ("tri", "sfm", "pairs") for p in ("multiview", "twoview")
     }
-    assert set(runs.loc[runs["policy"].str.startswith("colmap"), "task"]) == {"sfm"}
+    assert set(runs.loc[runs["policy"].str.startswith("colmap"), "task"]) == {"sfm", "pairs"}
+    pairs = runs[runs["task"] == "pairs"]  # scored from the poses stored with the prediction
+    assert pairs["auc_10"].between(0, 1).all() and (pairs["pairs_estimated"] > 0).all()
     capped = runs.loc[runs["policy"] == "colmap-b", "keypoints_per_view"]
     assert len(capped) and (capped == 64).all()  # a hard cap: exactly B per view
     assert runs["maa"].notna().sum() == runs["task"].eq("sfm").sum()  # never NaN, failed or not
@@ -321,7 +323,7 @@ def test_interrupted_run_resumes_without_redoing_rows(renders_dir, tmp_path, mon
     monkeypatch.setattr(execute, "predict", interrupt_after_three)
     with pytest.raises(KeyboardInterrupt):
         bench_run(SMALL, tmp_path, renders_dir)
-    assert len(pd.read_csv(tmp_path / "runs.csv")) == 3 * 4  # tasks x protocols
+    assert len(pd.read_csv(tmp_path / "runs.csv")) == 3 * 6  # tasks x protocols
     monkeypatch.setattr(execute, "predict", real)
     calls.clear()
     spy(monkeypatch, calls)
@@ -348,7 +350,7 @@ def test_growing_a_results_folder_runs_only_the_new_rows(
     bench_run(grown, tmp_path / "r", renders_dir)
     assert sorted(calls) == [(p, 32) for p in sorted(POLICIES[:6])]
     runs = pd.read_csv(tmp_path / "r" / "runs.csv")
-    assert len(runs) == ROWS + 5 * 4 + 2  # the new budget's selections and its colmap-b
+    assert len(runs) == ROWS + 5 * 6 + 4  # the new budget's selections and its colmap-b
     other = dataclasses.replace(SMALL, run=RunConfig(render=dataclasses.replace(MEDIUM, spp=4)))
     with pytest.raises(BenchError, match=r"other settings \(render.spp: 16 there, 4 now\)"):
         bench_run(other, tmp_path / "r", renders_dir)
