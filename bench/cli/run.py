@@ -84,8 +84,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "protocols",
         ",".join(PROTOCOLS),
         "P1,P2",
-        "track protocols, applied to both tasks' triangulation: multiview (tracks of 3+ "
-        "views, the headline) and twoview (two-view tracks kept; its own table)",
+        "track protocols, applied to the tri and sfm tasks' triangulation (pairs has none): "
+        "multiview (tracks of 3+ views, the headline) and twoview (two-view tracks kept; its "
+        "own table)",
     )
     list_arg(
         "seeds", None, "N1,N2", "scene seeds, e.g. 0,1,2 or 0-9 (default: 0-4, or 0 with --quick)"
