@@ -50,8 +50,8 @@ class PeerRun:
     verified: int
     seconds: dict[str, float]
     pairs: list[PairMatches]
-    """The verified pairs with their relative poses (empty: none asked for)."""
-    pose_s: float = 0.0
+    """The verified pairs with their relative poses (for a task that does not map)."""
+    pose_s: float
     """The seconds their poses took."""
 
 
@@ -116,11 +116,9 @@ def run_peer(
     budget: int,
     cfg: BackendConfig,
     protocols: list[str],
-    poses: bool = False,
 ) -> PeerRun:
-    """Extract (and cap) and match once with stock COLMAP, then map under each track
-    protocol, and with `poses` estimate each verified pair's relative pose (see the module
-    docstring)."""
+    """Extract (and cap) and match once with stock COLMAP, estimate each verified pair's
+    relative pose, then map under each track protocol (see the module docstring)."""
     work = Path(tempfile.mkdtemp(prefix="bench-peer-"))
     db_path = work / "database.db"
     db = pycolmap.Database.open(str(db_path))
@@ -163,9 +161,7 @@ def run_peer(
             keypoints = [db.read_keypoints(ids[n])[:, :2] for n in names]
             tentative, verified = db.num_matches(), db.num_inlier_matches()
             t = time.perf_counter()
-            pairs = (
-                verified_pairs(db, [ids[n] for n in names], cams, keypoints, cfg) if poses else []
-            )
+            pairs = verified_pairs(db, [ids[n] for n in names], cams, keypoints, cfg)
             pose_s = time.perf_counter() - t
         finally:
             db.close()

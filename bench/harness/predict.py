@@ -20,9 +20,8 @@ configuration), `tentative_{k}` and `verified_{k}` (matches as (M, 2) rows of in
 the selections of views i and j) and, where the verification estimated one, `pose_{k}`
 (the relative pose [R | t], (3, 4), of view j's camera from view i's, unit t: what the
 `pairs` task scores); `prediction-peer.npz` holds `keypoints_{v}` (the (N, 2) pixel
-positions of the peer's keypoints in view v, as COLMAP's database holds them) and, with a
-task that does not map (`pairs`), `pose_{k}` of the k-th pair of `prediction.json`'s
-`peer["pairs"]`. `prediction.json`'s `jobs` are keyed by `Job.key` (`<task>/<protocol>`).
+positions of the peer's keypoints in view v, as COLMAP's database holds them) and
+`pose_{k}` of the k-th pair of `prediction.json`'s `peer["pairs"]`. `prediction.json`'s `jobs` are keyed by `Job.key` (`<task>/<protocol>`).
 """
 
 from __future__ import annotations
@@ -243,21 +242,20 @@ def _predict_policy(scene, unit, jobs, cfg, ws, record) -> None:
 
 def _predict_peer(scene, unit, jobs, cfg, ws, record) -> None:
     """A peer maps its own database for a task that maps (`TaskRunner.maps`); a task that
-    does not is given the peer's keypoints and verified pairs, with their poses (estimated
-    too where an earlier job of the unit's record needs them: the arrays are rewritten)."""
+    does not is given the peer's keypoints and verified pairs, with their poses."""
     fe = next(iter(scene.fronts.values()))
     names, cams = [v.name for v in fe.views], [v.camera for v in fe.views]
     image_dir = Source.of(scene.entry).images
     mapped = list(dict.fromkeys(j.protocol for j in jobs if RUNNERS[j.task].maps))
-    tasks = {j.task for j in jobs} | {k.split("/")[0] for k in record["jobs"]}
-    poses = any(t in RUNNERS and not RUNNERS[t].maps for t in tasks)
-    run = run_peer(image_dir, names, cams, unit.policy, unit.budget, cfg.backend, mapped, poses)
+    run = run_peer(image_dir, names, cams, unit.policy, unit.budget, cfg.backend, mapped)
     record["names"] = names
-    record["peer"] = {"tentative": run.tentative, "verified": run.verified, "seconds": run.seconds}
-    arrays = {f"keypoints_{v}": k for v, k in enumerate(run.keypoints)}
-    if poses:
-        record["peer"]["pairs"] = [{"i": p.i, "j": p.j, "config": p.config} for p in run.pairs]
-        arrays |= pose_arrays(run.pairs)
+    record["peer"] = {
+        "tentative": run.tentative,
+        "verified": run.verified,
+        "seconds": run.seconds,
+        "pairs": [{"i": p.i, "j": p.j, "config": p.config} for p in run.pairs],
+    }
+    arrays = {f"keypoints_{v}": k for v, k in enumerate(run.keypoints)} | pose_arrays(run.pairs)
     with atomic_path(ws.unit_dir(unit) / f"{PREDICTION}-peer.npz") as tmp:
         np.savez(tmp, **arrays)
     matched = Matched(image_dir, cams, names, run.keypoints, run.pairs)
