@@ -1,12 +1,12 @@
 """Table 1, Table 2 and the paired comparisons, from the rows of `runs.csv` alone.
 
 * `table1.csv`: per strategy and budget, the headline task and protocol (`tri`,
-  `multiview`) and beside it the `sfm` task's metrics (prefixed `sfm_`: mAA, registered
-  views, ...): the mean of every metric over runs with a 95% interval (`<metric>_lo`,
-  `<metric>_hi`; a stratified t-interval over scenes, `bench.report.stats`; `note` says
-  why a row has none, e.g. `n/a (1 seed)`). The stock-COLMAP peers have sfm
-  columns only. `table1_twoview.csv`: both tasks under the `twoview` track protocol, never
-  mixed into the headline.
+  `multiview`) and beside it every other task's metrics (prefixed with its name: `sfm_maa`,
+  `pairs_auc_10`, ...): the mean of every metric over runs with a 95% interval
+  (`<metric>_lo`, `<metric>_hi`; a stratified t-interval over scenes, `bench.report.stats`;
+  `note` says why a row has none, e.g. `n/a (1 seed)`). The stock-COLMAP peers have sfm
+  and pairs columns only. `table1_twoview.csv`: every task under the `twoview` track
+  protocol, never mixed into the headline.
 * `completeness_vs_oracle_pct`: a run's completeness as a percentage of the oracle's in the
   same scene, seed and budget (the oracle is the ground-truth selection under the same
   budget, `bench.evaluation.oracle`).
