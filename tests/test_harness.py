@@ -703,7 +703,7 @@ def test_a_unit_failing_on_a_worker_is_retried_once_then_recorded(
     assert calls.count("texture") == 2  # tried, then retried once
     runs = read_runs(tmp_path / "runs.csv")
     failed = runs[runs["policy"] == "texture"]
-    assert len(failed) == 4 and (failed["status"] == "failed").all()
+    assert len(failed) == 6 and (failed["status"] == "failed").all()
     assert failed["failure"].str.contains("retried once: RuntimeError: worker lost").all()
     assert (runs.loc[runs["policy"] != "texture", "status"] == "ok").any()
 
