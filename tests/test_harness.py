@@ -545,7 +545,9 @@ def test_nothing_to_compute_is_said_in_one_line(tmp_path, capsys):
     argv = ["run", "--quick", "--policies", "colmap", "--tasks", "tri"]
     assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "nothing to compute" in err[0] and "peers run only sfm, pairs" in err[0]
+    assert (
+        len(err) == 1 and "nothing to compute" in err[0] and "peers run only sfm, pairs" in err[0]
+    )
 
 
 # --- the harness cannot publish wrong numbers ----------------------------------------
