@@ -18,7 +18,7 @@ import numpy as np
 
 from bench import BenchError
 from bench.console import log
-from bench.evaluation.groundtruth import CLOUD, TRUTH_DIR, load_ground_truth, write_ply_points
+from bench.evaluation.layers import CLOUD, TRUTH_DIR, read_layers, write_ply_points
 from bench.files import atomic_dir, locked
 from bench.frontend.colmap_model import read_model
 
@@ -36,7 +36,7 @@ def export_dataset(entry: Path, out: Path) -> Path:
             log(f"replacing the earlier export in {out}")
     out.parent.mkdir(parents=True, exist_ok=True)
     names = [n for n, _ in read_model(entry)]
-    gts = load_ground_truth(entry)
+    gts = read_layers(entry)
     with locked(out), atomic_dir(out) as tmp:
         for sub in ("images", "sparse", TRUTH_DIR):
             (tmp / sub).mkdir()
