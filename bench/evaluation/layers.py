@@ -60,6 +60,11 @@ def read_layers(entry: Path) -> list[TruthLayers]:
         raise BenchError(f"cannot read the ground truth of {entry}: {e}") from e
 
 
+def surface_samples(gts: list[TruthLayers]) -> np.ndarray:
+    """The ground-truth surface as points: every view's single-surface positions (Nx3)."""
+    return np.concatenate([g.position[g.single_surface] for g in gts])
+
+
 TRUTH_DIR = "ground_truth"
 CLOUD = "points.ply"
 _PLY_TYPES = {

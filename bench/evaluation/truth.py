@@ -14,7 +14,12 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from bench.camera import Camera
-from bench.evaluation.layers import TruthLayers, read_dataset_layers, read_layers
+from bench.evaluation.layers import (
+    TruthLayers,
+    read_dataset_layers,
+    read_layers,
+    surface_samples,
+)
 from bench.frontend.features import Candidates
 from bench.frontend.views import Source
 
@@ -133,9 +138,7 @@ class SceneTruth:
             surface = Surface(cloud) if cloud is not None else None
             kind = "poses" if cloud is None else "point cloud"
             return SceneTruth(surface, cams, None, None, [c.xy for c in pools], None, None, kind)
-        samples = (
-            np.concatenate([g.position[g.single_surface] for g in gts]) if cloud is None else cloud
-        )
+        samples = surface_samples(gts) if cloud is None else cloud
         points = []
         for cam, gt, cand in zip(cams, gts, pools):
             col = np.clip(cand.xy[:, 0].astype(int), 0, cam.width - 1)
