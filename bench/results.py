@@ -67,10 +67,12 @@ from bench.vocabulary import (
 HASHES = ("prediction_hash", "evaluation_hash")
 ROW_CHECKSUM = "row_checksum"
 """The last column: a hash of the row's other values as written (`row_checksum`)."""
-TEXT_COLUMNS = ("scene", "policy", "task", "protocol", "render_key", *HASHES, "status")
+TEXT_COLUMNS = ("scene", "method", "task", "protocol", "render_key", *HASHES, "status")
 TEXT_COLUMNS += ("failure", "invocation", "ground_truth", ROW_CHECKSUM)
 REQUIRED = (*KEY, "render_key", *HASHES, "status", "failure", "invocation", "wall_ms")
 DAMAGED = "runs.damaged.csv"
+OLD_METHOD = "policy"
+"""The `method` column's name before 0.3.0 (`bench upgrade` renames it)."""
 PREDICTION = "prediction"
 """A unit's stored prediction: `prediction.json` (written last) and `prediction.npz`."""
 
@@ -89,7 +91,7 @@ class Workspace:
     def unit_dir(self, unit: Unit) -> Path:
         """A unit's folder: its prediction, and the headline job's model at the top."""
         return (
-            self.results / "models" / f"{unit.scene}-s{unit.seed}" / f"{unit.policy}-b{unit.budget}"
+            self.results / "models" / f"{unit.scene}-s{unit.seed}" / f"{unit.method}-b{unit.budget}"
         )
 
     def model_dir(self, unit: Unit, job: Job) -> Path:
@@ -137,7 +139,7 @@ def row_checksum(fields: dict[str, str]) -> str:
 
 def _row_problem(row: dict[str, str], vocab: Vocabulary) -> str | None:
     """Why one row (raw strings) breaks the contract, or None."""
-    for k in ("scene", "policy", "render_key", *HASHES, "invocation"):
+    for k in ("scene", "method", "render_key", *HASHES, "invocation"):
         if not row[k]:
             return f"empty {k}"
     for k in ("seed", "budget"):
@@ -194,7 +196,7 @@ def _key_of(row: dict[str, str]) -> tuple:
 
 
 def _key_text(header: list[str], line: str) -> str:
-    """` (scene, seed s, policy, budget b, task, protocol)` of a row's line, if readable."""
+    """` (scene, seed s, method, budget b, task, protocol)` of a row's line, if readable."""
     try:
         row = dict(zip(header, next(csv.reader([line]))))
         return " ({}, seed {}, {}, budget {}, {}, {})".format(*(row[k] for k in KEY))
@@ -216,6 +218,11 @@ def check_runs(
     if not lines:
         raise DamagedRuns(f"{path} is damaged: it is empty", [1])
     header = next(csv.reader([lines[0]]))
+    if OLD_METHOD in header and "method" not in header:
+        raise BenchError(
+            f"{path} was written by an older bench (its `{OLD_METHOD}` column is now "
+            f"`method`); `bench upgrade --results {Path(path).parent}` renames it"
+        )
     missing = [c for c in REQUIRED if c not in header]
     if missing:
         raise DamagedRuns(f"{path} is damaged: its header lacks {', '.join(missing)}", [1])
@@ -295,7 +302,7 @@ def mark_reference(table: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     if not {"views", "registered_views", "maa"} <= set(table):
         return table
     ref = table[
-        (table["policy"] == REFERENCE_PEER)
+        (table["method"] == REFERENCE_PEER)
         & table["task"].isin(vocab.exclusion_tasks)
         & (table["protocol"] == HEADLINE[1])
     ]
@@ -525,7 +532,8 @@ def bind_results_dir(results: Path, settings: dict, vocab: Vocabulary, overwrite
 
 def upgrade(results: Path, current: Vocabulary) -> list[str]:
     """Bring a results folder written by an older bench up to date, in place (`bench
-    upgrade`): its recorded tasks get what the report reads of them (`REPORT_FIELDS`),
+    upgrade`): the `policy` column of its rows is renamed `method` (`_rename_method`),
+    and its recorded tasks get what the report reads of them (`REPORT_FIELDS`),
     taken from `current`'s declarations of the same names. What it changed, one item each
     (empty: the folder was up to date)."""
     results = Path(results)
@@ -533,7 +541,7 @@ def upgrade(results: Path, current: Vocabulary) -> list[str]:
     if not path.is_file():
         raise BenchError(f"{path} not found: not a results folder of `bench run`")
     data = json.loads(path.read_text())
-    changed = []
+    changed = [c for name in ("runs.csv", DAMAGED) for c in _rename_method(results / name)]
     for name, task in data["tasks"].items():
         missing = [f for f in REPORT_FIELDS if f not in task]
         if not missing:
@@ -549,3 +557,30 @@ def upgrade(results: Path, current: Vocabulary) -> list[str]:
     if changed:
         write_text_atomic(path, Vocabulary.from_json(json.dumps(data)).to_json())
     return changed
+
+
+def _rename_method(path: Path) -> list[str]:
+    """Rename a `runs.csv`'s `policy` column to `method` (`OLD_METHOD`), each row's
+    checksum recomputed where it held before (an altered row stays altered)."""
+    if not path.is_file():
+        return []
+    with path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or OLD_METHOD not in rows[0] or "method" in rows[0]:
+        return []
+    old = rows[0]
+    new = [("method" if c == OLD_METHOD else c) for c in old]
+    out = [new]
+    for fields in rows[1:]:
+        row = dict(zip(old, fields))
+        if (
+            ROW_CHECKSUM in row
+            and len(fields) == len(old)
+            and row[ROW_CHECKSUM] == row_checksum(row)
+        ):
+            row = dict(zip(new, fields))
+            row[ROW_CHECKSUM] = row_checksum(row)
+            fields = [row[c] for c in new]
+        out.append(fields)
+    write_text_atomic(path, _csv_lines(out))
+    return [f"{path.name}: column {OLD_METHOD} renamed method ({len(rows) - 1} rows)"]

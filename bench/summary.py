@@ -21,7 +21,7 @@ NUMBER = re.compile(r"\d+")
 def _kind(row) -> str:
     """A failure's reason without its numbers (an error: its method)."""
     if row.failure.startswith(ERROR):
-        return f"{row.task}: error of {row.policy}"
+        return f"{row.task}: error of {row.method}"
     return f"{row.task}: {NUMBER.sub('N', row.failure)[:60]}"
 
 
@@ -39,7 +39,7 @@ def errors(rows: pd.DataFrame) -> str:
     bad = rows[rows["failure"].fillna("").str.startswith(ERROR)]
     if bad.empty:
         return ""
-    methods = ", ".join(f"{p} ({n})" for p, n in bad["policy"].value_counts().items())
+    methods = ", ".join(f"{p} ({n})" for p, n in bad["method"].value_counts().items())
     first = bad["failure"].iloc[0][len(ERROR) :]
     return f"{len(bad)} row(s) could not be computed, of {methods}; the first: {first}"
 

@@ -23,7 +23,7 @@ from typing import NamedTuple
 
 from bench import BenchError
 
-KEY = ("scene", "seed", "policy", "budget", "task", "protocol")
+KEY = ("scene", "seed", "method", "budget", "task", "protocol")
 """The columns that identify a row of `runs.csv`."""
 UNIT_KEY = KEY[:4]
 """The columns that identify a unit of work (one selection, matched once per geometry)."""
@@ -137,11 +137,11 @@ class Task:
 
 @dataclass(frozen=True)
 class Unit:
-    """One unit of work: a policy's selection at a budget in one scene and seed."""
+    """One unit of work: a method at a budget in one scene and seed."""
 
     scene: str
     seed: int
-    policy: str
+    method: str
     budget: int
 
     @property
@@ -150,7 +150,7 @@ class Unit:
         return self.scene, self.seed
 
     def __str__(self) -> str:
-        return f"{self.scene} s{self.seed} {self.policy} b{self.budget}"
+        return f"{self.scene} s{self.seed} {self.method} b{self.budget}"
 
 
 class Job(NamedTuple):

@@ -66,7 +66,7 @@ def edit(path: Path, old: str, new: str) -> None:
 
 def run(src: Path, work: Path, extra: list[str], scenes: str, policies: str) -> float:
     cmd = [sys.executable, "-m", "bench", "run", *GRID, "--scenes", scenes]
-    cmd += ["--policies", policies, "--results", str(work / "results")]
+    cmd += ["--methods", policies, "--results", str(work / "results")]
     cmd += ["--renders", str(work / "renders"), *extra]
     t = time.perf_counter()
     env = os.environ | {"PYTHONPATH": str(src)}
@@ -183,7 +183,7 @@ def main() -> None:
         before = entries(work) if (work / "renders").is_dir() else set()
         seconds = run(src, work, extra, scenes, policies)
         rows = pd.read_csv(work / "results" / "runs.csv", dtype=str)
-        rows["row"] = rows["scene"] + " " + rows["policy"]
+        rows["row"] = rows["scene"] + " " + rows["method"]
         now = rows.set_index("row")
         status = {}
         for row, r in now.iterrows():

@@ -9,7 +9,7 @@ import argparse
 import numpy as np
 import pandas as pd
 
-KEY = ["scene", "seed", "policy", "budget", "task", "protocol"]
+KEY = ["scene", "seed", "method", "budget", "task", "protocol"]
 ap = argparse.ArgumentParser(
     description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
 )

@@ -99,7 +99,7 @@ def verified_per_pair(results: Path | None, scene: str) -> dict:
     ]
     out = {}
     for p in POLICIES:
-        rows = at[at["policy"] == p]
+        rows = at[at["method"] == p]
         pairs = rows["views"].map(lambda n: comb(int(n), 2))
         out[f"verified_per_pair_{p}"] = float((rows["verified_matches"] / pairs).mean())
     return out

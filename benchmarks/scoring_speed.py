@@ -47,13 +47,13 @@ a.extra = argv[cut + 1 :]  # grid: arguments passed to `bench run`
 def points() -> None:
     from scipy.spatial import cKDTree
 
-    from bench.evaluation.groundtruth import load_ground_truth
+    from bench.evaluation.layers import read_layers, surface_samples
     from bench.evaluation.truth import Surface
     from bench.render.config import RenderConfig
     from bench.render.entry import render_scene
 
     entry = render_scene(a.scene, 0, RenderConfig(), Path(a.renders))
-    S = np.concatenate([g.position[g.single_surface] for g in load_ground_truth(entry)])
+    S = surface_samples(read_layers(entry))
     S = S.astype(np.float64)
     rng = np.random.default_rng(0)
     d = rng.normal(size=(1000, 3))

@@ -27,7 +27,7 @@ cfg = BenchConfig(scenes=(a.scene,), seeds=(a.seed,))
 renders = ROOT / "renders"
 entry = render_scene(a.scene, a.seed, cfg.run.render, renders)
 before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-work = {u: Work(tuple(cfg.jobs(u.policy))) for u in cfg.units()}
+work = {u: Work(tuple(cfg.jobs(u.method))) for u in cfg.units()}
 plan = Plan({(a.scene, a.seed): entry}, work, cfg.budgets)
 scene_task((a.scene, a.seed), entry, cfg.run, renders, plan)
 with tempfile.TemporaryDirectory() as tmp:

@@ -1,5 +1,5 @@
 """An example policy from outside the package: `bench run --policy-module examples/my_policy.py
---policies texture,center-texture`.
+--methods texture,center-texture`.
 
 A policy is a function (inputs, budget, rng, cfg) -> indices, registered with `@policy`.
 It sees one view's image, calibration, candidates and signals (`PolicyInput`), never ground

@@ -29,7 +29,7 @@ from bench.report.transfer import transfer
 from bench.vocabulary import KEY, Vocabulary
 from tests.conftest import MEDIUM, bench_run
 
-GRID = dict(seeds=(0,), policies=("texture", "adaptive", "oracle", "colmap-b"), budgets=(64,))
+GRID = dict(seeds=(0,), methods=("texture", "adaptive", "oracle", "colmap-b"), budgets=(64,))
 NOT_COMPARED = {"scene", "render_key", "render_s_per_view", "invocation", "ground_truth"}
 NOT_COMPARED |= {"row_checksum"}  # a hash of every value, those above included
 
@@ -90,7 +90,7 @@ def test_dataset_without_pixel_truth_scores_poses_and_leaves_the_rest_nan(
             "run",
             "--dataset",
             str(bare),
-            "--policies",
+            "--methods",
             "texture,oracle",
             "--budget",
             "64",
@@ -105,7 +105,7 @@ def test_dataset_without_pixel_truth_scores_poses_and_leaves_the_rest_nan(
     assert code == 0
     assert "no per-pixel ground truth: the oracle is left out" in capsys.readouterr().err
     runs = pd.read_csv(tmp_path / "res" / "runs.csv")
-    assert set(runs["policy"]) == {"texture"} and set(runs["scene"]) == {"bare"}
+    assert set(runs["method"]) == {"texture"} and set(runs["scene"]) == {"bare"}
     sfm = runs[runs["task"] == "sfm"]
     assert sfm["maa"].notna().all() and runs["rmse"].isna().all()
     assert runs["acc_completeness_pct"].isna().all()
@@ -159,7 +159,7 @@ def test_select_says_what_it_replaces_and_what_falls_short(dataset, tmp_path, ca
 def test_dataset_runs_name_the_options_they_ignore_and_record_no_render(
     dataset, renders_dir, tmp_path, capsys
 ):
-    argv = ["run", "--dataset", str(dataset), "--policies", "texture", "--budget", "64"]
+    argv = ["run", "--dataset", str(dataset), "--methods", "texture", "--budget", "64"]
     argv += ["--tasks", "tri", "--protocols", "multiview", "--workers", "1", "--width", "100"]
     argv += ["--results", str(tmp_path / "r"), "--renders", str(renders_dir)]
     assert main([*argv, "--scenes", "table"]) == 0
@@ -367,7 +367,7 @@ def test_a_dataset_whose_contents_changed_is_computed_again(
     same folder is computed again (the table's rows were reused: "0 to do")."""
     ds = tmp_path / "D"
     export_dataset(medium_entry("table"), ds)
-    argv = ["run", "--dataset", str(ds), "--policies", "texture", "--budget", "64", "--tasks"]
+    argv = ["run", "--dataset", str(ds), "--methods", "texture", "--budget", "64", "--tasks"]
     argv += ["tri", "--protocols", "multiview", "--workers", "1", "--results", str(tmp_path / "r")]
     argv += ["--renders", str(renders_dir)]
     assert main(argv) == 0
@@ -387,7 +387,7 @@ def test_several_datasets_run_at_once_with_tables_per_dataset_and_a_transfer_tab
     sets = tmp_path / "sets"
     export_dataset(medium_entry("table"), sets / "table-ds")
     export_dataset(medium_entry("facade"), sets / "facade-ds")
-    grid = ["--policies", "random,texture,adaptive", "--budget", "64", "--tasks", "tri"]
+    grid = ["--methods", "random,texture,adaptive", "--budget", "64", "--tasks", "tri"]
     grid += ["--protocols", "multiview", "--workers", "1", "--renders", str(renders_dir)]
     medium = ["--width", "320", "--height", "240", "--spp", "16", "--max-depth", "2"]
     assert (
@@ -411,7 +411,7 @@ def test_several_datasets_run_at_once_with_tables_per_dataset_and_a_transfer_tab
     out = tmp_path / "d"
     assert set(pd.read_csv(out / "runs.csv")["scene"]) == {"table-ds", "facade-ds"}
     for name in ("table-ds", "facade-ds"):
-        assert set(pd.read_csv(out / f"table1-{name}.csv")["policy"]) == {
+        assert set(pd.read_csv(out / f"table1-{name}.csv")["method"]) == {
             "random",
             "texture",
             "adaptive",

@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from bench.backend.matching import expected_ransac_iterations
 from bench.camera import look_at
-from bench.evaluation.groundtruth import GroundTruth
+from bench.evaluation.layers import TruthLayers
 from bench.evaluation.metrics import (
     completeness_pct,
     coverage_pct,
@@ -81,7 +81,7 @@ def test_runtime_proxy_parts():
 # --- reconstructable points on a hand-made scene --------------------------------------------
 
 
-def _plane_truth(cam) -> GroundTruth:
+def _plane_truth(cam) -> TruthLayers:
     """Exact layers of the plane y = 0 seen by `cam` (every pixel hits it)."""
     v, u = np.mgrid[0 : cam.height, 0 : cam.width] + 0.5
     d = cam.rays(np.c_[u.ravel(), v.ravel()])
@@ -90,7 +90,7 @@ def _plane_truth(cam) -> GroundTruth:
     P = (C + s[:, None] * d).reshape(cam.height, cam.width, 3)
     z = cam.to_camera(P.reshape(-1, 3))[:, 2].reshape(cam.height, cam.width)
     n = np.broadcast_to([0, -1.0, 0], P.shape)
-    return GroundTruth(np.linalg.norm(P - C, axis=2), z, P, n, np.zeros(z.shape))
+    return TruthLayers(np.linalg.norm(P - C, axis=2), z, P, n, np.zeros(z.shape))
 
 
 def _cands(xy):

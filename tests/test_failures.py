@@ -47,18 +47,18 @@ def test_a_raising_plugin_fails_its_rows_saying_where_and_the_grid_finishes(
     module.write_text(LATE)
     argv = ["run", "--scenes", "table", "--seeds", "0", "--budget", "16", "--workers", workers]
     argv += ["--width", "64", "--height", "48", "--spp", "2", "--max-depth", "2"]
-    argv += ["--policies", "texture,late-fail", "--tasks", "tri", "--protocols", "multiview"]
+    argv += ["--methods", "texture,late-fail", "--tasks", "tri", "--protocols", "multiview"]
     argv += ["--policy-module", str(module), "--results", str(tmp_path / "r")]
     run = lambda: main([*argv, "--renders", str(renders_dir)])  # noqa: E731
     try:
         assert run() == 2
         runs = read_runs(tmp_path / "r" / "runs.csv")
-        (late,) = runs[runs["policy"] == "late-fail"].itertuples()
+        (late,) = runs[runs["method"] == "late-fail"].itertuples()
         assert late.status == "failed"
         for where in ("RuntimeError: boom on call 3", "view 2 ", f"{module}:{RAISE_LINE}"):
             assert where in late.failure
         assert "in table seed 0, task tri" in late.failure
-        assert (runs["policy"] == "texture").sum() == 1  # every other row is written
+        assert (runs["method"] == "texture").sum() == 1  # every other row is written
         assert (tmp_path / "r" / "table1.csv").is_file()
         assert (tmp_path / "r" / "figure3.png").is_file()
         err = capsys.readouterr().err.strip().splitlines()
@@ -118,7 +118,7 @@ def test_list_options_ignore_spaces_around_items():
 
 
 def _table1(policies: list[str], metrics: dict[str, list[float]], budget: int = 256):
-    t = pd.DataFrame({"policy": policies, "strategy": policies, "budget": budget})
+    t = pd.DataFrame({"method": policies, "strategy": policies, "budget": budget})
     for m, _ in Vocabulary.current().panels():
         values = metrics.get(m, [math.nan] * len(policies))
         t[m], t[f"{m}_lo"], t[f"{m}_hi"] = values, values, values
@@ -175,7 +175,7 @@ def test_the_summary_says_what_failed_by_reason_and_which_cells_sfm_leaves_out()
         {
             "scene": ["table", "table", "facade", "facade", "corridor"],
             "seed": [0, 0, 0, 0, 1],
-            "policy": ["texture", "texture", "texture", "colmap", "texture"],
+            "method": ["texture", "texture", "texture", "colmap", "texture"],
             "task": ["sfm", "tri", "sfm", "sfm", "sfm"],
             "status": ["failed", "failed", "failed", "ok", "ok"],
             "failure": [

@@ -197,7 +197,7 @@ def test_parallax_is_low_near_the_epipole():
 def test_bad_policy_input_is_a_clear_error(table_front):
     inp = _inputs(table_front)[0]
     with pytest.raises(
-        BenchError, match="unknown policy 'best'; valid: random, texture, grid, adaptive, "
+        BenchError, match="unknown method 'best'; valid: random, texture, grid, adaptive, "
     ):
         select("best", inp, BUDGET, np.random.default_rng(0))
     with pytest.raises(BenchError, match="budget must be positive"):

@@ -20,7 +20,7 @@ from bench import BenchError, vocabulary
 from bench.backend.reconstruction import known_pose_model
 from bench.cli import build_parser, main
 from bench.cli.common import LATEST, PUBLISHED, QUICK, parse_list
-from bench.evaluation.groundtruth import load_ground_truth
+from bench.evaluation.layers import read_layers
 from bench.evaluation.truth import SceneTruth
 from bench.frontend import plugins
 from bench.frontend import policies as registry
@@ -42,7 +42,7 @@ from bench.vocabulary import KEY, Job, Unit, Vocabulary
 from tests.conftest import MEDIUM, TINY, bench_run, synthetic_rig
 
 
-def spy(monkeypatch, calls: list, what=lambda unit: (unit.policy, unit.budget)):
+def spy(monkeypatch, calls: list, what=lambda unit: (unit.method, unit.budget)):
     """Record `what` of every unit that is predicted (selected, matched, mapped)."""
     real = execute.predict
     monkeypatch.setattr(
@@ -88,7 +88,7 @@ def table_run(medium_entry, tmp_path_factory):
     entry = medium_entry("table")
     cfg = RunConfig()
     fe = front_end(entry, cfg.detector, cfg.signals, tmp_path_factory.mktemp("fe"))
-    truth = SceneTruth.build([v.camera for v in fe.views], load_ground_truth(entry), fe.pools)
+    truth = SceneTruth.build([v.camera for v in fe.views], read_layers(entry), fe.pools)
     out = tmp_path_factory.mktemp("models")
 
     def run(policy: str, budget: int = 128):
@@ -139,7 +139,7 @@ def test_the_order_of_a_policys_indices_does_not_change_any_metric(medium_entry,
         for g in ("rig", "images")
     }
     truth = SceneTruth.build(
-        [v.camera for v in fronts["rig"].views], load_ground_truth(entry), fronts["rig"].pools
+        [v.camera for v in fronts["rig"].views], read_layers(entry), fronts["rig"].pools
     )
     work = Work((Job("tri", "multiview"), Job("sfm", "multiview")))
     scene = LoadedScene(entry, fronts, truth)
@@ -149,7 +149,7 @@ def test_the_order_of_a_policys_indices_does_not_change_any_metric(medium_entry,
         )
         for p in ("forwards", "backwards")
     }
-    skip = {"policy", "failure", "prediction_hash"} | {
+    skip = {"method", "failure", "prediction_hash"} | {
         k for k in rows["forwards"][0] if k.endswith("_ms")
     }
     for a, b in zip(rows["forwards"], rows["backwards"]):
@@ -179,7 +179,7 @@ def test_exported_model_reads_back_with_pycolmap(tmp_path):
 SMALL = BenchConfig(
     scenes=("table", "facade"),
     seeds=(0,),
-    policies=("random", "texture", "grid", "adaptive", "all", "oracle", "colmap", "colmap-b"),
+    methods=("random", "texture", "grid", "adaptive", "all", "oracle", "colmap", "colmap-b"),
     budgets=(64,),
     run=RunConfig(render=MEDIUM),
 )
@@ -223,16 +223,16 @@ def test_quick_run_writes_every_file_with_documented_columns(quick_results):
     ):
         assert (quick_results / name).is_file(), name
     runs = pd.read_csv(quick_results / "runs.csv")
-    assert len(runs) == ROWS and set(runs["policy"]) == set(POLICIES)
-    assert set(runs.loc[runs["policy"] == "all", "budget"]) == {0}  # one run, the whole pool
+    assert len(runs) == ROWS and set(runs["method"]) == set(POLICIES)
+    assert set(runs.loc[runs["method"] == "all", "budget"]) == {0}  # one run, the whole pool
     assert set(zip(runs["task"], runs["protocol"])) == {
         (t, p) for t in ("tri", "sfm", "pairs") for p in ("multiview", "twoview")
     }
-    assert set(runs.loc[runs["policy"].str.startswith("colmap"), "task"]) == {"sfm", "pairs"}
+    assert set(runs.loc[runs["method"].str.startswith("colmap"), "task"]) == {"sfm", "pairs"}
     pairs = runs[runs["task"] == "pairs"]  # scored from the poses stored with the prediction
     assert pairs["auc_10"].between(0, 1).all() and (pairs["pairs_estimated"] > 0).any()
     assert (pairs.loc[pairs["status"] == "failed", "auc_20"] == 0).all()  # scored, all missing
-    capped = runs.loc[runs["policy"] == "colmap-b", "keypoints_per_view"]
+    capped = runs.loc[runs["method"] == "colmap-b", "keypoints_per_view"]
     assert len(capped) and (capped == 64).all()  # a hard cap: exactly B per view
     assert runs["maa"].notna().sum() == runs["task"].eq("sfm").sum()  # never NaN, failed or not
     assert {
@@ -257,7 +257,7 @@ def test_quick_run_writes_every_file_with_documented_columns(quick_results):
         "accuracy_pct",
         "completeness_vs_oracle_pct",
     } <= set(t1.columns)
-    assert list(t1["policy"]) == POLICIES
+    assert list(t1["method"]) == POLICIES
     t2 = pd.read_csv(quick_results / "table2.csv")
     assert list(t2.columns[:2]) == ["scene", "budget"]
     assert set(t2["scene"]) == {"table", "facade", "all scenes"}
@@ -278,7 +278,7 @@ def test_quick_run_writes_every_file_with_documented_columns(quick_results):
     # every job's model in its own folder (sfm's two protocols once shared one)
     ws, mapped = Workspace(quick_results, quick_results), runs[(runs["task"] == "sfm")]
     for r in mapped[mapped["status"] == "ok"].itertuples():
-        folder = ws.model_dir(Unit(r.scene, r.seed, r.policy, r.budget), Job(r.task, r.protocol))
+        folder = ws.model_dir(Unit(r.scene, r.seed, r.method, r.budget), Job(r.task, r.protocol))
         model = pycolmap.Reconstruction(str(folder))
         assert (model.num_reg_images(), model.num_points3D()) == (r.registered_views, r.points)
     assert set(mapped.loc[mapped["status"] == "ok", "protocol"]) == {"multiview", "twoview"}
@@ -370,7 +370,7 @@ def test_rows_computed_by_other_code_are_computed_again(
     assert len(calls) == 8  # every unit of the table scene, again
     runs = pd.read_csv(tmp_path / "r" / "runs.csv")
     assert len(runs) == ROWS // 2  # one hash per method: its own code and settings
-    assert runs.groupby("policy")["prediction_hash"].nunique().max() == 1
+    assert runs.groupby("method")["prediction_hash"].nunique().max() == 1
 
 
 def test_a_changed_metric_rescores_the_stored_predictions_alone(
@@ -400,8 +400,8 @@ def test_a_changed_metric_rescores_the_stored_predictions_alone(
     "content, message",
     [
         (None, "runs.csv not found"),
-        ("scene,seed\n\x00\x01,\n", "damaged: its header lacks policy"),
-        ('scene,seed,policy\n"unclosed', "damaged: its header lacks"),
+        ("scene,seed\n\x00\x01,\n", "damaged: its header lacks method"),
+        ('scene,seed,method\n"unclosed', "damaged: its header lacks"),
     ],
 )
 def test_plot_rejects_bad_runs_csv_in_one_line(tmp_path, capsys, content, message):
@@ -416,8 +416,8 @@ def test_plot_rejects_bad_runs_csv_in_one_line(tmp_path, capsys, content, messag
     "argv, message",
     [
         (
-            ["run", "--policies", "best"],
-            "unknown policy 'best'; valid: random, texture, grid, adaptive, ",
+            ["run", "--methods", "best"],
+            "unknown method 'best'; valid: random, texture, grid, adaptive, ",
         ),
         (
             ["run", "--protocols", "threeview"],
@@ -466,23 +466,23 @@ def test_cells_stock_colmap_cannot_map_are_marked_and_left_out_of_the_sfm_means(
     # stock COLMAP maps seed 0; seed 1 it registers in part, seed 2 with wrong poses
     for seed, ref, ref_maa in ((0, 6, 1.0), (1, 2, 0.3), (2, 6, 0.1)):
         cell = dict(scene="s", seed=seed, task="sfm", protocol="multiview", views=6, status="ok")
-        rows.append(cell | dict(policy="colmap", budget=0, registered_views=ref, maa=ref_maa))
+        rows.append(cell | dict(method="colmap", budget=0, registered_views=ref, maa=ref_maa))
         for policy, maa in (("texture", 0.5), ("adaptive", 0.7), ("colmap-b", 0.4)):
             maa += 0.2 * seed
-            rows.append(cell | dict(policy=policy, budget=64, registered_views=6, maa=maa))
+            rows.append(cell | dict(method=policy, budget=64, registered_views=6, maa=maa))
     table = mark_reference(pd.DataFrame(rows), vocabulary.Vocabulary.current())
     maps = table.groupby("seed")["reference_maps"].agg(set).to_dict()
     assert maps == {0: {1}, 1: {0}, 2: {0}}
     vocab = vocabulary.Vocabulary.current()
     frame = headline_frame(table, vocab)
-    t1 = table1(frame, vocab).set_index("policy")
+    t1 = table1(frame, vocab).set_index("method")
     assert t1.loc["texture", "sfm_maa"] == 0.5 and t1.loc["texture", "runs"] == 3
     assert t1.loc["texture", "sfm_excluded_runs"] == 2
-    pairs = paired_sfm(frame, vocab).set_index(["scene", "policy", "baseline", "metric"])
+    pairs = paired_sfm(frame, vocab).set_index(["scene", "method", "baseline", "metric"])
     vs_texture = pairs.loc[("all scenes", "adaptive", "texture", "sfm_maa")]
     assert vs_texture["n"] == 1 and vs_texture["mean_diff"] == pytest.approx(0.2)
     assert pairs.loc[("s", "texture", "colmap-b", "sfm_maa"), "mean_diff"] == pytest.approx(0.1)
-    scenes = table_scenes(frame, vocab).set_index(["policy", "budget"])
+    scenes = table_scenes(frame, vocab).set_index(["method", "budget"])
     assert scenes.loc[("texture", 64), "sfm_excluded_seeds"] == 2
     assert scenes.loc[("texture", 64), "sfm_maa"] == 0.5
 
@@ -518,7 +518,7 @@ def test_a_budget_above_every_pool_is_refused_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert "budget 100000 exceeds every candidate pool of table seed 0" in err[-1]
     assert not (tmp_path / "r").exists()  # a refused run binds no folder to its settings
-    other = ["--budget", "16", "--spp", "3", "--policies", "texture", "--tasks", "tri"]
+    other = ["--budget", "16", "--spp", "3", "--methods", "texture", "--tasks", "tri"]
     argv = [*argv[:5], *argv[7:], "--protocols", "multiview"]  # the same, less the budget
     assert main([*argv, *other, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 0
     assert (
@@ -534,7 +534,7 @@ def test_a_second_run_into_a_folder_in_use_is_refused_in_one_line(tmp_path, caps
     results = tmp_path / "r"
     results.mkdir()
     with exclusive(results / ".bench-run.lock", "the first run"):
-        argv = ["run", "--quick", "--scenes", "table", "--policies", "texture"]
+        argv = ["run", "--quick", "--scenes", "table", "--methods", "texture"]
         assert main([*argv, "--results", str(results), "--renders", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"results folder {results} is in use by another bench" in err[0]
@@ -542,7 +542,7 @@ def test_a_second_run_into_a_folder_in_use_is_refused_in_one_line(tmp_path, caps
 
 
 def test_nothing_to_compute_is_said_in_one_line(tmp_path, capsys):
-    argv = ["run", "--quick", "--policies", "colmap", "--tasks", "tri"]
+    argv = ["run", "--quick", "--methods", "colmap", "--tasks", "tri"]
     assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert (
@@ -588,7 +588,7 @@ def test_a_damaged_runs_csv_is_refused_naming_the_row_and_set_aside_on_request(
 
 def test_repeated_list_items_run_once(capsys):
     assert parse_list("--seeds", "0,1,0,1-2", int) == (0, 1, 2)
-    assert parse_list("--policies", "texture,texture", str) == ("texture",)
+    assert parse_list("--methods", "texture,texture", str) == ("texture",)
     assert "--seeds repeats 0, 1; each runs once" in capsys.readouterr().err
 
 
@@ -671,7 +671,7 @@ def test_written_files_respect_the_umask(tmp_path):
 # --- execution on Dask (issue 14) --------------------------------------------------------
 
 PARALLEL = dataclasses.replace(
-    SMALL, scenes=("table",), policies=("texture", "adaptive", "oracle", "colmap-b")
+    SMALL, scenes=("table",), methods=("texture", "adaptive", "oracle", "colmap-b")
 )
 
 
@@ -694,8 +694,8 @@ def test_a_unit_failing_on_a_worker_is_retried_once_then_recorded(
     real = execute.predict
 
     def flaky(scene, unit, *a):
-        calls.append(unit.policy)
-        if unit.policy == "texture":
+        calls.append(unit.method)
+        if unit.method == "texture":
             raise RuntimeError("worker lost")
         return real(scene, unit, *a)
 
@@ -704,10 +704,10 @@ def test_a_unit_failing_on_a_worker_is_retried_once_then_recorded(
         bench_run(PARALLEL, tmp_path, renders_dir, scheduler=cluster.scheduler_address)
     assert calls.count("texture") == 2  # tried, then retried once
     runs = read_runs(tmp_path / "runs.csv")
-    failed = runs[runs["policy"] == "texture"]
+    failed = runs[runs["method"] == "texture"]
     assert len(failed) == 6 and (failed["status"] == "failed").all()
     assert failed["failure"].str.contains("retried once: RuntimeError: worker lost").all()
-    assert (runs.loc[runs["policy"] != "texture", "status"] == "ok").any()
+    assert (runs.loc[runs["method"] != "texture", "status"] == "ok").any()
 
 
 def test_a_raising_policy_on_workers_is_one_line_without_retry_or_traceback(tmp_path, capfd):
@@ -720,7 +720,7 @@ def test_a_raising_policy_on_workers_is_one_line_without_retry_or_traceback(tmp_
         f"    open({str(calls)!r}, 'a').write('call\\n')\n"
         "    raise ValueError('deterministic')\n"
     )
-    argv = ["run", "--quick", "--scenes", "table", "--policies", "boom", "--workers", "2"]
+    argv = ["run", "--quick", "--scenes", "table", "--methods", "boom", "--workers", "2"]
     argv += ["--policy-module", str(module), "--tasks", "tri", "--protocols", "multiview"]
     assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 2
     err = capfd.readouterr().err
@@ -790,7 +790,7 @@ def test_a_twoview_only_run_prints_its_table_and_sfm_only_rows_name_figure2s_tas
     quick_results, tmp_path, renders_dir, capsys
 ):
     argv = ["run", "--scenes", "table", "--seeds", "0", "--budget", "64", "--workers", "1"]
-    argv += ["--policies", "texture", "--protocols", "twoview", "--width", "320"]
+    argv += ["--methods", "texture", "--protocols", "twoview", "--width", "320"]
     argv += ["--height", "240", "--spp", "16", "--max-depth", "2"]
     assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(renders_dir)]) == 0
     out = capsys.readouterr().out
@@ -811,7 +811,7 @@ def test_the_budget_figure_says_n_a_for_a_panel_without_values(monkeypatch, tmp_
             {
                 "scene": "table",
                 "seed": 0,
-                "policy": "texture",
+                "method": "texture",
                 "budget": [64, 128],
                 "status": "ok",
                 "acc_completeness_pct": [1.0, 2.0],
@@ -848,16 +848,16 @@ def test_a_policy_module_decides_its_own_rows_only(renders_dir, tmp_path, monkey
 
     def cfg(policies, modules=()):
         run = RunConfig(render=MEDIUM, policy=dataclasses.replace(PolicyConfig(), modules=modules))
-        return BenchConfig(policies=policies, run=run, **grid)
+        return BenchConfig(methods=policies, run=run, **grid)
 
     calls = []
-    spy(monkeypatch, calls, lambda unit: unit.policy)
+    spy(monkeypatch, calls, lambda unit: unit.method)
     results = tmp_path / "r"
     bench_run(cfg(("texture", "mine-1"), (str(module),)), results, renders_dir)
     assert sorted(calls) == ["mine-1", "texture"]
     calls.clear()
     bench_run(cfg(("texture",)), results, renders_dir)  # without the module: not refused
-    assert calls == [] and set(read_runs(results / "runs.csv")["policy"]) == {"texture", "mine-1"}
+    assert calls == [] and set(read_runs(results / "runs.csv")["method"]) == {"texture", "mine-1"}
     module.write_text(source.format(v=1).replace("np.arange(", "1 + np.arange("))
     plugins.load_module.cache_clear()
     registry.POLICIES.pop("mine-1")
@@ -944,7 +944,7 @@ def test_a_task_is_added_in_one_place(renders_dir, tmp_path):
         with pytest.raises(BenchError, match="task name 'count' is taken"):
             tasks.register(runner)
         grid = dataclasses.replace(
-            SMALL, scenes=("table",), policies=("texture",), tasks=("tri", "count")
+            SMALL, scenes=("table",), methods=("texture",), tasks=("tri", "count")
         )
         runs = bench_run(grid, tmp_path, renders_dir)
     finally:  # the registry as it was, for the other tests
@@ -1003,7 +1003,7 @@ def test_a_refused_overwrite_keeps_the_stored_predictions_and_a_bound_one_replac
     with pytest.raises(BenchError, match="exceeds every candidate pool"):
         bench_run(dataclasses.replace(SMALL, budgets=(10**6,)), r, renders_dir, overwrite=True)
     assert sorted(p.relative_to(r) for p in (r / "models").rglob("prediction.json")) == stored
-    one = dataclasses.replace(SMALL, scenes=("table",), policies=("texture",), tasks=("tri",))
+    one = dataclasses.replace(SMALL, scenes=("table",), methods=("texture",), tasks=("tri",))
     bench_run(one, r, renders_dir, overwrite=True)
     assert [p.parent.name for p in (r / "models").rglob("prediction.json")] == ["texture-b64"]
     assert not list(r.glob(".models-replaced-*")) and len(read_runs(r / "runs.csv")) == 2

@@ -26,7 +26,7 @@ from tests.conftest import MEDIUM, bench_run
 GRID = BenchConfig(
     scenes=("table",),
     seeds=(0,),
-    policies=("texture", "grid"),
+    methods=("texture", "grid"),
     budgets=(64,),
     tasks=("tri",),
     protocols=("multiview",),
@@ -43,13 +43,13 @@ def small_run(renders_dir, tmp_path_factory):
     return results
 
 
-def _edit(runs_csv: Path, policy: str, column: str, value: str, reseal: bool = False):
-    """Set one value of `policy`'s row of `runs.csv` in place, as a hand edit would
+def _edit(runs_csv: Path, method: str, column: str, value: str, reseal: bool = False):
+    """Set one value of `method`'s row of `runs.csv` in place, as a hand edit would
     (`reseal`: with the checksum recomputed, as a bug that wrote it would); (its line, the
     old value)."""
     rows = list(csv.reader(runs_csv.read_text().splitlines()))
     header = rows[0]
-    line = next(n for n, row in enumerate(rows, 1) if row[header.index("policy")] == policy)
+    line = next(n for n, row in enumerate(rows, 1) if row[header.index("method")] == method)
     row = rows[line - 1]
     old, row[header.index(column)] = row[header.index(column)], value
     if reseal:
@@ -96,7 +96,7 @@ def test_a_hand_edited_metric_is_refused_by_plot_publish_and_a_resumed_run(
     monkeypatch.setattr(execute, "predict", lambda *a: predicted.append(a) or real(*a))
     rows = bench_run(GRID, r, renders_dir, reevaluate=True)
     assert predicted == []  # scored again from the stored prediction
-    fixed = rows.set_index("policy").loc["grid", "acc_completeness_pct"]
+    fixed = rows.set_index("method").loc["grid", "acc_completeness_pct"]
     assert fixed == pytest.approx(float(old)) and (r / "table1.csv").read_bytes() == before
 
 
@@ -259,3 +259,29 @@ def test_a_folder_written_before_checksums_is_refused_then_reevaluated(
     bench_run(GRID, r, renders_dir, reevaluate=True)
     assert len(read_runs(r / "runs.csv")) == 2
     assert json.loads((r / "config.json").read_text())["settings"]["render"]["width"] == 320
+
+
+def test_a_folder_with_the_old_policy_column_is_refused_and_upgraded(small_run, tmp_path, capsys):
+    """A `runs.csv` written before the column was named `method` (its rows sealed under the
+    old name) is refused in one line naming `bench upgrade`, which renames the column and
+    re-seals every row whose checksum held; a row altered by hand stays altered."""
+    from bench.results import ROW_CHECKSUM, row_checksum
+
+    r = tmp_path / "r"
+    shutil.copytree(small_run, r)
+    rows = list(csv.reader((r / "runs.csv").read_text().splitlines()))
+    header = ["policy" if c == "method" else c for c in rows[0]]
+    for row in rows[1:]:
+        row[-1] = row_checksum(dict(zip(header, row)))
+    rows[2][header.index("points")] = "1"  # altered after sealing
+    out = io.StringIO()
+    csv.writer(out, lineterminator="\n").writerows([header, *rows[1:]])
+    (r / "runs.csv").write_text(out.getvalue())
+    assert main(["plot", "--results", str(r)]) == 2
+    assert _one_line(capsys).endswith(f"`bench upgrade --results {r}` renames it")
+    assert main(["upgrade", "--results", str(r)]) == 0
+    assert "runs.csv: column policy renamed method (2 rows)" in capsys.readouterr().out
+    new = list(csv.DictReader((r / "runs.csv").read_text().splitlines()))
+    assert [row[ROW_CHECKSUM] == row_checksum(row) for row in new] == [True, False]
+    with pytest.raises(BenchError, match="line 3 .*do not match its row_checksum"):
+        read_runs(r / "runs.csv")

@@ -106,7 +106,7 @@ def test_front_and_back_end_cannot_reach_ground_truth(name):
 @pytest.mark.parametrize(
     "planted",
     [
-        "from bench.evaluation.groundtruth import load_ground_truth",
+        "from bench.evaluation.layers import read_layers",
         "from bench.evaluation.oracle import oracle_select",
         "import bench.render.entry",
         "from bench.scenes import spec",

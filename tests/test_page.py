@@ -34,7 +34,7 @@ def test_the_page_shows_each_interval_and_no_interval_where_a_table_has_none(tmp
     pd.DataFrame(
         {
             "strategy": ["Texture-only", "Random budget"],
-            "policy": ["texture", "random"],
+            "method": ["texture", "random"],
             "budget": [256, 256],
             "runs": [5, 1],
             "rmse": [0.5, 0.125],

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from bench.camera import look_at
-from bench.evaluation.groundtruth import load_ground_truth
+from bench.evaluation.layers import read_layers
 from bench.evaluation.relative import (
     MISSING_DEG,
     evaluate_pairs,
@@ -130,9 +130,9 @@ def test_the_task_is_declared_for_the_report():
     assert vocab.range_of("auc_20") == (0.0, 1.0) and vocab.range_of("maa_pairs") == (0.0, 1.0)
 
 
-@pytest.mark.parametrize("policy, budget", [("texture", 128), ("colmap-b", 128)])
+@pytest.mark.parametrize("method, budget", [("texture", 128), ("colmap-b", 128)])
 def test_one_unit_end_to_end_and_scored_again_from_its_prediction(
-    medium_entry, tmp_path, policy, budget
+    medium_entry, tmp_path, method, budget
 ):
     """A policy's and a peer's pairs rows: the relative poses are stored with the
     prediction (nothing is mapped or exported), and scoring them again from it alone gives
@@ -141,9 +141,9 @@ def test_one_unit_end_to_end_and_scored_again_from_its_prediction(
     cfg = RunConfig()
     fe = front_end(entry, cfg.detector, cfg.signals, tmp_path / "fe", IMAGES)
     posed = [v.camera for v in load_views(entry)]  # the evaluation's: the rig's poses
-    truth = SceneTruth.build(posed, load_ground_truth(entry), fe.pools)
+    truth = SceneTruth.build(posed, read_layers(entry), fe.pools)
     scene, ws = LoadedScene(entry, {IMAGES: fe}, truth), Workspace(tmp_path / "r", tmp_path)
-    unit, jobs = Unit("table", 0, policy, budget), [Job("pairs", "multiview")]
+    unit, jobs = Unit("table", 0, method, budget), [Job("pairs", "multiview")]
     (row,) = compute_unit(scene, unit, Work(tuple(jobs)), cfg, ws)
     assert row["status"] == "ok", row["failure"]
     assert 0 < row["pairs_estimated"] <= row["pairs_scored"] <= 15

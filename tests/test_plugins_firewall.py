@@ -27,8 +27,8 @@ def _module(tmp_path, body: str, name: str = "mine"):
     "body, why",
     [
         (
-            'importlib.import_module("bench.evaluation." + "ground" + "truth")\n',
-            "it imports bench.evaluation.groundtruth (line 4)",
+            'importlib.import_module("bench.evaluation." + "lay" + "ers")\n',
+            "it imports bench.evaluation.layers (line 4)",
         ),
         ("name = 'bench.harness'\nimportlib.import_module(name)\n", "by a computed name (line 5)"),
         ("__import__('bench.' + 'scenes')\n", "it imports bench.scenes (line 4)"),

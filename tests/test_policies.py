@@ -90,10 +90,10 @@ def test_learned_weights_are_shipped_with_provenance_and_disjoint_seeds():
 
 
 def test_depth_prior_from_the_data_matches_the_rendered_depth(fe, medium_entry):
-    from bench.evaluation.groundtruth import load_ground_truth
+    from bench.evaluation.layers import read_layers
 
     depths = depth_priors(fe.views, fe.pools, SignalConfig())
-    for d, gt, c in zip(depths, load_ground_truth(medium_entry("table")), fe.pools):
+    for d, gt, c in zip(depths, read_layers(medium_entry("table")), fe.pools):
         col, row = (c.xy - 0.5).round().astype(int).T
         true = np.nanmedian(gt.z[row.clip(0, 239), col.clip(0, 319)])  # under the candidates
         assert 0.8 * true < d < 1.25 * true
@@ -122,7 +122,7 @@ def test_a_policy_module_registers_and_its_broken_rules_are_named(fe, tmp_path):
             del POLICIES["short2"], METHODS["short2"]
     peek = tmp_path / "peek.py"
     peek.write_text(
-        "from bench.evaluation.groundtruth import load_ground_truth\n"
+        "from bench.evaluation.layers import read_layers\n"
         "from bench.frontend.policies import policy\n"
     )
     with pytest.raises(BenchError, match="'no ground truth': it imports bench.evaluation"):
@@ -212,7 +212,7 @@ def test_sfm_selections_are_blind_to_the_poses_and_tri_selections_are_not(medium
     from bench.frontend.policies import PolicyInput
     from bench.frontend.selection import select_views
     from bench.harness.config import RunConfig
-    from bench.harness.grid import default_policies
+    from bench.harness.grid import default_methods
     from bench.harness.tasks import RUNNERS
 
     entry = medium_entry("table")
@@ -228,7 +228,7 @@ def test_sfm_selections_are_blind_to_the_poses_and_tri_selections_are_not(medium
         return select_views(policy, inputs, BUDGET, 0, cfg.policy, match)[0]
 
     roles = ("baseline", "contender")
-    for name in [p for p in default_policies() if METHODS[p].role in roles]:
+    for name in [p for p in default_methods() if METHODS[p].role in roles]:
         a, b = selections(true, "sfm", name), selections(wrong, "sfm", name)
         assert all(np.array_equal(x, y) for x, y in zip(a, b)), name
     a, b = selections(true, "tri", "cross-view"), selections(wrong, "tri", "cross-view")

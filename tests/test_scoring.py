@@ -16,7 +16,7 @@ from scipy.spatial import cKDTree
 
 from bench import BenchError, files
 from bench.evaluation import truth as truth_module
-from bench.evaluation.groundtruth import load_ground_truth
+from bench.evaluation.layers import read_layers
 from bench.evaluation.metrics import point_error, point_metrics
 from bench.evaluation.truth import SceneTruth, Surface
 from bench.frontend import views as views_module
@@ -111,7 +111,7 @@ def test_a_tri_model_has_its_point_errors_computed_once(medium_entry, tmp_path, 
     entry = medium_entry("table")
     cfg = RunConfig()
     fe = front_end(entry, cfg.detector, cfg.signals, tmp_path / "fe")
-    truth = SceneTruth.build([v.camera for v in fe.views], load_ground_truth(entry), fe.pools)
+    truth = SceneTruth.build([v.camera for v in fe.views], read_layers(entry), fe.pools)
     unit, work = Unit("table", 0, "texture", 128), Work((Job("tri", "multiview"),))
     (row,) = compute_unit(
         LoadedScene(entry, {RIG: fe}, truth), unit, work, cfg, Workspace(tmp_path, tmp_path)

@@ -36,7 +36,7 @@ def _tri_rows(seeds, scenes=("a", "b", "c", "d")) -> pd.DataFrame:
                 ("texture", 40.0 + i + seed),
                 ("adaptive", 40 + i + seed + ahead),
             ):
-                rows.append(cell | dict(policy=policy, acc_completeness_pct=value, status="ok"))
+                rows.append(cell | dict(method=policy, acc_completeness_pct=value, status="ok"))
     return pd.DataFrame(rows)
 
 
@@ -50,7 +50,7 @@ def test_a_one_seed_table_shows_no_interval_and_says_why():
     for _, r in row.iterrows():  # per scene and pooled
         assert r["mean_diff"] > 0 and math.isnan(r["lo"]) and math.isnan(r["hi"])
         assert r["note"] == "n/a (1 seed)"
-    t1 = table1(frame, vocab).set_index("policy")
+    t1 = table1(frame, vocab).set_index("method")
     assert math.isnan(t1.loc["adaptive", "acc_completeness_pct_lo"])
     assert t1.loc["adaptive", "note"] == "n/a (1 seed)"
     # with two seeds every scene has a spread: an interval, and no note
@@ -65,9 +65,9 @@ def test_table1_intervals_stay_within_the_metric_range():
     rows = _tri_rows(seeds=[0, 1, 2])
     rows["accuracy_pct"] = [100.0, 100.0, 100.0, 100.0, 60.0, 100.0] * 4
     t1 = table1(headline_frame(rows, Vocabulary.current()), Vocabulary.current())
-    raw = stratified_interval(rows[rows["policy"] == "texture"]["accuracy_pct"], rows["scene"][::2])
+    raw = stratified_interval(rows[rows["method"] == "texture"]["accuracy_pct"], rows["scene"][::2])
     assert raw[2] > 100  # the interval as computed
-    texture = t1.set_index("policy").loc["texture"]
+    texture = t1.set_index("method").loc["texture"]
     assert texture["accuracy_pct_hi"] == 100 and texture["accuracy_pct_lo"] == raw[1]
 
 
@@ -128,9 +128,9 @@ def _sfm_rows(reference_cells) -> pd.DataFrame:
         cell = dict(scene="s", seed=seed, task="sfm", protocol="multiview", views=6, status="ok")
         if seed in reference_cells:
             ref = dict(registered_views=6 - 4 * seed, maa=1.0 - 0.8 * seed)
-            rows.append(cell | dict(policy="colmap", budget=0, **ref))
+            rows.append(cell | dict(method="colmap", budget=0, **ref))
         for policy, maa in (("texture", 0.4), ("adaptive", 0.6)):
-            rows.append(cell | dict(policy=policy, budget=64, registered_views=6, maa=maa + seed))
+            rows.append(cell | dict(method=policy, budget=64, registered_views=6, maa=maa + seed))
     return mark_reference(pd.DataFrame(rows), Vocabulary.current())
 
 
@@ -141,7 +141,7 @@ def test_the_sfm_rule_is_applied_in_all_cells_or_none_and_said(cells):
     every cell, and Table 1 says which."""
     vocab = Vocabulary.current()
     frame = headline_frame(_sfm_rows(cells), vocab)
-    t1 = table1(frame, vocab).set_index("policy")
+    t1 = table1(frame, vocab).set_index("method")
     if cells == (0, 1):
         assert t1.loc["texture", "sfm_exclusion"] == "applied"
         assert t1.loc["texture", "sfm_maa"] == pytest.approx(0.4)
@@ -179,23 +179,23 @@ def test_a_dataset_run_with_colmap_keeps_its_sfm_means_and_its_transfer_table(
     policies = ("random", "texture", "adaptive")
     run = RunConfig(render=MEDIUM)
     bench_run(
-        BenchConfig(scenes=("table",), policies=policies, run=run, **grid), rendered, renders_dir
+        BenchConfig(scenes=("table",), methods=policies, run=run, **grid), rendered, renders_dir
     )
-    argv = ["run", "--dataset", str(ds), "--policies", ",".join([*policies, "colmap"])]
+    argv = ["run", "--dataset", str(ds), "--methods", ",".join([*policies, "colmap"])]
     argv += ["--budget", "64", "--tasks", "sfm", "--protocols", "multiview", "--workers", "1"]
     argv += ["--renders", str(renders_dir), "--results", str(out)]
     assert main([*argv, "--rendered", str(rendered)]) == 0
     # stock COLMAP does not map the dataset, as on the temple (views registered off the
     # truth; at this size it does not map it anyway)
     runs = read_runs(out / "runs.csv")
-    runs.loc[runs["policy"] == "colmap", ["registered_views", "maa"]] = (2, 0.1)
+    runs.loc[runs["method"] == "colmap", ["registered_views", "maa"]] = (2, 0.1)
     (out / "runs.csv").unlink()
     rows = runs.drop(columns=[REFERENCE_MAPS, ROW_CHECKSUM]).to_dict("records")
     append_runs(out / "runs.csv", rows, Vocabulary.current())  # with their checksums
     assert (read_runs(out / "runs.csv")[REFERENCE_MAPS] == 0).all()
     assert main(["plot", "--results", str(out), "--rendered", str(rendered)]) == 0
-    t1 = pd.read_csv(out / "table1.csv").set_index("policy")
-    sfm = runs[runs["policy"] == "texture"]["maa"]
+    t1 = pd.read_csv(out / "table1.csv").set_index("method")
+    sfm = runs[runs["method"] == "texture"]["maa"]
     assert t1.loc["texture", "sfm_maa"] == pytest.approx(sfm.mean())
     assert t1.loc["texture", "sfm_exclusion"] == "not applied: a dataset's poses are the truth"
     summary = pd.read_csv(out / "transfer.csv")
@@ -228,7 +228,7 @@ def test_the_front_end_cost_reads_its_tasks_from_the_vocabulary():
     assert vocab.posefree_task == "free"
     df = pd.DataFrame(
         [
-            {"scene": "table", "seed": s, "budget": 64, "policy": "texture", "task": task}
+            {"scene": "table", "seed": s, "budget": 64, "method": "texture", "task": task}
             | {"protocol": "multiview", "detect_ms": ms, "signals_ms": 0.0, "select_ms": 0.0}
             for s in (0, 1)
             for task, ms in (("tri", 10.0), ("free", 30.0))
@@ -278,12 +278,12 @@ def test_a_task_declared_once_is_in_every_table_figure_and_the_page(tmp_path, mo
             ("random", 30.0, 0.2),
         ):
             tri = dict(acc_completeness_pct=completeness + seed, accuracy_pct=80.0 + seed)
-            rows.append(cell | dict(policy=policy, task="tri", **tri))
-            rows.append(cell | dict(policy=policy, task="toy", score=score + 0.01 * seed))
+            rows.append(cell | dict(method=policy, task="tri", **tri))
+            rows.append(cell | dict(method=policy, task="toy", score=score + 0.01 * seed))
     (tmp_path / VOCABULARY_FILE).write_text(vocab.to_json())
     assert Vocabulary.load(tmp_path).tasks["toy"] == toy  # recorded as declared
     df = with_oracle_share(pd.DataFrame(rows))
-    t1 = write_tables(df, tmp_path, vocab).set_index("policy")
+    t1 = write_tables(df, tmp_path, vocab).set_index("method")
     assert t1.loc["adaptive", "toy_score"] == pytest.approx(0.11)
     pairs = pd.read_csv(tmp_path / "paired.csv").set_index(["scene", "baseline", "metric"])
     # adaptive's score is the lowest in every unit: a win, lower being better

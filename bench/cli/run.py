@@ -25,9 +25,9 @@ from bench.cli.common import (
 from bench.console import log
 from bench.render.config import QUICK_RENDER, VARIANTS, RenderConfig
 
-HELP = "run the full benchmark: every scene, seed, policy and budget; tables and figures"
+HELP = "run the full benchmark: every scene, seed, method and budget; tables and figures"
 DESCRIPTION = (
-    "Run every (scene, seed, policy, budget) of the grid: render (cached), candidates and "
+    "Run every (scene, seed, method, budget) of the grid: render (cached), candidates and "
     "signals (cached), selection, COLMAP matching and verification, then each task (tri: "
     "triangulation with the known poses; sfm: incremental mapping with unknown poses) under "
     "each track protocol, evaluated against ground truth. Each unit's prediction (its "
@@ -49,7 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The grid's lists and the settings, then `_input_arguments` and `_folder_arguments`."""
     from bench.frontend.policies import PolicyConfig, Weights, own_fields
     from bench.harness.config import RunConfig
-    from bench.harness.grid import default_policies
+    from bench.harness.grid import default_methods
     from bench.harness.tasks import RUNNERS
     from bench.scenes.spec import scene_names
     from bench.vocabulary import PROTOCOLS, SETTINGS
@@ -64,10 +64,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     list_arg("scenes", None, "S1,S2", f"scene types (default: {','.join(scene_names())})")
     list_arg(
-        "policies",
-        ",".join(default_policies()),
-        "P1,P2",
-        "policies; with the sfm task on rendered scenes, stock COLMAP with all its features "
+        "methods",
+        ",".join(default_methods()),
+        "M1,M2",
+        "methods: the selection policies, the oracle and the stock-COLMAP peers (the "
+        "`method` column of runs.csv); with the sfm task on rendered scenes, stock COLMAP with all its features "
         "(colmap) is added if missing: the sfm means leave out the (scene, seed) cells it "
         "does not map",
     )
@@ -289,12 +290,12 @@ def datasets_arg(paths: list[Path]) -> tuple[Path, ...]:
 
 def has_pixel_truth(dataset: Path) -> bool:
     """Whether a dataset has per-pixel ground truth (which the oracle needs)."""
-    from bench.evaluation import groundtruth
+    from bench.evaluation import layers
     from bench.frontend.colmap_model import read_model
     from bench.frontend.views import Source
 
     names = [n for n, _ in read_model(Source.of(dataset).model)]
-    ok = groundtruth.has_pixel_truth(dataset, names)
+    ok = layers.has_pixel_truth(dataset, names)
     if not ok:
         log(f"{dataset} has no per-pixel ground truth: the oracle is left out")
     return ok
@@ -313,7 +314,7 @@ def run(args: argparse.Namespace) -> None:
     if args.scheduler is not None and args.workers is not None:
         raise BenchError("--workers does not apply with --scheduler: the cluster has its workers")
     run_cfg = run_config(args)
-    policies = parse_list("--policies", args.policies, str, "texture,adaptive")
+    methods = parse_list("--methods", args.methods, str, "texture,adaptive")
     datasets = datasets_arg(args.dataset) if args.dataset else ()
     tasks = parse_list("--tasks", args.tasks, str, HEADLINE[0])
     if args.rendered is not None and not datasets:
@@ -322,19 +323,19 @@ def run(args: argparse.Namespace) -> None:
         if args.seeds is not None:
             log("--seeds is ignored with --dataset: a dataset is one scene, recorded as seed 0")
         scenes, seeds = tuple(d.name for d in datasets), (0,)
-        truth = ORACLE in policies and all([has_pixel_truth(d) for d in datasets])
-        policies = tuple(p for p in policies if p != ORACLE or truth)
+        truth = ORACLE in methods and all([has_pixel_truth(d) for d in datasets])
+        methods = tuple(p for p in methods if p != ORACLE or truth)
     else:
         seeds = parse_list(
             "--seeds", args.seeds or ("0" if args.quick else "0-4"), int, "0,1,2 or 100-119"
         )
         scenes = parse_list("--scenes", args.scenes or ",".join(scene_names()), str, "table,facade")
-        policies = with_reference(policies, tasks)
+        methods = with_reference(methods, tasks)
     budget = args.budget if args.budget is not None else ("256" if args.quick else "128,256,512")
     cfg = BenchConfig(
         scenes=scenes,
         seeds=seeds,
-        policies=policies,
+        methods=methods,
         budgets=parse_list("--budget", budget, int, "128,256,512"),
         tasks=tasks,
         protocols=parse_list("--protocols", args.protocols, str, "multiview,twoview"),

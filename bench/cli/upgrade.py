@@ -8,7 +8,8 @@ from bench.cli.common import LATEST, results_arg
 
 HELP = "bring a results folder written by an older bench up to date, in place"
 DESCRIPTION = (
-    "Record in RESULTS/vocabulary.json what the report reads of each task (its headline "
+    "Rename runs.csv's `policy` column `method` (each row's checksum recomputed where it "
+    "held), and record in RESULTS/vocabulary.json what the report reads of each task (its headline "
     "metrics, which are lower-better, its summary metrics, its figure titles, whether the "
     "stock-COLMAP exclusion rule holds), as this bench declares them. No row is computed "
     "again; run `bench plot` afterwards to rewrite the tables."

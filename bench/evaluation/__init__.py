@@ -2,6 +2,6 @@
 ground-truth layers, the candidate pools, the selections and the back end's result.
 Out: one run's metrics (formulas in `metrics`).
 
-`groundtruth` reads the layers; `metrics` builds the scene's ground-truth structures and
+`layers` reads the truth layers; `metrics` builds the scene's ground-truth structures and
 computes every metric (a new metric goes there).
 """

@@ -18,7 +18,13 @@ import numpy as np
 
 from bench import BenchError
 from bench.console import log
-from bench.evaluation.groundtruth import CLOUD, TRUTH_DIR, load_ground_truth, write_ply_points
+from bench.evaluation.layers import (
+    CLOUD,
+    TRUTH_DIR,
+    read_layers,
+    surface_samples,
+    write_ply_points,
+)
 from bench.files import atomic_dir, locked
 from bench.frontend.colmap_model import read_model
 
@@ -36,7 +42,7 @@ def export_dataset(entry: Path, out: Path) -> Path:
             log(f"replacing the earlier export in {out}")
     out.parent.mkdir(parents=True, exist_ok=True)
     names = [n for n, _ in read_model(entry)]
-    gts = load_ground_truth(entry)
+    gts = read_layers(entry)
     with locked(out), atomic_dir(out) as tmp:
         for sub in ("images", "sparse", TRUTH_DIR):
             (tmp / sub).mkdir()
@@ -49,8 +55,7 @@ def export_dataset(entry: Path, out: Path) -> Path:
         (tmp / "sparse" / "points3D.txt").write_text(
             "# no points: the poses are the ground truth\n"
         )
-        samples = np.concatenate([g.position[g.single_surface] for g in gts])
-        write_ply_points(tmp / TRUTH_DIR / CLOUD, samples)
+        write_ply_points(tmp / TRUTH_DIR / CLOUD, surface_samples(gts))
         meta = json.loads((entry / "meta.json").read_text())
         info = {"exported_from": entry.name, "scene": meta.get("scene"), "seed": meta.get("seed")}
         (tmp / "dataset.json").write_text(json.dumps(info, indent=1) + "\n")

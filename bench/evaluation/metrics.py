@@ -1,6 +1,6 @@
 """Evaluation against the ground truth: the only stage that reads it.
 
-A render entry has every layer. A dataset (`bench.evaluation.groundtruth`) has the poses,
+A render entry has every layer. A dataset (`bench.evaluation.layers`) has the poses,
 and optionally a point cloud (point accuracy) and per-pixel truth (match precision,
 ground-truth tracks, completeness); a metric whose truth is missing is NaN.
 
@@ -13,7 +13,7 @@ two-view tracks; over tracks of three or more views the RMSE was 0.15 (adaptive)
 (texture), 1.06 (grid) and 0.45 (all), against 3.9 to 5.2 for every policy with two-view
 tracks kept, so the RMSE measured unverifiable two-view outliers, not the policies.
 
-Metrics, for one run (scene, seed, policy, budget, task, protocol):
+Metrics, for one run (scene, seed, method, budget, task, protocol):
 
 * point error e(X) = min_s |X - s| over the ground-truth surface samples s (the world
   positions of every single-surface pixel of all six views).

@@ -36,7 +36,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from bench.backend.matching import tentative_matches
-from bench.evaluation.truth import SceneTruth, load_truth
+from bench.evaluation.truth import SceneTruth, scene_truth
 from bench.frontend.features import Candidates, strongest_first
 from bench.vocabulary import ORACLE, Method, declare_method, implemented_by
 
@@ -107,4 +107,4 @@ def oracle_select(
     return [np.sort(np.array(c, dtype=np.int64)) for c in chosen]
 
 
-implemented_by([ORACLE], matchable_tracks, oracle_select, load_truth)
+implemented_by([ORACLE], matchable_tracks, oracle_select, scene_truth)

@@ -15,7 +15,12 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from bench.camera import Camera
-from bench.evaluation.groundtruth import GroundTruth, load_dataset_truth, load_ground_truth
+from bench.evaluation.layers import (
+    TruthLayers,
+    read_dataset_layers,
+    read_layers,
+    surface_samples,
+)
 from bench.frontend.features import Candidates
 from bench.frontend.views import Source
 
@@ -80,7 +85,7 @@ class Surface:
         return best
 
 
-def _visible(X: np.ndarray, cam: Camera, gt: GroundTruth) -> tuple[np.ndarray, np.ndarray]:
+def _visible(X: np.ndarray, cam: Camera, gt: TruthLayers) -> tuple[np.ndarray, np.ndarray]:
     """Pixels of X (N, 3) in `cam`, and whether X is visible there by the depth test."""
     uv, z = cam.project(X)
     ok = (
@@ -105,7 +110,7 @@ class SceneTruth:
     surface: Surface | None
     """Ground-truth surface samples (None: no point accuracy)."""
     cams: list[Camera]
-    gts: list[GroundTruth] | None
+    gts: list[TruthLayers] | None
     """Per-pixel truth (None: a dataset without it)."""
     points: list[np.ndarray] | None
     """Per view: the 3D point under each candidate (NaN on occlusion edges)."""
@@ -124,7 +129,7 @@ class SceneTruth:
     @staticmethod
     def build(
         cams: list[Camera],
-        gts: list[GroundTruth] | None,
+        gts: list[TruthLayers] | None,
         pools: list[Candidates],
         cloud: np.ndarray | None = None,
     ) -> SceneTruth:
@@ -134,9 +139,7 @@ class SceneTruth:
             surface = Surface(cloud) if cloud is not None else None
             kind = "poses" if cloud is None else "point cloud"
             return SceneTruth(surface, cams, None, None, [c.xy for c in pools], None, None, kind)
-        samples = (
-            np.concatenate([g.position[g.single_surface] for g in gts]) if cloud is None else cloud
-        )
+        samples = surface_samples(gts) if cloud is None else cloud
         points = []
         for cam, gt, cand in zip(cams, gts, pools):
             col = np.clip(cand.xy[:, 0].astype(int), 0, cam.width - 1)
@@ -176,11 +179,11 @@ class SceneTruth:
         return one_way(i, j, ki, kj) | one_way(j, i, kj, ki)
 
 
-def load_truth(source: Path, cams: list[Camera], names: list[str], pools) -> SceneTruth:
+def scene_truth(source: Path, cams: list[Camera], names: list[str], pools) -> SceneTruth:
     """The truth of a render entry, or whatever truth a dataset folder holds."""
     if Source.kind(source) == "render":
-        return SceneTruth.build(cams, load_ground_truth(source), pools)
-    cloud, gts = load_dataset_truth(source, names, cams)
+        return SceneTruth.build(cams, read_layers(source), pools)
+    cloud, gts = read_dataset_layers(source, names, cams)
     truth = SceneTruth.build(cams, gts, pools, cloud)
     if gts is not None:
         truth.kind = "per-pixel"

@@ -136,11 +136,11 @@ def policy(
     return register
 
 
-def check_policies(names) -> list[str]:
+def check_methods(names) -> list[str]:
     """Refuse, in one line, a name no method has declared."""
     unknown = [n for n in names if n not in METHODS]
     if unknown:
-        raise BenchError(f"unknown policy {unknown[0]!r}; valid: {', '.join(METHODS)}")
+        raise BenchError(f"unknown method {unknown[0]!r}; valid: {', '.join(METHODS)}")
     return list(names)
 
 
@@ -208,7 +208,7 @@ def select(
     """Run a policy, check its contract and return its selection in ascending order (module
     docstring); a policy that raises or breaks the contract is a `PolicyFailed`."""
     if name not in POLICIES:
-        check_policies([name])
+        check_methods([name])
         raise BenchError(f"{name} is not a selection policy (a reference or a peer)")
     whole = METHODS[name].whole_pool
     if budget <= 0 and not whole:

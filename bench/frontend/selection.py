@@ -16,7 +16,7 @@ import numpy as np
 from bench import BenchError
 from bench.frontend import feedback, plugins
 from bench.frontend.feedback import Match
-from bench.frontend.policies import PolicyConfig, PolicyInput, check_policies, select
+from bench.frontend.policies import PolicyConfig, PolicyInput, check_methods, select
 from bench.frontend.signals import SIGNALS, Signals
 from bench.vocabulary import METHODS
 
@@ -53,7 +53,7 @@ def select_views(
     loop's rounds (none for other policies); the policy runs behind the ground-truth
     firewall (`bench.frontend.plugins.firewall`) and reads only the signals it declares."""
     plugins.load(cfg.modules)
-    reads = METHODS[check_policies([policy])[0]].reads
+    reads = METHODS[check_methods([policy])[0]].reads
     inputs = [replace(i, signals=DeclaredSignals(i.signals, policy, reads)) for i in inputs]
     if policy == feedback.NAME:
         with plugins.firewall():

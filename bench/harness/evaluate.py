@@ -22,7 +22,7 @@ import pycolmap
 
 from bench.codehash import code_hash
 from bench.evaluation.metrics import coverage_pct, match_metrics, model_points, point_error
-from bench.evaluation.truth import load_truth
+from bench.evaluation.truth import scene_truth
 from bench.files import atomic_path
 from bench.frontend.colmap_model import read_model
 from bench.frontend.signals import seconds_of
@@ -39,7 +39,7 @@ from bench.harness.tasks import RUNNERS
 from bench.results import PREDICTION, Workspace
 from bench.vocabulary import CODE, HEADLINE, METHODS, Job, Unit
 
-SCORING_CODE = (sys.modules[__name__], load_truth)
+SCORING_CODE = (sys.modules[__name__], scene_truth)
 """Where the scoring's code starts: this module and the loading of the ground truth."""
 
 
@@ -103,7 +103,7 @@ def _shared(scene: LoadedScene, unit: Unit, record: dict, grant: str, folder: Pa
         pairs = stored_pairs(record, grant, arrays)
         poses = stored_poses(stored["pairs"], arrays)
     fe = scene.fronts[grant]
-    reads = METHODS[unit.policy].reads
+    reads = METHODS[unit.method].reads
     earlier = [(r["selected"], r["pair_tentative"], r["pair_verified"]) for r in stored["rounds"]]
     shared = match_metrics(scene.truth, fe.pools, selections, pairs, len(reads), earlier)
     shared["ground_truth"] = scene.truth.kind
@@ -138,13 +138,13 @@ def identity(entry: Path, unit: Unit, job: Job, cfg: RunConfig) -> dict:
     return {
         "scene": unit.scene,
         "seed": unit.seed,
-        "policy": unit.policy,
+        "method": unit.method,
         "budget": unit.budget,
         "task": job.task,
         "protocol": job.protocol,
         "render_key": source_key(entry),
         "views": len(read_model(Source.of(entry).model)),
-        "prediction_hash": prediction_hash(cfg, unit.policy),
+        "prediction_hash": prediction_hash(cfg, unit.method),
         "evaluation_hash": evaluation_hash(),
     }
 

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bench import BenchError
-from bench.evaluation.truth import load_truth
+from bench.evaluation.truth import scene_truth
 from bench.frontend.geometry import RIG
 from bench.frontend.policies import PolicyFailed
 from bench.frontend.stage import FrontEnd, front_end
@@ -98,7 +98,7 @@ def _scene(entry: Path, cfg: RunConfig, renders: Path, grants) -> LoadedScene:
         # the evaluation side may read the poses: the rig's front end holds them
         posed = fronts[RIG].views if RIG in fronts else load_views(entry)
         cams, names = [v.camera for v in posed], [v.name for v in posed]
-        truth = load_truth(entry, cams, names, next(iter(fronts.values())).pools)
+        truth = scene_truth(entry, cams, names, next(iter(fronts.values())).pools)
         _HELD.update(key=key, scene=LoadedScene(entry, fronts, truth))
     return _HELD["scene"]
 

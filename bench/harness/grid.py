@@ -30,7 +30,7 @@ from bench import ROOT, BenchError
 from bench.console import log, progress
 from bench.files import write_text_atomic
 from bench.frontend import plugins
-from bench.frontend.policies import check_policies, learned_weights
+from bench.frontend.policies import check_methods, learned_weights
 from bench.frontend.views import Source, source_key
 from bench.harness.config import RunConfig
 from bench.harness.evaluate import evaluation_hash
@@ -63,22 +63,22 @@ from bench.vocabulary import (
 )
 
 
-def default_policies() -> tuple[str, ...]:
+def default_methods() -> tuple[str, ...]:
     """Every method the package declares, in display order (not those of modules)."""
     vocab = Vocabulary.current()
     names = [n for n in METHODS if n not in plugins.ORIGIN]
     return tuple(sorted(names, key=vocab.order))
 
 
-def with_reference(policies: tuple[str, ...], tasks: tuple[str, ...]) -> tuple[str, ...]:
-    """`policies`, with stock COLMAP with all features (`REFERENCE_PEER`) added when the
+def with_reference(methods: tuple[str, ...], tasks: tuple[str, ...]) -> tuple[str, ...]:
+    """`methods`, with stock COLMAP with all features (`REFERENCE_PEER`) added when the
     grid runs a task with the exclusion rule (sfm) on rendered scenes: its means leave out
     the cells it does not map, and the rule holds only when it ran in every cell. (Said by
     `bench run --help`; the run's closing line names the cells it left out.)"""
     ruled = any(RUNNERS[t].spec.exclusion_reference for t in tasks if t in RUNNERS)
-    if REFERENCE_PEER in policies or not ruled:
-        return policies
-    return (*policies, REFERENCE_PEER)
+    if REFERENCE_PEER in methods or not ruled:
+        return methods
+    return (*methods, REFERENCE_PEER)
 
 
 @dataclass(frozen=True)
@@ -87,7 +87,7 @@ class BenchConfig:
 
     scenes: tuple[str, ...] = field(default_factory=lambda: tuple(scene_names()))
     seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
-    policies: tuple[str, ...] = field(default_factory=default_policies)
+    methods: tuple[str, ...] = field(default_factory=default_methods)
     budgets: tuple[int, ...] = (128, 256, 512)
     tasks: tuple[str, ...] = field(default_factory=lambda: tuple(RUNNERS))
     protocols: tuple[str, ...] = tuple(PROTOCOLS)
@@ -108,8 +108,8 @@ class BenchConfig:
             for s in self.scenes:
                 load_spec(s)
         plugins.load(self.run.policy.modules)
-        check_policies(self.policies)
-        if "learned" in self.policies and not self.datasets:
+        check_methods(self.methods)
+        if "learned" in self.methods and not self.datasets:
             trained = set(
                 learned_weights(self.run.policy_config("learned").learned_weights)["seeds"]
             )
@@ -151,7 +151,7 @@ class BenchConfig:
             Unit(sc, sd, p, b)
             for sc in self.scenes
             for sd in self.seeds
-            for p in self.policies
+            for p in self.methods
             for b in ((0,) if METHODS[p].whole_pool else self.budgets)
             if self.jobs(p)
         ]
@@ -224,7 +224,7 @@ def _current_rows(
     # each row against its policy's hash; a policy not registered now (a module not given
     # this time) keeps its rows as they are
     known = set(METHODS)
-    expected = df["policy"].map({p: prediction_hash(cfg.run, p) for p in set(df["policy"]) & known})
+    expected = df["method"].map({p: prediction_hash(cfg.run, p) for p in set(df["method"]) & known})
     stale = expected.notna() & (df["prediction_hash"] != expected)
     if stale.any():
         log(
@@ -243,7 +243,7 @@ def _current_rows(
     if errored.any():
         log(f"{int(errored.sum())} row(s) could not be computed last time; computing them again")
     df = df[~(stale | errored)]
-    rescore = altered[~(stale | errored)] | df["policy"].isin(known) & (
+    rescore = altered[~(stale | errored)] | df["method"].isin(known) & (
         options.reevaluate | (df["evaluation_hash"] != evaluation_hash())
     )
     return df, rescore
@@ -263,14 +263,14 @@ def _run_in(
     done, again = keys(df[~rescore]), keys(df[rescore])
     work = {}
     for unit in cfg.units():
-        missing = [j for j in cfg.jobs(unit.policy) if (*asdict(unit).values(), *j) not in done]
+        missing = [j for j in cfg.jobs(unit.method) if (*asdict(unit).values(), *j) not in done]
         if missing:
             redo = all((*asdict(unit).values(), *j) in again for j in missing)
             work[unit] = Work(tuple(missing), rescore=redo)
     n_rows = sum(len(w.jobs) for w in work.values())
     if not cfg.units():
         raise BenchError(
-            f"nothing to compute: no policy of {', '.join(cfg.policies)} runs a task of "
+            f"nothing to compute: no method of {', '.join(cfg.methods)} runs a task of "
             f"{', '.join(cfg.tasks)} (the COLMAP peers run only "
             f"{', '.join(t for t, r in RUNNERS.items() if r.spec.peers)})"
         )
@@ -347,7 +347,7 @@ def _computed(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, stage
             yield new
             first = new[0]
             bar.set_postfix_str(
-                f"{first['scene']} s{first['seed']} {first['policy']} b{first['budget']}"
+                f"{first['scene']} s{first['seed']} {first['method']} b{first['budget']}"
             )
             bar.update()
 

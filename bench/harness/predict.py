@@ -122,7 +122,7 @@ def select_features(
 ) -> tuple[list[np.ndarray], float, list[dict]]:
     """Every view's selection, the seconds it took, and the feedback loop's rounds."""
     t = time.perf_counter()
-    if unit.policy == ORACLE:
+    if unit.method == ORACLE:
         found = matchable_tracks(scene_truth, fe.pools, cfg.backend.ratio)
         sel = oracle_select(found, [c.response for c in fe.pools], unit.budget)
         rounds = []
@@ -130,7 +130,7 @@ def select_features(
         inputs = [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
         match = matcher([v.camera for v in fe.views], fe.pools, cfg.backend)
         sel, rounds = select_views(
-            unit.policy, inputs, unit.budget, unit.seed, cfg.policy_config(unit.policy), match
+            unit.method, inputs, unit.budget, unit.seed, cfg.policy_config(unit.method), match
         )
     return sel, time.perf_counter() - t, rounds
 
@@ -177,11 +177,11 @@ def predict(scene: LoadedScene, unit: Unit, jobs: list[Job], cfg: RunConfig, ws:
     """Compute and store the prediction of `unit` for `jobs` (module docstring)."""
     folder = ws.unit_dir(unit)
     folder.mkdir(parents=True, exist_ok=True)
-    record = {"hash": prediction_hash(cfg, unit.policy), "grants": {}, "jobs": {}}
+    record = {"hash": prediction_hash(cfg, unit.method), "grants": {}, "jobs": {}}
     earlier = read_record(folder)
     if earlier.get("hash") == record["hash"]:
         record |= {k: earlier[k] for k in ("grants", "jobs", "peer") if k in earlier}
-    if METHODS[unit.policy].role == "peer":
+    if METHODS[unit.method].role == "peer":
         _predict_peer(scene, unit, jobs, cfg, ws, record)
     else:
         _predict_policy(scene, unit, jobs, cfg, ws, record)
@@ -247,7 +247,7 @@ def _predict_peer(scene, unit, jobs, cfg, ws, record) -> None:
     names, cams = [v.name for v in fe.views], [v.camera for v in fe.views]
     image_dir = Source.of(scene.entry).images
     mapped = list(dict.fromkeys(j.protocol for j in jobs if RUNNERS[j.task].maps))
-    run = run_peer(image_dir, names, cams, unit.policy, unit.budget, cfg.backend, mapped)
+    run = run_peer(image_dir, names, cams, unit.method, unit.budget, cfg.backend, mapped)
     record["names"] = names
     record["peer"] = {
         "tentative": run.tentative,
@@ -285,7 +285,7 @@ def read_record(folder: Path) -> dict:
 def has_prediction(ws: Workspace, unit: Unit, jobs: list[Job], cfg: RunConfig) -> bool:
     """Whether the unit's folder holds a current prediction of every job in `jobs`."""
     record = read_record(ws.unit_dir(unit))
-    return record.get("hash") == prediction_hash(cfg, unit.policy) and all(
+    return record.get("hash") == prediction_hash(cfg, unit.method) and all(
         j.key in record.get("jobs", {}) for j in jobs
     )
 

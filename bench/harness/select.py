@@ -28,7 +28,7 @@ from bench.backend.reconstruction import camera_ids, write_database
 from bench.console import log
 from bench.files import atomic_path
 from bench.frontend import feedback, plugins
-from bench.frontend.policies import POLICIES, PolicyInput, check_policies
+from bench.frontend.policies import POLICIES, PolicyInput, check_methods
 from bench.frontend.selection import select_views
 from bench.frontend.stage import compute
 from bench.frontend.views import View, load_image_folder
@@ -61,7 +61,7 @@ def select_to_database(request: SelectRequest, out: Path, seconds: dict | None =
         raise BenchError(f"--out {out} is a file; give a folder for database.db")
     policy, budget, cfg = request.policy, request.budget, request.settings.validate()
     plugins.load(cfg.policy.modules)
-    check_policies([policy])
+    check_methods([policy])
     if policy not in POLICIES and policy != feedback.NAME:
         raise BenchError(f"{policy} is not a selection policy; valid: a policy of `bench run`")
     t = time.perf_counter()

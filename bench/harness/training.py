@@ -26,7 +26,7 @@ from bench.backend.reconstruction import triangulate
 from bench.codehash import code_hash
 from bench.console import log, progress
 from bench.evaluation.metrics import point_error
-from bench.evaluation.truth import load_truth
+from bench.evaluation.truth import scene_truth
 from bench.files import write_text_atomic
 from bench.frontend.policies import ADAPTIVE_SIGNALS, Weights
 from bench.frontend.stage import front_end
@@ -44,7 +44,7 @@ def labelled_candidates(entry: Path, cfg: RunConfig, renders: Path) -> tuple[np.
     """(signals (N, 5), labels (N,)) of every candidate of one render entry."""
     fe = front_end(entry, cfg.detector, cfg.signals, renders / "frontend")
     cams, names = [v.camera for v in fe.views], [v.name for v in fe.views]
-    truth = load_truth(entry, cams, names, fe.pools)
+    truth = scene_truth(entry, cams, names, fe.pools)
     xy = [c.xy for c in fe.pools]
     pairs, _ = match_and_verify(cams, xy, [c.descriptors for c in fe.pools], cfg.backend)
     model = triangulate(Source.of(entry).images, cams, names, xy, pairs, cfg.backend)

@@ -74,7 +74,7 @@ def figure3(
                 fontsize=8,
                 color="gray",
             )
-        ax.set_xticks(range(len(t)), t["policy"], rotation=50, ha="right", fontsize=8)
+        ax.set_xticks(range(len(t)), t["method"], rotation=50, ha="right", fontsize=8)
         ax.set_xlim(-0.6, len(t) - 0.4)  # every slot inside, a missing last one's "n/a" too
         ax.set_title(label, fontsize=10)
         if m in LOG_SCALE and (values[ok] > 0).any():
@@ -115,8 +115,8 @@ def figure_budget(t1: pd.DataFrame, vocab: Vocabulary, out: Path) -> None:
         if m not in t1:
             ax.set_visible(False)
             continue
-        curves = [p for p in t1.loc[t1["budget"] > 0, "policy"].unique() if p != ORACLE]
-        for policy, g in t1[t1["budget"] > 0].groupby("policy", sort=False):
+        curves = [p for p in t1.loc[t1["budget"] > 0, "method"].unique() if p != ORACLE]
+        for policy, g in t1[t1["budget"] > 0].groupby("method", sort=False):
             g = g.sort_values("budget")
             style = (
                 {"linestyle": ":", "color": "black", "marker": "o"}
@@ -127,7 +127,7 @@ def figure_budget(t1: pd.DataFrame, vocab: Vocabulary, out: Path) -> None:
             ax.fill_between(
                 g["budget"], g[f"{m}_lo"], g[f"{m}_hi"], color=line[0].get_color(), alpha=0.15
             )
-        for policy, ref in t1[t1["budget"] == 0].groupby("policy", sort=False):
+        for policy, ref in t1[t1["budget"] == 0].groupby("method", sort=False):
             if np.isfinite(ref[m].iloc[0]):
                 style = "--" if policy == "all" else "-."
                 ax.axhline(
@@ -184,7 +184,7 @@ def read_text_model(folder: Path) -> tuple[dict, np.ndarray, np.ndarray]:
 def figure2_expected(df: pd.DataFrame) -> bool:
     """Whether the rows ask for Figure 2 (they hold adaptive on table), so that not drawing
     it is worth saying."""
-    return bool(((df["scene"] == "table") & (df["policy"] == "adaptive")).any())
+    return bool(((df["scene"] == "table") & (df["method"] == "adaptive")).any())
 
 
 def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | None:
@@ -193,7 +193,7 @@ def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | 
     be drawn, or None."""
     rows = df[
         (df["scene"] == "table")
-        & (df["policy"] == "adaptive")
+        & (df["method"] == "adaptive")
         & (df["task"] == HEADLINE[0])
         & (df["protocol"] == HEADLINE[1])
     ]
@@ -269,7 +269,7 @@ def figure_transfer(ranks: pd.DataFrame, summary: pd.DataFrame, budget: int, out
         ax.plot([1, n], [1, n], color="0.8", lw=1)
         ax.scatter(r["rank_rendered"], r["rank_dataset"], s=18)
         for _, p in r.iterrows():
-            ax.annotate(p["policy"], (p["rank_rendered"], p["rank_dataset"]), fontsize=7)
+            ax.annotate(p["method"], (p["rank_rendered"], p["rank_dataset"]), fontsize=7)
         ax.set(
             xlabel="rank on the rendered benchmark",
             ylabel=f"rank on {s['dataset']}",

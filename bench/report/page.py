@@ -86,7 +86,7 @@ def _run_section(manifest: dict, runs: pd.DataFrame) -> list[str]:
 
 def _grid_section(runs: pd.DataFrame, config: dict) -> list[str]:
     out = ["## Grid and settings", ""]
-    for col in ("scene", "seed", "policy", "budget", "task", "protocol"):
+    for col in ("scene", "seed", "method", "budget", "task", "protocol"):
         values = sorted(set(runs[col].astype(str)), key=lambda v: (len(v), v))
         out.append(f"- {col}: {', '.join(values)}")
     settings = config.get("settings") or {}
@@ -171,7 +171,7 @@ def _paired_section(
     header = ["method", "baseline", "metric", "n", "mean difference [95%]", "w/t/l"]
     body = [
         [
-            str(r["policy"]),
+            str(r["method"]),
             str(r["baseline"]),
             str(r["metric"]),
             _num(r["n"]),
@@ -202,7 +202,7 @@ def _exclusions(runs: pd.DataFrame, t1: pd.DataFrame, vocab: Vocabulary) -> list
     for task in vocab.exclusion_tasks:
         excluded = vocab.column(task, "excluded_runs")
         if excluded in t1 and t1[excluded].fillna(0).sum():
-            n = int(t1.groupby("policy")[excluded].max().max())
+            n = int(t1.groupby("method")[excluded].max().max())
             out.append(
                 f"- up to {n} runs per method left out of the {task} means: their (scene, "
                 "seed) is not mapped by stock COLMAP with all its features (`reference_maps` 0)"

@@ -69,7 +69,7 @@ def rule_column(vocab: Vocabulary, task: str) -> str:
 def headline_frame(
     df: pd.DataFrame, vocab: Vocabulary, protocol: str = HEADLINE[1], dataset: bool = False
 ) -> pd.DataFrame:
-    """One row per (scene, seed, policy, budget) under a track protocol: the headline
+    """One row per (scene, seed, method, budget) under a track protocol: the headline
     task's columns, and every other task's as `<task>_<name>` (a unit without one of the
     tasks has NaN for it); with a task with the exclusion rule (`Task.exclusion_reference`),
     its `rule_column` and, where the rule is applied, `REFERENCE_MAPS` (`dataset`: the rows
@@ -105,7 +105,7 @@ def solvable(rows: pd.DataFrame, metric: str, vocab: Vocabulary) -> pd.DataFrame
 def with_oracle_share(df: pd.DataFrame) -> pd.DataFrame:
     """Add `completeness_vs_oracle_pct` (NaN where there is no oracle run or it is 0)."""
     keys = ["scene", "seed", "budget", "task", "protocol"]
-    oracle = df[df["policy"] == ORACLE].set_index(keys)["acc_completeness_pct"]
+    oracle = df[df["method"] == ORACLE].set_index(keys)["acc_completeness_pct"]
     ref = np.array([oracle.get(k, math.nan) for k in df.set_index(keys).index], dtype=float)
     with np.errstate(divide="ignore", invalid="ignore"):
         share = 100.0 * df["acc_completeness_pct"].to_numpy(dtype=float) / ref
@@ -127,8 +127,8 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     others = [t for t in vocab.tasks if t != HEADLINE[0]]
     metrics = [*vocab.tasks[HEADLINE[0]].columns]
     metrics += [vocab.column(t, m) for t in others for m in vocab.tasks[t].columns]
-    for (policy, budget), g in rows.groupby(["policy", "budget"], sort=False):
-        row = {"strategy": vocab.label(policy), "policy": policy, "budget": budget}
+    for (policy, budget), g in rows.groupby(["method", "budget"], sort=False):
+        row = {"strategy": vocab.label(policy), "method": policy, "budget": budget}
         row["runs"] = len(g)
         row["failed_runs"] = int((g["status"] == "failed").sum())
         for t in (t for t in others if f"{t}_status" in g):
@@ -152,13 +152,13 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     if t.empty:
         return t
     order = t.apply(
-        lambda r: (r["budget"] if r["budget"] > 0 else math.inf, vocab.order(r["policy"])), axis=1
+        lambda r: (r["budget"] if r["budget"] > 0 else math.inf, vocab.order(r["method"])), axis=1
     )
     return t.loc[order.sort_values().index].reset_index(drop=True)
 
 
 def _units(df: pd.DataFrame, policy: str, budget: int, metric: str) -> pd.Series:
-    g = df[(df["policy"] == policy) & (df["budget"] == budget)]
+    g = df[(df["method"] == policy) & (df["budget"] == budget)]
     return g.set_index(["scene", "seed"])[metric].astype(float)
 
 
@@ -182,7 +182,7 @@ def _paired(
                         {
                             "scene": scope,
                             "budget": budget,
-                            "policy": policy,
+                            "method": policy,
                             "baseline": base,
                             "metric": m,
                             **res,
@@ -195,7 +195,7 @@ def paired(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     """The headline policy (adaptive) minus every other baseline or contender, per scene
     and pooled, per budget and headline metric (`rows`: `headline_frame`)."""
     ranked = set(vocab.with_role("baseline", "contender")) - {HEADLINE_POLICY}
-    others = [p for p in pd.unique(rows["policy"]) if p in ranked]
+    others = [p for p in pd.unique(rows["method"]) if p in ranked]
     return _paired(rows, [(HEADLINE_POLICY, b) for b in others], vocab.headline_metrics(), vocab)
 
 
@@ -205,7 +205,7 @@ def paired_sfm(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     budgeted policy (and the oracle) minus the peer held to the budget, `colmap-b`, and
     every contender (and the oracle) minus every baseline. Cells stock COLMAP does not
     map are left out (`solvable`)."""
-    present = list(pd.unique(rows["policy"]))
+    present = list(pd.unique(rows["method"]))
     ranked = {*vocab.with_role("baseline", "contender"), ORACLE}
     policies = [p for p in present if p in ranked]
     pairs = [(p, PAIRED_PEER) for p in policies] if PAIRED_PEER in present else []
@@ -229,7 +229,7 @@ def table2(rows: pd.DataFrame, pairs: pd.DataFrame, vocab: Vocabulary) -> pd.Dat
             part = part if scope == "all scenes" else part[part["scene"] == scope]
             means = pd.DataFrame(
                 {
-                    m: solvable(part, m, vocab).groupby("policy")[m].mean()
+                    m: solvable(part, m, vocab).groupby("method")[m].mean()
                     for m in metrics
                     if m in part
                 }
@@ -269,7 +269,7 @@ def table_scenes(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     """Per scene, policy and budget: means over seeds of every task's summary metrics
     (`Task.summary`; `rows`: `headline_frame`)."""
     cols = [m for n in vocab.tasks for m in vocab.summary_metrics(n) if m in rows]
-    keys = ["scene", "policy", "budget"]
+    keys = ["scene", "method", "budget"]
     t = pd.DataFrame(
         {m: solvable(rows, m, vocab).groupby(keys, sort=False)[m].mean() for m in cols}
     )
@@ -279,7 +279,7 @@ def table_scenes(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
         excluded = rows[REFERENCE_MAPS].eq(0).groupby([rows[k] for k in keys], sort=False)
         for k, task in enumerate(vocab.exclusion_tasks):
             t.insert(4 + k, vocab.column(task, "excluded_seeds"), excluded.sum().astype(int).values)
-    order = t.apply(lambda r: (r["scene"], r["budget"], vocab.order(r["policy"])), axis=1)
+    order = t.apply(lambda r: (r["scene"], r["budget"], vocab.order(r["method"])), axis=1)
     return t.loc[order.sort_values().index].reset_index(drop=True)
 
 
@@ -291,29 +291,29 @@ def frontend_cost(df: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     pose-free to the posed front end over the units both ran."""
     parts = ["detect_ms", "signals_ms", "select_ms"]
     ranked = vocab.with_role("baseline", "contender")
-    rows = df[(df["protocol"] == HEADLINE[1]) & df["policy"].isin(ranked)]
+    rows = df[(df["protocol"] == HEADLINE[1]) & df["method"].isin(ranked)]
     if rows.empty or not set(parts) <= set(rows):
         return pd.DataFrame()
-    unit = ["scene", "seed", "budget", "policy"]
+    unit = ["scene", "seed", "budget", "method"]
     front = {
         task: rows[rows["task"] == task].set_index(unit)[parts].sum(axis=1) for task in vocab.tasks
     }
     out = []
-    for policy in dict.fromkeys(rows["policy"]):
-        row = {"policy": policy}
+    for policy in dict.fromkeys(rows["method"]):
+        row = {"method": policy}
         posed_task, free_task = HEADLINE[0], vocab.posefree_task
         for task, suffix in ((posed_task, ""), (free_task, "_posefree")):
             f = front[task]
-            units = f[f.index.get_level_values("policy") == policy].droplevel("policy")
-            has_texture = "texture" in set(f.index.get_level_values("policy"))
-            tex = f.xs("texture", level="policy") if has_texture else None
+            units = f[f.index.get_level_values("method") == policy].droplevel("method")
+            has_texture = "texture" in set(f.index.get_level_values("method"))
+            tex = f.xs("texture", level="method") if has_texture else None
             row[f"frontend_ms{suffix}"] = units.mean() if len(units) else math.nan
             row[f"ratio_to_texture{suffix}"] = (
                 (units / tex.reindex(units.index)).mean() if tex is not None else math.nan
             )
-        posed = front[posed_task][front[posed_task].index.get_level_values("policy") == policy]
-        free = front[free_task][front[free_task].index.get_level_values("policy") == policy]
+        posed = front[posed_task][front[posed_task].index.get_level_values("method") == policy]
+        free = front[free_task][front[free_task].index.get_level_values("method") == policy]
         row["posefree_to_posed"] = (free / posed.reindex(free.index)).mean()
         out.append(row)
     t = pd.DataFrame(out)
-    return t.iloc[t["policy"].map(vocab.order).argsort(kind="stable")].reset_index(drop=True)
+    return t.iloc[t["method"].map(vocab.order).argsort(kind="stable")].reset_index(drop=True)

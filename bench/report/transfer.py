@@ -59,7 +59,7 @@ def _means(frame: pd.DataFrame, metric: str, vocab: Vocabulary) -> pd.DataFrame:
     (`solvable`; budget 0, a whole-pool method, has no budget to rank at)."""
     frame = solvable(frame, metric, vocab)
     rows = frame[(frame["budget"] > 0) & frame[metric].notna()]
-    return rows.groupby(["budget", "policy"])[metric].mean().unstack("policy")
+    return rows.groupby(["budget", "method"])[metric].mean().unstack("method")
 
 
 def transfer(
@@ -109,7 +109,7 @@ def transfer(
                             "dataset": dataset,
                             "metric": metric,
                             "budget": int(budget),
-                            "policy": m,
+                            "method": m,
                             "value_dataset": a[m],
                             "value_rendered": b[m],
                             "rank_dataset": rank_x[m],

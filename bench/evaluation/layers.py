@@ -26,7 +26,7 @@ from bench.camera import Camera
 
 
 @dataclass(frozen=True)
-class GroundTruth:
+class TruthLayers:
     """One view's ground truth (float32 HxW or HxWx3; NaN / -1 where nothing was hit)."""
 
     range: np.ndarray
@@ -42,7 +42,7 @@ class GroundTruth:
         return (self.shape_index >= 0) & (self.shape_index == np.round(self.shape_index))
 
 
-def load_ground_truth(entry: Path) -> list[GroundTruth]:
+def read_layers(entry: Path) -> list[TruthLayers]:
     """The ground-truth layers of every view of a render entry."""
     entry = Path(entry)
     try:
@@ -51,13 +51,18 @@ def load_ground_truth(entry: Path) -> list[GroundTruth]:
         for v in range(n):
             with np.load(entry / f"gt_{v:02d}.npz") as z:
                 out.append(
-                    GroundTruth(
+                    TruthLayers(
                         *(z[k] for k in ("range", "z", "position", "normal", "shape_index"))
                     )
                 )
         return out
     except (OSError, ValueError, KeyError, zipfile.BadZipFile) as e:
         raise BenchError(f"cannot read the ground truth of {entry}: {e}") from e
+
+
+def surface_samples(gts: list[TruthLayers]) -> np.ndarray:
+    """The ground-truth surface as points: every view's single-surface positions (Nx3)."""
+    return np.concatenate([g.position[g.single_surface] for g in gts])
 
 
 TRUTH_DIR = "ground_truth"
@@ -125,9 +130,9 @@ def has_pixel_truth(root: Path, names: list[str]) -> bool:
     return all((Path(root) / TRUTH_DIR / f"{n}.npz").is_file() for n in names)
 
 
-def load_dataset_truth(
+def read_dataset_layers(
     root: Path, names: list[str], cams: list[Camera]
-) -> tuple[np.ndarray | None, list[GroundTruth] | None]:
+) -> tuple[np.ndarray | None, list[TruthLayers] | None]:
     """A dataset's point cloud and per-pixel truth, each None where the dataset has none
     (per-pixel truth counts only when every image has it)."""
     folder = Path(root) / TRUTH_DIR
@@ -151,5 +156,5 @@ def load_dataset_truth(
             along = rays @ cam.R[2]  # z of a unit ray
             pos = cam.center + rays * (depth / along)[..., None]
         index = np.where(np.isfinite(pos).all(-1), 0.0, -1.0).astype(np.float32)
-        gts.append(GroundTruth(depth, depth, pos.astype(np.float32), pos * np.nan, index))
+        gts.append(TruthLayers(depth, depth, pos.astype(np.float32), pos * np.nan, index))
     return cloud, gts
