@@ -61,8 +61,12 @@ def evaluate(
     shared = {}
     for grant in {record["jobs"][j.key]["grant"] for j in jobs}:
         shared[grant] = _shared(scene, unit, record, grant, folder)
-    rows = []
-    for job in jobs:
+    rows, idents, render_s = (
+        [],
+        identities(scene.entry, unit, jobs, cfg),
+        render_seconds(scene.entry),
+    )
+    for job, ident in zip(jobs, idents):
         done = record["jobs"][job.key]
         metrics_of, seconds, poses = shared[done["grant"]]
         out = ws.model_dir(unit, job)
@@ -72,8 +76,7 @@ def evaluate(
         if job.task == HEADLINE[0] and model is not None and scene.truth.surface is not None:
             _write_point_errors(model, scene, out)
         timing = seconds | {"task": done["task_s"], "evaluate": time.perf_counter() - t}
-        ident = identity(scene.entry, unit, job, cfg)
-        rows.append(make_row(ident, metrics_of | scores, timing, done["failure"], scene.entry))
+        rows.append(make_row(ident, metrics_of | scores, timing, done["failure"], render_s))
     return rows
 
 
@@ -133,30 +136,39 @@ def _write_point_errors(model, scene: LoadedScene, out: Path) -> None:
         )
 
 
-def identity(entry: Path, unit: Unit, job: Job, cfg: RunConfig) -> dict:
-    """The columns that say which run a row is and which code and settings computed it."""
-    return {
-        "scene": unit.scene,
-        "seed": unit.seed,
-        "method": unit.method,
-        "budget": unit.budget,
-        "task": job.task,
-        "protocol": job.protocol,
+def identities(entry: Path, unit: Unit, jobs: list[Job], cfg: RunConfig) -> list[dict]:
+    """For each job, the columns that say which run its row is and which code and settings
+    computed it (what they share, computed once for the unit)."""
+    shared = {
         "render_key": source_key(entry),
         "views": len(read_model(Source.of(entry).model)),
         "prediction_hash": prediction_hash(cfg, unit.method),
         "evaluation_hash": evaluation_hash(),
     }
+    return [
+        {
+            "scene": unit.scene,
+            "seed": unit.seed,
+            "method": unit.method,
+            "budget": unit.budget,
+            "task": job.task,
+            "protocol": job.protocol,
+            **shared,
+        }
+        for job in jobs
+    ]
+
+
+def render_seconds(entry: Path) -> float:
+    """A render entry's mean seconds per view (NaN for a dataset)."""
+    if Source.kind(entry) != "render":
+        return math.nan
+    return float(np.mean(json.loads((Path(entry) / "meta.json").read_text())["seconds_per_view"]))
 
 
 def make_row(
-    ident: dict, scores: dict, timing: dict[str, float], failure: str | None, entry: Path
+    ident: dict, scores: dict, timing: dict[str, float], failure: str | None, render_s: float
 ) -> dict:
-    render_s = (
-        float(np.mean(json.loads((Path(entry) / "meta.json").read_text())["seconds_per_view"]))
-        if Source.kind(entry) == "render"
-        else math.nan
-    )
     row = {
         **ident,
         **scores,

@@ -38,7 +38,7 @@ from bench.frontend.policies import PolicyFailed
 from bench.frontend.stage import FrontEnd, front_end
 from bench.frontend.views import load_views
 from bench.harness.config import RunConfig
-from bench.harness.evaluate import evaluate, identity
+from bench.harness.evaluate import evaluate, identities
 from bench.harness.predict import LoadedScene, has_prediction, predict
 from bench.harness.tasks import RUNNERS
 from bench.results import Workspace
@@ -154,10 +154,8 @@ def failed_rows(entry: Path, unit: Unit, jobs, cfg: RunConfig, why: str) -> list
     failure = ERROR + " ".join(why.split())[:400]
     empty = {k: math.nan for r in RUNNERS.values() for k in r.spec.needs}
     return [
-        identity(entry, unit, job, cfg)
-        | empty
-        | {"wall_ms": math.nan, "status": "failed", "failure": failure}
-        for job in jobs
+        ident | empty | {"wall_ms": math.nan, "status": "failed", "failure": failure}
+        for ident in identities(entry, unit, jobs, cfg)
     ]
 
 

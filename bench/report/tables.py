@@ -157,9 +157,10 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     return t.loc[order.sort_values().index].reset_index(drop=True)
 
 
-def _units(df: pd.DataFrame, policy: str, budget: int, metric: str) -> pd.Series:
-    g = df[(df["method"] == policy) & (df["budget"] == budget)]
-    return g.set_index(["scene", "seed"])[metric].astype(float)
+def _units(rows: pd.DataFrame, budget: int, metric: str) -> dict[str, pd.Series]:
+    """Each method's values of `metric` at `budget`, by (scene, seed)."""
+    at = rows[rows["budget"] == budget].set_index(["scene", "seed"])
+    return {m: g[metric].astype(float) for m, g in at.groupby("method", sort=False)}
 
 
 def _paired(
@@ -169,13 +170,14 @@ def _paired(
     per budget and metric, over the (scene, seed) units both ran."""
     out = []
     lower = vocab.lower_better()
+    none = pd.Series(dtype=float, index=pd.MultiIndex.from_tuples([], names=["scene", "seed"]))
     for budget in sorted(b for b in pd.unique(rows["budget"]) if b > 0):
         for scope in [*pd.unique(rows["scene"]), "all scenes"]:
             part = rows if scope == "all scenes" else rows[rows["scene"] == scope]
+            units = {m: _units(solvable(part, m, vocab), budget, m) for m in metrics if m in part}
             for policy, base in pairs:
-                for m in (m for m in metrics if m in part):
-                    counted = solvable(part, m, vocab)
-                    a, b = _units(counted, policy, budget, m), _units(counted, base, budget, m)
+                for m in units:
+                    a, b = units[m].get(policy, none), units[m].get(base, none)
                     strata = pd.Series(a.index.get_level_values("scene"), index=a.index)
                     res = paired_difference(a, b, strata, m in lower)  # n = 0: one is missing
                     out.append(
