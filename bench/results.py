@@ -24,7 +24,7 @@ A row is finished when its `prediction_hash` (the shared settings and code, and 
 method's own settings and code) and its `evaluation_hash` (the code of the scoring) are the
 current ones: a row whose prediction is stale is computed again; a row whose evaluation
 alone is stale is scored again from the unit's stored prediction. A results folder is bound to its shared settings
-(`config.json`); its grid may grow (new scenes, seeds, policies, budgets, tasks run only
+(`config.json`); its grid may grow (new scenes, seeds, methods, budgets, tasks run only
 the new rows), a method's own settings may change (its rows alone run again), and only a
 change of shared settings needs `--overwrite`. One bench process at a time writes a folder
 (`holding`): a run, `bench plot` or `bench publish`; another is refused in one line while

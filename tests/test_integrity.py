@@ -153,7 +153,7 @@ def test_runs_csv_is_appended_to_not_rewritten(small_run, renders_dir, tmp_path,
 
 
 def test_publish_keeps_a_snapshot_of_other_settings_unless_replace(small_run, tmp_path, capsys):
-    """Publishing 2 rows at 320x240 over the 3,240-row snapshot replaced it (and deleted
+    """Publishing 2 rows at 320x240 over the published snapshot replaced it (and deleted
     its budget figure) without a word; now it is refused naming the differences."""
     snap = tmp_path / "published"
     shutil.copytree(PUBLISHED, snap)
@@ -165,7 +165,7 @@ def test_publish_keeps_a_snapshot_of_other_settings_unless_replace(small_run, tm
         "render.width: 640 there, 320 here",
         "scene: corridor, facade, vegetation only there",
         "seed: 1, 2, 3, 4 only there",
-        "task: sfm only there",
+        "task: pairs, sfm only there",
         "); --replace replaces it",
     ):
         assert phrase in err
@@ -178,7 +178,7 @@ def test_publish_keeps_a_snapshot_of_other_settings_unless_replace(small_run, tm
 
 def test_the_published_snapshot_carries_its_checksums():
     rows = read_runs(PUBLISHED / "runs.csv")
-    assert len(rows) == 3240 and rows["row_checksum"].str.len().eq(12).all()
+    assert len(rows) == 5000 and rows["row_checksum"].str.len().eq(12).all()
     assert set(rows["reference_maps"].dropna()) == {0, 1}  # derived from its colmap rows
 
 

@@ -12,7 +12,7 @@ DESCRIPTION = (
     "Check RESULTS/runs.csv row by row, then copy it with config.json, vocabulary.json, "
     "manifest.json, the tables and the figures into TO (the snapshot the repository "
     "tracks), removing report files there that RESULTS does not have. A snapshot of other "
-    "settings (config.json) or another grid (scenes, seeds, policies, budgets, tasks, "
+    "settings (config.json) or another grid (scenes, seeds, methods, budgets, tasks, "
     "protocols) is replaced only with --replace."
 )
 

@@ -181,11 +181,12 @@ FIGURES = ("figure2.png", "figure3.png", "figure3.pdf", "figure_budget.png")
 def publish(results: Path, to: Path) -> int:
     """Copy a results folder's rows, settings, manifest, tables and figures into the
     snapshot `to`, after checking every row; report files `results` lacks are removed
-    from `to`, so the snapshot never mixes runs. How many files were copied."""
+    from `to`, so the snapshot never mixes runs; its page is written from what it holds
+    (under its own name). How many files were copied or written."""
     read_runs(Path(results) / "runs.csv")  # a damaged file is refused, nothing is copied
     to.mkdir(parents=True, exist_ok=True)
     copied = 0
-    for name in (*PUBLISHED_FILES, *REPORT_FILES, *FIGURES):
+    for name in (n for n in (*PUBLISHED_FILES, *REPORT_FILES, *FIGURES) if n != PAGE):
         src, dst = Path(results) / name, to / name
         if src.is_file():
             with atomic_path(dst) as tmp:
@@ -193,4 +194,5 @@ def publish(results: Path, to: Path) -> int:
             copied += 1
         elif name != "scenes.png":
             dst.unlink(missing_ok=True)
-    return copied
+    write_text_atomic(to / PAGE, results_page(to))
+    return copied + 1
