@@ -61,12 +61,8 @@ def evaluate(
     shared = {}
     for grant in {record["jobs"][j.key]["grant"] for j in jobs}:
         shared[grant] = _shared(scene, unit, record, grant, folder)
-    rows, idents, render_s = (
-        [],
-        identities(scene.entry, unit, jobs, cfg),
-        render_seconds(scene.entry),
-    )
-    for job, ident in zip(jobs, idents):
+    rows, render_s = [], render_seconds(scene.entry)
+    for job, ident in zip(jobs, identities(scene.entry, unit, jobs, cfg)):
         done = record["jobs"][job.key]
         metrics_of, seconds, poses = shared[done["grant"]]
         out = ws.model_dir(unit, job)
