@@ -5,6 +5,7 @@ the back end, and the one line without the extra."""
 
 from __future__ import annotations
 
+import socket
 import sys
 from dataclasses import replace
 
@@ -22,6 +23,17 @@ torch = pytest.importorskip("torch")
 torch.set_num_threads(1)
 ALIKED = DetectorConfig(detector="aliked", learned_max_edge=160)
 DISK = DetectorConfig(detector="disk", learned_max_edge=160)
+
+
+@pytest.fixture(autouse=True)
+def offline(monkeypatch):
+    """No test here may reach the network (the weights are the package's own)."""
+
+    def refuse(*args, **kwargs):
+        raise AssertionError(f"network access: {args} {kwargs}")
+
+    monkeypatch.setattr(socket.socket, "connect", refuse)
+    monkeypatch.setattr(torch.hub, "download_url_to_file", refuse)
 
 
 @pytest.fixture(scope="module")

@@ -48,10 +48,11 @@ class DetectorConfig:
     (their LightGlue's training size); keypoints are returned in full-resolution pixels."""
     learned_keypoints: int = 4096
     """ALIKED and DISK: most keypoints per view, the highest-scoring (the pool; above the
-    largest budget)."""
-    aliked_threshold: float = 0.05
+    largest budget; max_features bounds the OpenCV detectors')."""
+    aliked_threshold: float = 0.01
     """ALIKED's detection score threshold (LightGlue's default is 0.2; low, so that the
-    pool is several times the budget on weakly textured views)."""
+    pool is above the budget on small, weakly textured views: 330-610 candidates per
+    view of the table at 320x240, SIFT's 330-390)."""
 
     def validate(self) -> DetectorConfig:
         if self.detector not in DETECTORS:
@@ -96,11 +97,13 @@ class Candidates:
     """(N, 2) float64 x, y in pixels, COLMAP convention (the image's corner is 0, 0; the
     first pixel's centre 0.5, 0.5)."""
     size: np.ndarray
-    """(N,) float64 keypoint diameter in pixels (the detector's scale)."""
+    """(N,) float64 keypoint diameter in pixels (the detector's scale; a learned
+    detector's is nominal, `bench.frontend.learned`)."""
     angle: np.ndarray
     """(N,) float64 orientation in degrees [0, 360) (OpenCV's; -1: none)."""
     response: np.ndarray
-    """(N,) float64 detector response (strength; its scale depends on the detector)."""
+    """(N,) float64 detector response (strength; its scale depends on the detector; a
+    learned detector's detection score)."""
     descriptors: np.ndarray
     """(N, D): float32 unit-length for SIFT, uint8 bit strings for ORB/AKAZE."""
 
