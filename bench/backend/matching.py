@@ -33,11 +33,11 @@ MATCHERS = ("ratio", "lightglue")
 class BackendConfig:
     """Matching, verification and reconstruction settings."""
 
+    ratio: float = 0.8
+    """Lowe ratio test threshold for tentative matches (with mutual nearest neighbours)."""
     matcher: str = "ratio"
     """Tentative matches: ratio (mutual nearest neighbours passing the ratio test) or
     lightglue (LightGlue with the weights of the detector: aliked and disk pools only)."""
-    ratio: float = 0.8
-    """Lowe ratio test threshold for tentative matches (with mutual nearest neighbours)."""
     ransac_max_error: float = 4.0
     """RANSAC inlier threshold of the two-view verification, in pixels (COLMAP's default)."""
     min_tri_angle: float = 1.5
