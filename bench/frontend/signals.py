@@ -40,8 +40,8 @@ within the band around each epipolar line (`epipolar_pairs`) and their descripto
 
 Every signal is defined on every pool. On a learned pool (ALIKED, DISK:
 `bench.frontend.learned`) the response is the detection score, the scale s a nominal size
-(neither detector has one), re-detection runs the same network, and tau is set per
-detector (`DUPLICATE_DISTANCE`).
+(neither detector has one), re-detection runs the same network (on the perturbed grey
+image, as three equal channels), and tau is set per detector (`DUPLICATE_DISTANCE`).
 
 Overlap, nearest views, working distances, epipolar lines and the cameras that parallax
 looks at come from the views' geometry (`bench.frontend.geometry`): the rig's poses when
