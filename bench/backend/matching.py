@@ -1,7 +1,9 @@
 """Matching and geometric verification of the selected features of every pair of views.
 
-1. Tentative matches: mutual nearest neighbours in descriptor space that also pass Lowe's
-   ratio test (d1 < ratio * d2).
+1. Tentative matches (`BackendConfig.matcher`): `ratio`, mutual nearest neighbours in
+   descriptor space that also pass Lowe's ratio test (d1 < ratio * d2); or `lightglue`,
+   LightGlue with the weights of the pool's detector (ALIKED and DISK pools only:
+   `bench.frontend.learned`).
 2. Verification per pair with COLMAP's calibrated two-view geometry (RANSAC on the
    essential matrix, homography checks) using the known intrinsics; inliers are kept,
    with the relative pose COLMAP estimates from them (the `pairs` task's prediction).
@@ -12,6 +14,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from itertools import combinations
 
@@ -19,8 +22,11 @@ import numpy as np
 
 from bench import BenchError
 from bench.camera import Camera
+from bench.frontend import learned
 from bench.frontend.features import Candidates, tentative_matches
 from bench.frontend.geometry import configuration, two_view_geometry, verification_options
+
+MATCHERS = ("ratio", "lightglue")
 
 
 @dataclass(frozen=True)
@@ -29,6 +35,9 @@ class BackendConfig:
 
     ratio: float = 0.8
     """Lowe ratio test threshold for tentative matches (with mutual nearest neighbours)."""
+    matcher: str = "ratio"
+    """Tentative matches: ratio (mutual nearest neighbours passing the ratio test) or
+    lightglue (LightGlue with the weights of the detector: aliked and disk pools only)."""
     ransac_max_error: float = 4.0
     """RANSAC inlier threshold of the two-view verification, in pixels (COLMAP's default)."""
     min_tri_angle: float = 1.5
@@ -37,6 +46,10 @@ class BackendConfig:
     """Seed of COLMAP's RANSAC, triangulator and mapper."""
 
     def validate(self) -> BackendConfig:
+        if self.matcher not in MATCHERS:
+            raise BenchError(
+                f"unknown backend.matcher {self.matcher!r}; valid: {', '.join(MATCHERS)}"
+            )
         if not 0 < self.ratio <= 1:
             raise BenchError(f"backend.ratio must lie in (0, 1], got {self.ratio}")
         if self.ransac_max_error <= 0 or self.min_tri_angle < 0:
@@ -86,13 +99,44 @@ def verify(
     return inliers, configuration(tvg), pose
 
 
+def check_matcher(cfg: BackendConfig, detector: str) -> None:
+    """Refuse, in one line, LightGlue on a pool without LightGlue weights."""
+    if cfg.matcher == "lightglue" and detector not in learned.LEARNED:
+        raise BenchError(
+            f"backend.matcher=lightglue needs a pool with LightGlue weights "
+            f"({', '.join(learned.LEARNED)}), not {detector}"
+        )
+
+
+def tentative(
+    cams: list[Camera],
+    xy: list[np.ndarray],
+    desc: list[np.ndarray],
+    cfg: BackendConfig,
+    detector: str,
+) -> Callable[[int, int], np.ndarray]:
+    """The tentative matches (M, 2) of views i and j under `cfg.matcher`, as a function."""
+    check_matcher(cfg, detector)
+    if cfg.matcher == "ratio":
+        return lambda i, j: tentative_matches(desc[i], desc[j], cfg.ratio)
+    sides = [(x, d, (c.width, c.height)) for c, x, d in zip(cams, xy, desc)]
+    return lambda i, j: learned.lightglue_matches(detector, sides[i], sides[j])
+
+
 def match_and_verify(
-    cams: list[Camera], xy: list[np.ndarray], desc: list[np.ndarray], cfg: BackendConfig
+    cams: list[Camera],
+    xy: list[np.ndarray],
+    desc: list[np.ndarray],
+    cfg: BackendConfig,
+    detector: str,
 ) -> tuple[list[PairMatches], dict[str, float]]:
+    """Every pair of views (i < j): the tentative matches of the pool's `detector` under
+    `cfg.matcher`, and their verification; with the seconds of each."""
     pairs, seconds = [], {"match": 0.0, "verify": 0.0}
+    match = tentative(cams, xy, desc, cfg, detector)
     for i, j in combinations(range(len(cams)), 2):
         t = time.perf_counter()
-        m = tentative_matches(desc[i], desc[j], cfg.ratio)
+        m = match(i, j)
         seconds["match"] += time.perf_counter() - t
         t = time.perf_counter()
         inliers, config, pose = verify(cams[i], xy[i], cams[j], xy[j], m, cfg)
@@ -101,13 +145,13 @@ def match_and_verify(
     return pairs, seconds
 
 
-def matcher(cams: list[Camera], pools: list[Candidates], cfg: BackendConfig):
+def matcher(cams: list[Camera], pools: list[Candidates], cfg: BackendConfig, detector: str):
     """Selections per view -> the verified pairs of those keypoints (for the feedback loop)."""
 
     def match(selection: list[np.ndarray]) -> list[PairMatches]:
         xy = [c.xy[s] for c, s in zip(pools, selection)]
         desc = [c.descriptors[s] for c, s in zip(pools, selection)]
-        return match_and_verify(cams, xy, desc, cfg)[0]
+        return match_and_verify(cams, xy, desc, cfg, detector)[0]
 
     return match
 

@@ -11,7 +11,13 @@ a selection policy, on the same images, scored the same way.
   keeps whole scale levels (octaves) until the limit is reached, so a view holds more (up
   to about twice) or fewer features than B; its rows record how many.
 
-For the `pairs` task, each pair's relative pose is estimated from the pair's verified
+The modern peers, `aliked-b` and `disk-b`: the learned detector's own B highest-scoring
+keypoints (the pool's strongest B: what a user of hloc keeps at a budget), matched with
+LightGlue (`backend.matcher` whatever its setting), verified, triangulated and mapped by
+the policies' back end. They run like a policy, on their detector's pool (`bench run
+--detector aliked`; a grid on another pool leaves them out).
+
+For the `pairs` task of the COLMAP peers, each pair's relative pose is estimated from the pair's verified
 matches (COLMAP's own verification, read back from its database) by the policies'
 verification (`bench.backend.matching.verify`: COLMAP's calibrated two-view geometry with
 the known intrinsics, seeded); COLMAP's matcher stores no pose.
@@ -24,7 +30,7 @@ from __future__ import annotations
 import shutil
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import combinations
 from pathlib import Path
 
@@ -35,6 +41,7 @@ from bench.backend.matching import BackendConfig, PairMatches, verify
 from bench.backend.reconstruction import Reconstruction, map_database, quiet_colmap, write_images
 from bench.camera import Camera
 from bench.frontend.features import strongest_first
+from bench.frontend.policies import policy
 from bench.vocabulary import Method, declare_method, implemented_by
 
 
@@ -183,3 +190,22 @@ implemented_by(
     ],
     run_peer,
 )
+
+COLMAP_PEERS = ("colmap", "colmap-b", "colmap-soft-b")
+"""The peers that extract, match and map with stock COLMAP (`run_peer`)."""
+LEARNED_PEERS = {"aliked-b": "aliked", "disk-b": "disk"}
+"""The learned peers (module docstring) and the detector of each."""
+
+
+def top_by_score(inp, budget, rng, cfg):
+    """The detector's B highest-scoring keypoints."""
+    return strongest_first(inp.candidates.response)[:budget]
+
+
+policy("aliked-b", "ALIKED top-B + LightGlue (peer)", role="peer", pool="aliked")(top_by_score)
+policy("disk-b", "DISK top-B + LightGlue (peer)", role="peer", pool="disk")(top_by_score)
+
+
+def backend_for(method: str, cfg: BackendConfig) -> BackendConfig:
+    """The back-end settings a method's matches are made with: a learned peer's LightGlue."""
+    return replace(cfg, matcher="lightglue") if method in LEARNED_PEERS else cfg

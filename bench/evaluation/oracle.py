@@ -9,7 +9,8 @@ least three views, so they can become points under the headline track protocol.
 Matchable tracks (`matchable_tracks`): connected components of the links between two
 candidates of different views that correspond in the ground truth *and* are tentative
 matches of the whole pools (mutual nearest descriptors passing the ratio test, as the back
-end matches). Ground-truth correspondence alone is not enough: measured on the quick
+end matches by default; on any pool, ALIKED's and DISK's included, and also where
+`backend.matcher` is LightGlue, whose cost on whole pools of thousands it does not pay). Ground-truth correspondence alone is not enough: measured on the quick
 renders, a third of SIFT candidates have an orientation twin at the same pixel, and of the
 same-track pairs an oracle built on geometry alone selected, only 24% (table) and 13%
 (facade) became tentative matches, so it lost to texture-only selection.

@@ -13,9 +13,10 @@ import cv2
 import numpy as np
 
 from bench import BenchError
+from bench.frontend import learned
 from bench.frontend.views import View
 
-DETECTORS = ("sift", "orb", "akaze")
+DETECTORS = ("sift", "orb", "akaze", *learned.LEARNED)
 
 
 @dataclass(frozen=True)
@@ -23,7 +24,8 @@ class DetectorConfig:
     """The detector that builds every view's candidate pool."""
 
     detector: str = "sift"
-    """Keypoint detector and descriptor: sift, orb or akaze."""
+    """Keypoint detector and descriptor: sift, orb, akaze, or the learned aliked or disk
+    (the `learned` extra; `bench.frontend.learned`)."""
     sift_contrast: float = 0.005
     """SIFT contrast threshold (OpenCV's default is 0.04; low, so that the pool is several
     times the budget even on the weakly textured corridor)."""
@@ -38,12 +40,37 @@ class DetectorConfig:
     max_features: int = 8192
     """Most candidates per view: the strongest by detector response (COLMAP's
     max_num_features); bounds the front end's memory on large photographs."""
+    learned_variant: str = "aliked-n16"
+    """ALIKED's network: aliked-n16, aliked-n16rot, aliked-n32 or aliked-t16 (LightGlue's
+    ALIKED weights were trained on aliked-n16's descriptors)."""
+    learned_max_edge: int = 1024
+    """ALIKED and DISK: longest side, px, of the downscaled copy the network detects on
+    (their LightGlue's training size); keypoints are returned in full-resolution pixels."""
+    learned_keypoints: int = 4096
+    """ALIKED and DISK: most keypoints per view, the highest-scoring (the pool; above the
+    largest budget; max_features bounds the OpenCV detectors')."""
+    aliked_threshold: float = 0.01
+    """ALIKED's detection score threshold (LightGlue's default is 0.2; low, so that the
+    pool is above the budget on small, weakly textured views: 330-610 candidates per
+    view of the table at 320x240, SIFT's 330-390)."""
 
     def validate(self) -> DetectorConfig:
         if self.detector not in DETECTORS:
             raise BenchError(f"unknown detector {self.detector!r}; valid: {', '.join(DETECTORS)}")
         if self.max_image_size < 64 or self.max_features < 1:
             raise BenchError("detector.max_image_size must be >= 64 and max_features >= 1")
+        if self.learned_variant not in learned.ALIKED_VARIANTS:
+            raise BenchError(
+                f"unknown detector.learned_variant {self.learned_variant!r}; valid: "
+                + ", ".join(learned.ALIKED_VARIANTS)
+            )
+        if self.learned_max_edge < 64 or self.learned_keypoints < 1 or self.aliked_threshold <= 0:
+            raise BenchError(
+                "detector.learned_max_edge must be >= 64, learned_keypoints >= 1 and "
+                "aliked_threshold > 0"
+            )
+        if self.detector in learned.LEARNED:
+            learned.require()
         return self
 
     def create(self):
@@ -70,11 +97,13 @@ class Candidates:
     """(N, 2) float64 x, y in pixels, COLMAP convention (the image's corner is 0, 0; the
     first pixel's centre 0.5, 0.5)."""
     size: np.ndarray
-    """(N,) float64 keypoint diameter in pixels (the detector's scale)."""
+    """(N,) float64 keypoint diameter in pixels (the detector's scale; a learned
+    detector's is nominal, `bench.frontend.learned`)."""
     angle: np.ndarray
     """(N,) float64 orientation in degrees [0, 360) (OpenCV's; -1: none)."""
     response: np.ndarray
-    """(N,) float64 detector response (strength; its scale depends on the detector)."""
+    """(N,) float64 detector response (strength; its scale depends on the detector; a
+    learned detector's detection score)."""
     descriptors: np.ndarray
     """(N, D): float32 unit-length for SIFT, uint8 bit strings for ORB/AKAZE."""
 
@@ -112,7 +141,9 @@ def keypoint_arrays(kps) -> tuple[np.ndarray, ...]:
 
 def detect(view: View, cfg: DetectorConfig) -> Candidates:
     """Detect and describe one view's candidates (the `max_features` strongest, in the
-    detector's order)."""
+    detector's order; a learned detector's: `bench.frontend.learned.detect`)."""
+    if cfg.detector in learned.LEARNED:
+        return Candidates(*learned.detect(view.image, cfg))
     kps, desc = cfg.create().detectAndCompute(view.gray, None)
     if len(kps) > cfg.max_features:
         order = strongest_first([k.response for k in kps])
@@ -130,6 +161,8 @@ def detect(view: View, cfg: DetectorConfig) -> Candidates:
 
 def detect_points(gray: np.ndarray, cfg: DetectorConfig) -> np.ndarray:
     """Keypoint locations only (COLMAP convention), for re-detection under perturbations."""
+    if cfg.detector in learned.LEARNED:
+        return learned.run_network(gray, cfg)[0]
     return keypoint_arrays(cfg.create().detect(gray, None))[0]
 
 

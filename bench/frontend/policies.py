@@ -115,12 +115,14 @@ def policy(
     whole_pool: bool = False,
     reads: tuple[str, ...] = (),
     config: type | None = None,
+    pool: str = "",
 ) -> Callable[[Policy], Policy]:
     """Register a policy under a name no other method has: its display label (default:
     the name), its role (`bench.vocabulary.ROLES`), whether it takes the whole pool
     (then it runs once per scene and seed, as budget 0), the signals it reads (for its
-    reported cost, and so that `bench select` computes the costly ones) and the class of
-    its own settings (a `PolicyConfig` subclass; `--set <name>.<field>=value`)."""
+    reported cost, and so that `bench select` computes the costly ones), the class of
+    its own settings (a `PolicyConfig` subclass; `--set <name>.<field>=value`) and the
+    detector whose pool it needs (`Method.pool`; empty: any)."""
     unknown = [s for s in reads if s not in SIGNALS]
     if unknown:
         raise BenchError(
@@ -128,7 +130,7 @@ def policy(
         )
 
     def register(fn: Policy) -> Policy:
-        method = Method(name, label or name, role, whole_pool, tuple(reads))
+        method = Method(name, label or name, role, whole_pool, tuple(reads), pool)
         declare_method(method, code=(fn,), settings=config)
         POLICIES[name] = fn
         return fn

@@ -12,7 +12,8 @@ photographs, with the signals its policy reads); `front_end` caches it for a ren
 entry or dataset.
 
 Cached (npz beside the render cache) by the render entry, the geometry granted, the
-detector and signal settings and the code that computes them (`front_end` and what it
+detector and signal settings (and a learned detector's package versions) and the code
+that computes them (`front_end` and what it
 reaches, `bench.codehash`); the seconds measured when it was computed are stored with
 it, so reported front-end times do not depend on whether the cache was warm.
 """
@@ -31,7 +32,7 @@ from bench import BenchError
 from bench.codehash import code_hash
 from bench.console import log
 from bench.files import atomic_path, content_key
-from bench.frontend import features
+from bench.frontend import features, learned
 from bench.frontend.features import Candidates, DetectorConfig
 from bench.frontend.geometry import IMAGES, RIG, SignalConfig, estimate_focal, focal_camera
 from bench.frontend.signals import SIGNALS, TIMED, Signals, compute_signals
@@ -85,6 +86,7 @@ def front_end(
             "opencv": cv2.__version__,
             "code": frontend_code_hash(),
         }
+        | learned.versions(det.detector)
     )
     path = Path(cache_dir) / f"{entry.name}-{det.detector}-{grant}-{key}.npz"
     if path.is_file():

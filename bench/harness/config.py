@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, replace
 
 from bench import BenchError
-from bench.backend.matching import BackendConfig
+from bench.backend.matching import BackendConfig, check_matcher
 from bench.frontend import feedback  # noqa: F401 (declares adaptive-loop and its own settings)
 from bench.frontend.features import DetectorConfig
 from bench.frontend.geometry import SignalConfig
@@ -76,6 +76,7 @@ class RunConfig:
         for section in (self.render, self.detector, self.policy, self.backend):
             if section is not None:
                 section.validate()
+        check_matcher(self.backend, self.detector.detector)
         unknown = sorted(set(self.methods) - set(SETTINGS))
         if unknown:
             raise BenchError(f"{unknown[0]} has no settings of its own")

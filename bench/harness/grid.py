@@ -157,7 +157,10 @@ class BenchConfig:
         ]
 
     def jobs(self, policy: str) -> list[Job]:
-        """Every job of a unit of `policy` (a peer runs the tasks that admit peers)."""
+        """Every job of a unit of `policy` (a peer runs the tasks that admit peers; a
+        method that needs another detector's pool runs none)."""
+        if METHODS[policy].pool not in ("", self.run.detector.detector):
+            return []
         peer = METHODS[policy].role == "peer"
         tasks = [t for t in self.tasks if RUNNERS[t].spec.peers or not peer]
         return [Job(t, pr) for t in tasks for pr in self.protocols]

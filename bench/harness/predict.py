@@ -5,7 +5,8 @@ per view (a policy, or the oracle, which reads ground truth as a reference) -> m
 verify -> for each job (task, protocol): reconstruct (COLMAP) -> export the model. The
 jobs of one grant share the selection, matching and verification, so they see exactly
 the same matches; a selection that does not depend on the grant (it reads no geometry)
-is matched once for both. A stock-COLMAP peer extracts, matches and maps on its own.
+is matched once for both. A stock-COLMAP peer extracts, matches and maps on its own; a
+learned peer (`aliked-b`) selects and matches like a policy, with LightGlue.
 
 What a unit predicted is stored in its folder (`Workspace.unit_dir`): the selections and
 verified matches (`prediction-<grant>.npz`, a peer's keypoints in `prediction-peer.npz`),
@@ -37,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.backend.matching import PairMatches, match_and_verify, matcher
-from bench.backend.peers import run_peer
+from bench.backend.peers import COLMAP_PEERS, backend_for, run_peer
 from bench.codehash import code_hash
 from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.evaluation.truth import SceneTruth
@@ -50,7 +51,7 @@ from bench.frontend.views import Source
 from bench.harness.config import RunConfig
 from bench.harness.tasks import RUNNERS, Matched
 from bench.results import PREDICTION, Workspace
-from bench.vocabulary import CODE, METHODS, ORACLE, Job, Unit
+from bench.vocabulary import CODE, ORACLE, Job, Unit
 
 
 @dataclass(frozen=True)
@@ -128,7 +129,7 @@ def select_features(
         rounds = []
     else:
         inputs = [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
-        match = matcher([v.camera for v in fe.views], fe.pools, cfg.backend)
+        match = matcher([v.camera for v in fe.views], fe.pools, cfg.backend, cfg.detector.detector)
         sel, rounds = select_views(
             unit.method, inputs, unit.budget, unit.seed, cfg.policy_config(unit.method), match
         )
@@ -181,7 +182,7 @@ def predict(scene: LoadedScene, unit: Unit, jobs: list[Job], cfg: RunConfig, ws:
     earlier = read_record(folder)
     if earlier.get("hash") == record["hash"]:
         record |= {k: earlier[k] for k in ("grants", "jobs", "peer") if k in earlier}
-    if METHODS[unit.method].role == "peer":
+    if unit.method in COLMAP_PEERS:
         _predict_peer(scene, unit, jobs, cfg, ws, record)
     else:
         _predict_policy(scene, unit, jobs, cfg, ws, record)
@@ -203,7 +204,9 @@ def _predict_policy(scene, unit, jobs, cfg, ws, record) -> None:
         xy = [c.xy[s] for c, s in zip(fe.pools, selections)]
         if key not in matched:
             desc = [c.descriptors[s] for c, s in zip(fe.pools, selections)]
-            matched[key] = match_and_verify([v.camera for v in fe.views], xy, desc, cfg.backend)
+            cams = [v.camera for v in fe.views]
+            backend = backend_for(unit.method, cfg.backend)
+            matched[key] = match_and_verify(cams, xy, desc, backend, cfg.detector.detector)
         pairs, match_s = matched[key]
         record["names"] = [v.name for v in fe.views]
         record["grants"][grant] = {

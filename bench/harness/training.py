@@ -46,7 +46,9 @@ def labelled_candidates(entry: Path, cfg: RunConfig, renders: Path) -> tuple[np.
     cams, names = [v.camera for v in fe.views], [v.name for v in fe.views]
     truth = scene_truth(entry, cams, names, fe.pools)
     xy = [c.xy for c in fe.pools]
-    pairs, _ = match_and_verify(cams, xy, [c.descriptors for c in fe.pools], cfg.backend)
+    pairs, _ = match_and_verify(
+        cams, xy, [c.descriptors for c in fe.pools], cfg.backend, cfg.detector.detector
+    )
     model = triangulate(Source.of(entry).images, cams, names, xy, pairs, cfg.backend)
     ids = list(model.points3D)
     X = np.array([model.points3D[i].xyz for i in ids]).reshape(-1, 3)
