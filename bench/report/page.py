@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from bench.vocabulary import HEADLINE, HEADLINE_BUDGET, HEADLINE_POLICY, PAIRED_PEER, Vocabulary
+from bench.vocabulary import HEADLINE, HEADLINE_BUDGET, HEADLINE_POLICY, PAIRED_PEERS, Vocabulary
 
 PAGE = "README.md"
 POOLED = ("all", "all scenes")
@@ -234,12 +234,13 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
         f"Paired: {HEADLINE_POLICY} against every method, all scenes",
         None,
     )
-    out += _paired_section(
-        _read(results, "paired_sfm.csv"),
-        vocab,
-        f"Paired sfm: every method against `{PAIRED_PEER}`, all scenes",
-        PAIRED_PEER,
-    )
+    for peer in PAIRED_PEERS:
+        out += _paired_section(
+            _read(results, "paired_sfm.csv"),
+            vocab,
+            f"Paired sfm: every method against `{peer}`, all scenes",
+            peer,
+        )
     out += _transfer_section(_read(results, "transfer.csv"))
     figures = [(n, t) for n, t in FIGURES.items() if (results / n).is_file()]
     if figures:

@@ -51,7 +51,7 @@ from bench.vocabulary import (
     HEADLINE,
     HEADLINE_POLICY,
     ORACLE,
-    PAIRED_PEER,
+    PAIRED_PEERS,
     REFERENCE_MAPS,
     UNIT_KEY,
     Vocabulary,
@@ -103,7 +103,10 @@ def solvable(rows: pd.DataFrame, metric: str, vocab: Vocabulary) -> pd.DataFrame
 
 
 def with_oracle_share(df: pd.DataFrame) -> pd.DataFrame:
-    """Add `completeness_vs_oracle_pct` (NaN where there is no oracle run or it is 0)."""
+    """Add `completeness_vs_oracle_pct` (NaN where there is no oracle run or it is 0, or
+    no task of the rows measures completeness)."""
+    if "acc_completeness_pct" not in df:
+        return df.assign(completeness_vs_oracle_pct=math.nan)
     keys = ["scene", "seed", "budget", "task", "protocol"]
     oracle = df[df["method"] == ORACLE].set_index(keys)["acc_completeness_pct"]
     ref = np.array([oracle.get(k, math.nan) for k in df.set_index(keys).index], dtype=float)
@@ -204,13 +207,13 @@ def paired(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
 def paired_sfm(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     """In the summary metrics (`Task.summary`) of the tasks the peers run (sfm: mAA and
     registered views), per scene and pooled, per budget (`rows`: `headline_frame`): every
-    budgeted policy (and the oracle) minus the peer held to the budget, `colmap-b`, and
+    budgeted policy (and the oracle) minus each peer held to the budget (`PAIRED_PEERS`), and
     every contender (and the oracle) minus every baseline. Cells stock COLMAP does not
     map are left out (`solvable`)."""
     present = list(pd.unique(rows["method"]))
     ranked = {*vocab.with_role("baseline", "contender"), ORACLE}
     policies = [p for p in present if p in ranked]
-    pairs = [(p, PAIRED_PEER) for p in policies] if PAIRED_PEER in present else []
+    pairs = [(p, peer) for peer in PAIRED_PEERS if peer in present for p in policies]
     bases = [p for p in present if p in vocab.with_role("baseline")]
     pairs += [(p, b) for p in policies if p not in bases for b in bases]
     metrics = [m for n, t in vocab.tasks.items() if t.peers for m in vocab.summary_metrics(n)]
