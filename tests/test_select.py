@@ -50,6 +50,15 @@ def select(folder, out, *extra):
     return main(["select", "--images", str(folder), "--out", str(out), "--budget", "40", *extra])
 
 
+@pytest.mark.parametrize("detector", ["orb", "aliked"])
+def test_a_pool_without_sift_descriptors_is_refused_in_one_line(tmp_path, capsys, detector):
+    folder = photos(tmp_path / "im")
+    assert select(folder, tmp_path / "o", "--set", f"detector.detector={detector}") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"detector.detector must be sift, not {detector}" in err[0]
+    assert not (tmp_path / "o" / "database.db").exists()
+
+
 def test_a_truncated_jpeg_is_refused_naming_the_file(tmp_path, capsys):
     folder = photos(tmp_path / "im", ext=".jpg")
     data = (folder / "p1.jpg").read_bytes()

@@ -60,6 +60,11 @@ def select_to_database(request: SelectRequest, out: Path, seconds: dict | None =
     if out.exists() and not out.is_dir():
         raise BenchError(f"--out {out} is a file; give a folder for database.db")
     policy, budget, cfg = request.policy, request.budget, request.settings.validate()
+    if cfg.detector.detector != "sift":
+        raise BenchError(
+            "bench select writes COLMAP's SIFT descriptors, which COLMAP's matchers read: "
+            f"detector.detector must be sift, not {cfg.detector.detector}"
+        )
     plugins.load(cfg.policy.modules)
     check_methods([policy])
     if policy not in POLICIES and policy != feedback.NAME:
