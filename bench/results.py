@@ -438,17 +438,24 @@ def _differing(there: dict, here: dict, now: str = "now") -> list[str]:
     return [f"{k}: {there.get(k)!r} there, {here.get(k)!r} {now}" for k in keys]
 
 
-def check_results_dir(results: Path, settings: dict, overwrite: bool) -> None:
+def check_results_dir(
+    results: Path, settings: dict, overwrite: bool, defaults: dict | None = None
+) -> None:
     """Refuse to compute into `results` under other shared settings than the ones its
     `config.json` holds, naming each that differs, unless `overwrite` (a method's own
-    settings may change: its rows alone are computed again). Writes nothing."""
+    settings may change: its rows alone are computed again; a setting the folder does not
+    have yet may be at its value in `defaults`). Writes nothing."""
     settings = _shared(json.loads(json.dumps(settings)))  # tuples as lists, as stored
     stored_path = results / "config.json"
     if stored_path.exists() and not overwrite:
         stored = _settings(stored_path, "use --overwrite to start again")
         now = _flatten(_shared(settings))
         # a stored setting this code no longer has (one that moved to its method), or a
-        # method's own setting, decides nothing here
+        # method's own setting, decides nothing here; nor does a setting added since the
+        # folder was made, at its default (a new setting's default is the behaviour before it)
+        default = _flatten(_shared(json.loads(json.dumps(defaults or {}))))
+        added = {k for k, v in now.items() if k not in stored and k in default and default[k] == v}
+        now = {k: v for k, v in now.items() if k not in added}
         differ = _differing({k: stored.get(k) for k in now}, now)
         if differ:
             raise BenchError(

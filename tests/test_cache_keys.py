@@ -239,6 +239,23 @@ def test_a_methods_own_setting_does_not_bind_the_folder(tmp_path):
     check_results_dir(tmp_path, RunConfig().as_dict(), False)
 
 
+def test_a_setting_added_since_the_folder_was_made_binds_it_only_off_its_default(tmp_path):
+    """A folder of the code before backend.matcher existed: extending it at the default
+    (the behaviour before) needs no --overwrite; asking for LightGlue does."""
+    from bench.harness.config import RunConfig
+    from bench.results import check_results_dir
+
+    old = RunConfig().shared()
+    del old["backend"]["matcher"]
+    (tmp_path / "config.json").write_text(json.dumps({"settings": old}))
+    defaults = RunConfig().as_dict()
+    check_results_dir(tmp_path, RunConfig().as_dict(), False, defaults)
+    glue = RunConfig()
+    glue = dataclasses.replace(glue, backend=dataclasses.replace(glue.backend, matcher="lightglue"))
+    with pytest.raises(BenchError, match="backend.matcher"):
+        check_results_dir(tmp_path, glue.as_dict(), False, defaults)
+
+
 def test_a_methods_own_setting_is_set_with_its_name():
     from bench.cli.common import apply_settings
     from bench.harness.config import RunConfig

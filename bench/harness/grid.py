@@ -260,7 +260,7 @@ def _run_in(
         "id": time.strftime("%Y%m%dT%H%M%S") + f"-{os.getpid()}",
         "git_commit": _git_commit(),  # before this run rewrites any tracked result file
     }
-    check_results_dir(ws.results, cfg.run.as_dict(), options.overwrite)
+    check_results_dir(ws.results, cfg.run.as_dict(), options.overwrite, RunConfig().as_dict())
     df, rescore = _current_rows(cfg, ws, options)
     keys = lambda frame: set(map(tuple, frame[list(KEY)].itertuples(index=False)))  # noqa: E731
     done, again = keys(df[~rescore]), keys(df[rescore])
