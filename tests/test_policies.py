@@ -233,3 +233,29 @@ def test_sfm_selections_are_blind_to_the_poses_and_tri_selections_are_not(medium
         assert all(np.array_equal(x, y) for x, y in zip(a, b)), name
     a, b = selections(true, "tri", "cross-view"), selections(wrong, "tri", "cross-view")
     assert not all(np.array_equal(x, y) for x, y in zip(a, b))
+
+
+def test_feedback_diagnostics_of_pairs_verified_with_and_without_a_pose():
+    """Unposed views (the sfm task): a pair verified without a relative pose (COLMAP's
+    planar or panoramic cases) has tracks of unknown angle, 0, instead of an error; with a
+    pose of 10 degrees about y the rays of one direction meet at 10 degrees."""
+    from bench.backend.matching import PairMatches
+    from bench.camera import Camera
+    from bench.frontend.features import Candidates
+    from bench.frontend.views import View
+
+    cam = Camera(64, 48, 50.0, 50.0, 32.0, 24.0, np.eye(3), np.zeros(3))  # identity pose
+    xy = np.array([[32.0, 24.0], [10.5, 10.5], [50.5, 40.5]])
+    pool = Candidates(xy, np.ones(3), np.zeros(3), np.ones(3), np.eye(3, 128, dtype=np.float32))
+    image = np.zeros((48, 64, 3), np.uint8)
+    inputs = [PolicyInput(View(k, f"v{k}", image, cam, posed=False), pool, None) for k in (0, 1)]
+    sel, m = [np.arange(3)] * 2, np.array([[0, 0], [1, 1], [2, 2]])
+    no_pose = feedback.keypoint_diagnostics(inputs, sel, [PairMatches(0, 1, m, m, "PLANAR")])
+    assert no_pose[0]["verified"].all() and (no_pose[0]["track_views"] == 2).all()
+    assert (no_pose[0]["track_angle"] == 0).all()
+    c, s = np.cos(np.radians(10)), np.sin(np.radians(10))
+    pose = np.c_[np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]), [1.0, 0, 0]]
+    posed = feedback.keypoint_diagnostics(
+        inputs, sel, [PairMatches(0, 1, m, m, "CALIBRATED", pose)]
+    )
+    assert posed[0]["track_angle"][0] == pytest.approx(10.0, abs=1e-6)

@@ -89,10 +89,13 @@ def keypoint_diagnostics(inputs: list[PolicyInput], sel: list[np.ndarray], pairs
         ver[a + ia] = ver[b + jb] = True
         ra = inputs[p.i].view.camera.rays(inputs[p.i].candidates.xy[sel[p.i][ia]])
         rb = inputs[p.j].view.camera.rays(inputs[p.j].candidates.xy[sel[p.j][jb]])
-        if not inputs[p.i].view.posed:  # camera-frame rays: a into b's frame
-            ra = ra @ p.rotation.T
         rows.append(a + ia)
         cols.append(b + jb)
+        if not inputs[p.i].view.posed:  # camera-frame rays: a into b's frame
+            if p.rotation is None:  # verified without a relative pose: angle unknown, 0
+                angles.append(np.zeros(len(ia)))
+                continue
+            ra = ra @ p.rotation.T
         angles.append(np.degrees(np.arccos(np.clip((ra * rb).sum(1), -1, 1))))
     r, c = (np.concatenate(x) if x else np.zeros(0, int) for x in (rows, cols))
     ang = np.concatenate(angles) if angles else np.zeros(0)
