@@ -136,33 +136,36 @@ def _sun(irradiance: float, direction) -> dict:
 def corridor(p: dict, rng: np.random.Generator, width: int, height: int, views: int):
     L, W, H, c = p["length"], p["width"], p["ceiling"], p["texture_contrast"]
     y0, y1 = -W / 2, W / 2
+
+    # painted plaster, tiles and ceiling boards with detail at every scale (`fractal`), each
+    # one texture over its whole surface (texels of 6.35 mm), so that only the tile grid
+    # and the fittings repeat
+    def px(metres: float) -> int:
+        return int(round(metres / 0.00635))
+
     paint = textures.contrast(
-        textures.tint(
-            textures.noise(rng, 256, (4, 16, 64)), (0.55, 0.57, 0.55), (0.85, 0.86, 0.82)
-        ),
+        textures.tint(textures.fractal(rng, (px(H), px(L))), (0.45, 0.47, 0.45), (0.9, 0.9, 0.86)),
         c,
     )
-    floor = textures.contrast(textures.tiles(rng, 256, 4, (0.35, 0.33, 0.3), (0.5, 0.47, 0.43)), c)
-    ceil = textures.contrast(textures.tiles(rng, 256, 2, (0.75, 0.75, 0.75), (0.85, 0.85, 0.85)), c)
+    floor = textures.tiles(rng, (px(W), px(L)), px(0.3), (0.35, 0.33, 0.3), (0.5, 0.47, 0.43))
+    chips = [(0.3, 0.28, 0.25), (0.55, 0.52, 0.47), (0.2, 0.2, 0.2)]  # terrazzo
+    chips = textures.speckle(rng, floor.shape[:2], int(floor.size / 3 / 175), chips)
+    floor = textures.contrast(floor * chips * 1.6, c)
+    ceil = textures.tiles(rng, (px(L), px(W)), px(0.6), (0.75, 0.75, 0.75), (0.85, 0.85, 0.85))
+    ceil = textures.contrast(
+        ceil * (0.7 + 0.6 * textures.fractal(rng, ceil.shape[:2])[..., None]), c
+    )
     meshes = [
-        _mesh(
-            "floor",
-            shapes.quad((0, y0, 0), (L, 0, 0), (0, W, 0), (L / 1.2, W / 1.2)),
-            Material(floor),
-        ),
-        _mesh(
-            "ceiling",
-            shapes.quad((0, y0, H), (0, W, 0), (L, 0, 0), (W / 1.2, L / 1.2)),
-            Material(ceil),
-        ),
+        _mesh("floor", shapes.quad((0, y0, 0), (L, 0, 0), (0, W, 0)), Material(floor)),
+        _mesh("ceiling", shapes.quad((0, y0, H), (0, W, 0), (L, 0, 0)), Material(ceil)),
         _mesh(
             "walls",
             shapes.merge(
                 [
-                    shapes.quad((0, y1, 0), (L, 0, 0), (0, 0, H), (L / 3, H / 3)),
-                    shapes.quad((0, y0, 0), (L, 0, 0), (0, 0, H), (L / 3, H / 3)),
-                    shapes.quad((L, y0, 0), (0, W, 0), (0, 0, H), (W / 3, H / 3)),
-                    shapes.quad((0, y0, 0), (0, W, 0), (0, 0, H), (W / 3, H / 3)),
+                    shapes.quad((0, y1, 0), (L, 0, 0), (0, 0, H)),
+                    shapes.quad((0, y0, 0), (L, 0, 0), (0, 0, H)),
+                    shapes.quad((L, y0, 0), (0, W, 0), (0, 0, H), (W / L, 1)),
+                    shapes.quad((0, y0, 0), (0, W, 0), (0, 0, H), (W / L, 1)),
                 ]
             ),
             Material(paint),
@@ -190,7 +193,7 @@ def corridor(p: dict, rng: np.random.Generator, width: int, height: int, views: 
         doors.append(shapes.box((x, side * (W / 2 - 0.02), 1.05), (1.0, 0.04, 2.1)))
     meshes.append(_mesh("door_frames", shapes.merge(frames), Material(color=(0.7, 0.7, 0.68))))
     wood = textures.contrast(
-        textures.tint(textures.noise(rng, 256, (2, 8, 64)), (0.4, 0.3, 0.22), (0.55, 0.42, 0.3)), c
+        textures.tint(textures.fractal(rng, 256), (0.4, 0.3, 0.22), (0.55, 0.42, 0.3)), c
     )
     meshes.append(_mesh("doors", shapes.merge(doors), Material(wood)))
     for k in range(int(p["n_posters"])):
@@ -199,12 +202,15 @@ def corridor(p: dict, rng: np.random.Generator, width: int, height: int, views: 
         yw = side * (W / 2 - 0.01)
         g = shapes.quad((x - w / 2 * side, yw, 1.0), (w * side, 0, 0), (0, 0, h))
         meshes.append(_mesh(f"poster_{k}", g, Material(textures.label(rng))))
-    # forward along the corridor, a few centimetres from side to side, every camera
-    # looking at the far end: points near the vanishing point have little parallax
-    target = (L, 0.0, 0.95 * p["cam_height"])
-    rig = []
-    for i, u in enumerate(np.linspace(0.0, 1.0, views)):
-        eye = (p["start"] + u * p["travel"], p["sway"] * (-1) ** i, p["cam_height"])
+    # forward along the corridor, weaving from side to side, every camera turned by
+    # `pan_deg` from the corridor's axis towards the left wall; positions are functions
+    # of the path position u, so that a rig of more views holds a rig of fewer on the same
+    # path; points near the far end have little parallax
+    rig, yaw = [], np.radians(p["pan_deg"])
+    for u in np.linspace(0.0, 1.0, views):
+        x = p["start"] + u * p["travel"]
+        eye = (x, p["sway"] * np.cos(2 * np.pi * p["weaves"] * u), p["cam_height"])
+        target = (x + np.cos(yaw), eye[1] + np.sin(yaw), p["cam_height"] - 0.05 / max(L - x, 1))
         rig.append(look_at(eye, target, width=width, height=height, fov_x_deg=p["fov_deg"]))
     return meshes, rig, None
 
@@ -273,7 +279,7 @@ def facade(p: dict, rng: np.random.Generator, width: int, height: int, views: in
         _mesh("ledges", shapes.merge(sills), Material(stone)),
     ]
     paving = textures.contrast(
-        textures.tiles(rng, 512, 4, (0.35, 0.35, 0.36), (0.6, 0.58, 0.55)), c
+        textures.tiles(rng, 512, 128, (0.35, 0.35, 0.36), (0.6, 0.58, 0.55)), c
     )
     meshes.append(
         _mesh(

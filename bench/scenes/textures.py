@@ -6,15 +6,33 @@ import cv2
 import numpy as np
 
 
-def noise(rng: np.random.Generator, size: int, scales=(4, 16, 64), weights=None) -> np.ndarray:
-    """Grey value noise in [0, 1]: random grids of the given cell counts, smoothly upsampled."""
+def _shape(size: int | tuple[int, int]) -> tuple[int, int]:
+    return (size, size) if isinstance(size, int) else size
+
+
+def noise(
+    rng: np.random.Generator, size: int | tuple[int, int], scales=(4, 16, 64), weights=None
+) -> np.ndarray:
+    """Grey value noise in [0, 1] of `size` (square, or (height, width)): random grids of
+    the given cell counts along the shorter side, smoothly upsampled."""
+    h, w = _shape(size)
     weights = weights or [1.0 / (i + 1) for i in range(len(scales))]
-    out = np.zeros((size, size), np.float32)
-    for cells, w in zip(scales, weights):
-        grid = rng.random((cells, cells)).astype(np.float32)
-        out += w * cv2.resize(grid, (size, size), interpolation=cv2.INTER_CUBIC)
+    out = np.zeros((h, w), np.float32)
+    for cells, wt in zip(scales, weights):
+        grid = rng.random((max(1, cells * h // min(h, w)), max(1, cells * w // min(h, w))))
+        out += wt * cv2.resize(grid.astype(np.float32), (w, h), interpolation=cv2.INTER_CUBIC)
     out -= out.min()
     return out / max(float(out.max()), 1e-6)
+
+
+def fractal(rng: np.random.Generator, size: int | tuple[int, int], coarsest: int = 2) -> np.ndarray:
+    """Grey noise with equal contrast in every octave from `coarsest` cells (along the
+    shorter side) to two texels a cell: the 1/f amplitude spectrum of natural images, so
+    there is detail at every scale a detector looks at, not only at the coarse scales
+    `noise` stops at."""
+    octaves = int(np.log2(min(_shape(size)) // 2 // coarsest)) + 1
+    scales = tuple(coarsest * 2**k for k in range(octaves))
+    return noise(rng, size, scales, [1.0] * octaves)
 
 
 def tint(gray: np.ndarray, dark, light) -> np.ndarray:
@@ -59,21 +77,25 @@ def label(rng: np.random.Generator, size: int = 256) -> np.ndarray:
     return img.astype(np.float32) / 255
 
 
-def speckle(rng: np.random.Generator, size: int, count: int, palette=None) -> np.ndarray:
+def speckle(
+    rng: np.random.Generator, size: int | tuple[int, int], count: int, palette=None
+) -> np.ndarray:
     """Random dots and strokes over noise: dense, non-repeating detail. Colours are drawn at
     random, or from `palette` (a list of RGB triples) with jitter."""
-    img = _to_u8(tint(noise(rng, size, (8, 32, 128)), (0.25, 0.25, 0.25), (0.75, 0.75, 0.75)))
+    h, w = _shape(size)
+    img = _to_u8(tint(noise(rng, (h, w), (8, 32, 128)), (0.25, 0.25, 0.25), (0.75, 0.75, 0.75)))
+    side = min(h, w)
     for _ in range(count):
         if palette is None:
             c = _color(rng, 0, 1)
         else:
             base = np.asarray(palette[rng.integers(len(palette))]) * rng.uniform(0.7, 1.3)
             c = tuple(int(v) for v in np.clip(base, 0, 1) * 255)
-        p = tuple(int(v) for v in rng.integers(0, size, 2))
+        p = tuple(int(v) for v in rng.integers(0, (w, h)))
         if rng.random() < 0.5:
-            cv2.circle(img, p, int(rng.integers(2, size // 24)), c, -1)
+            cv2.circle(img, p, int(rng.integers(2, side // 24)), c, -1)
         else:
-            q = tuple(int(v) for v in np.asarray(p) + rng.integers(-size // 10, size // 10, 2))
+            q = tuple(int(v) for v in np.asarray(p) + rng.integers(-side // 10, side // 10, 2))
             cv2.line(img, p, q, c, int(rng.integers(1, 4)))
     return img.astype(np.float32) / 255
 
@@ -95,15 +117,17 @@ def bricks(
     return img * (0.85 + 0.15 * noise(rng, size, (16, 64, 256))[..., None])
 
 
-def tiles(rng: np.random.Generator, size: int, n: int, c0, c1, grout=0.03) -> np.ndarray:
-    """Square tiles of jittered colour between c0 and c1, with grout lines."""
-    cell = size // n
-    t = rng.random((n, n)).astype(np.float32)
-    img = tint(np.kron(t, np.ones((cell, cell), np.float32)), c0, c1)
+def tiles(
+    rng: np.random.Generator, size: int | tuple[int, int], cell: int, c0, c1, grout=0.03
+) -> np.ndarray:
+    """Square tiles of `cell` texels and jittered colour between c0 and c1, grout lines."""
+    h, w = _shape(size)
+    t = rng.random((-(-h // cell), -(-w // cell))).astype(np.float32)
+    img = tint(np.kron(t, np.ones((cell, cell), np.float32))[:h, :w], c0, c1)
     g = max(1, int(grout * cell))
-    img[np.arange(size) % cell < g] *= 0.7
-    img[:, np.arange(size) % cell < g] *= 0.7
-    return img * (0.9 + 0.1 * noise(rng, size, (8, 64))[..., None])
+    img[np.arange(h) % cell < g] *= 0.7
+    img[:, np.arange(w) % cell < g] *= 0.7
+    return img * (0.9 + 0.1 * noise(rng, (h, w), (8, 64))[..., None])
 
 
 def window(size: int = 256) -> np.ndarray:
