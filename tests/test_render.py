@@ -37,6 +37,36 @@ def test_views_sets_the_rig_and_enters_the_render_key(tiny_entry, renders_dir):
         render.render_scene("facade", 0, replace(TINY, views=1), renders_dir)
 
 
+@pytest.mark.parametrize("scene", scene_names())
+def test_a_denser_rig_on_the_same_path_holds_the_sparser_one(scene):
+    """Every third view of a 7-view rig is a view of the 3-view rig on the same path: the
+    same camera, and the same leaves in the wind (the scene is otherwise the same)."""
+    desc3, desc7 = (build_scene(load_spec(scene), 0, 48, 36, n) for n in (3, 7))
+    for a, b in ((0, 0), (1, 3), (2, 6)):
+        np.testing.assert_array_equal(desc3.cameras[a].R, desc7.cameras[b].R)
+        np.testing.assert_array_equal(desc3.cameras[a].t, desc7.cameras[b].t)
+    assert not np.array_equal(desc3.cameras[1].t, desc7.cameras[1].t)
+    for m3, m7 in zip(desc3.meshes, desc7.meshes, strict=True):
+        np.testing.assert_array_equal(m3.vertices, m7.vertices)
+        assert (m3.motion is None) == (m7.motion is None)
+        if m3.motion is not None:
+            np.testing.assert_array_equal(m3.motion, m7.motion[::3])
+
+
+def test_the_views_two_rigs_share_are_rendered_once(tmp_path):
+    """A 3-view and a 5-view rig of one path: views 0, 2, 4 of the second are linked from
+    the per-view cache (the same pixels and ground truth), only two are rendered."""
+    small = replace(TINY, width=48, height=36, spp=2)
+    three = render.render_scene("vegetation", 0, replace(small, views=3), tmp_path)
+    assert len(list((tmp_path / "views").iterdir())) == 3
+    five = render.render_scene("vegetation", 0, replace(small, views=5), tmp_path)
+    assert len(list((tmp_path / "views").iterdir())) == 5
+    for a, b in ((0, 0), (1, 2), (2, 4)):
+        for name in ("view_{:02d}.png", "gt_{:02d}.npz"):
+            assert (three / name.format(a)).read_bytes() == (five / name.format(b)).read_bytes()
+    assert (three / "view_01.png").read_bytes() != (five / "view_01.png").read_bytes()
+
+
 def assert_ground_truth_projects(entry, views: int) -> None:
     """Every view's single-surface pixels project back onto themselves, and its range and
     z-depth agree with its intrinsics."""

@@ -1,10 +1,18 @@
-"""Render entries: a scene and seed to a cached `renders/` entry (six views, their
-ground truth, the rig), rendered through `bench.render.mitsuba` only when missing or damaged.
+"""Render entries: a scene and seed to a cached `renders/` entry (its views, their ground
+truth, the rig), rendered through `bench.render.mitsuba` only when missing or damaged.
+
+Each view is cached on its own too (`renders/views/`, keyed by its position on the scene's
+path: `view_key`), and an entry links its views from there: a rig of 21 views on a path
+renders only the 15 views a rig of 6 on the same path does not have, and the other way round.
 """
 
 from __future__ import annotations
 
+import json
+import os
+import shutil
 import time
+from fractions import Fraction
 from functools import cache
 from importlib.metadata import version
 from pathlib import Path
@@ -19,7 +27,13 @@ from bench.console import log
 from bench.render.config import RenderConfig
 from bench.render.mitsuba import AOVS, GT_LAYERS, MITSUBA_FROM_OPENCV, render_view, srgb8
 from bench.render.variant import resolve_variant
-from bench.scenes.catalog import build_scene, generator_functions, generator_of, load_spec
+from bench.scenes.catalog import (
+    build_scene,
+    generator_functions,
+    generator_of,
+    load_spec,
+    path_positions,
+)
 from bench.scenes.spec import SceneSpec
 
 RENDER_CODE = (build_scene, render_view, srgb8, write_colmap_rig)
@@ -37,28 +51,37 @@ def render_code_hash(scene: str) -> str:
     return code_hash([*RENDER_CODE, own], cut=others)
 
 
+def _pixel_fields(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -> dict:
+    """Everything that changes a view's pixels but its place on the path."""
+    return {
+        "scene": spec.name,
+        "params": spec.params,
+        "seed": seed,
+        "width": cfg.width,
+        "height": cfg.height,
+        "spp": cfg.spp,
+        "max_depth": cfg.max_depth,
+        "variant": variant,
+        "code": render_code_hash(spec.name),
+        "aovs": AOVS,
+        "mitsuba_from_opencv": MITSUBA_FROM_OPENCV.tolist(),
+        "mitsuba": version("mitsuba"),
+        "drjit": version("drjit"),
+    }
+
+
 def render_key(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -> str:
     """Hash of everything that changes pixels: scene, seed, rig, settings, code
     (`render_code_hash`), renderer."""
-    code = render_code_hash(spec.name)
-    return files.content_key(
-        {
-            "scene": spec.name,
-            "params": spec.params,
-            "seed": seed,
-            "views": cfg.views,
-            "width": cfg.width,
-            "height": cfg.height,
-            "spp": cfg.spp,
-            "max_depth": cfg.max_depth,
-            "variant": variant,
-            "code": code,
-            "aovs": AOVS,
-            "mitsuba_from_opencv": MITSUBA_FROM_OPENCV.tolist(),
-            "mitsuba": version("mitsuba"),
-            "drjit": version("drjit"),
-        }
-    )
+    return files.content_key({**_pixel_fields(spec, seed, cfg, variant), "views": cfg.views})
+
+
+def view_key(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str, u: Fraction) -> str:
+    """Hash of one view: `render_key`'s fields with its position on the path for the view
+    count (the scene's cameras and motion are functions of it), so that rigs of different
+    view counts share the views they have in common."""
+    where = f"{u.numerator}/{u.denominator}"
+    return files.content_key({**_pixel_fields(spec, seed, cfg, variant), "path_position": where})
 
 
 _announced: set[str] = set()
@@ -71,6 +94,36 @@ def load_renderer(variant: str) -> None:
     import mitsuba
 
     mitsuba.set_variant(variant)
+
+
+def render_view_entry(
+    desc, v: int, cfg: RenderConfig, variant: str, entry: Path, force: bool
+) -> dict:
+    """The cache entry of one view (`view_key`): its image and ground truth, rendered only
+    if missing, damaged or forced; its meta."""
+    with files.locked(entry):
+        if entry.exists() and not force and files.entry_problem(entry) is None:
+            return json.loads((entry / "meta.json").read_text())
+        with files.atomic_dir(entry) as tmp:
+            t0 = time.perf_counter()
+            rgb, gt, names = render_view(desc, v, cfg, variant)
+            cv2.imwrite(str(tmp / "view.png"), srgb8(rgb)[..., ::-1])
+            np.savez(tmp / "gt.npz", **gt)
+            meta = {"seconds": time.perf_counter() - t0, "shape_names": names}
+            files.write_meta(tmp, meta)
+        log(
+            f"rendered {desc.name} seed {desc.seed} view {v + 1}/{cfg.views} in "
+            f"{meta['seconds']:.1f} s ({variant})"
+        )
+        return meta
+
+
+def _link(src: Path, dst: Path) -> None:
+    """A hard link where the file system allows one, else a copy."""
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copy2(src, dst)
 
 
 def render_scene(
@@ -99,15 +152,18 @@ def render_scene(
         desc = build_scene(spec, seed, cfg.width, cfg.height, cfg.views)
         with files.atomic_dir(entry) as tmp:
             seconds, names = [], None
-            for v in range(cfg.views):
-                t0 = time.perf_counter()
-                rgb, gt, names = render_view(desc, v, cfg, variant)
-                cv2.imwrite(str(tmp / f"view_{v:02d}.png"), srgb8(rgb)[..., ::-1])
-                np.savez(tmp / f"gt_{v:02d}.npz", **gt)
-                seconds.append(time.perf_counter() - t0)
-                log(
-                    f"rendered {name} seed {seed} view {v + 1}/{cfg.views} in {seconds[-1]:.1f} s ({variant})"
+            for v, u in enumerate(path_positions(cfg.views)):
+                view = (
+                    renders_dir
+                    / "views"
+                    / f"{name}-s{seed}-{view_key(spec, seed, cfg, variant, u)}"
                 )
+                meta = render_view_entry(desc, v, cfg, variant, view, force)
+                for kind in ("view", "gt"):
+                    src = next(view.glob(f"{kind}.*"))
+                    _link(src, tmp / f"{kind}_{v:02d}{src.suffix}")
+                seconds.append(meta["seconds"])
+                names = meta["shape_names"]
             write_colmap_rig(desc.cameras, tmp, [f"view_{v:02d}.png" for v in range(cfg.views)])
             files.write_meta(
                 tmp,

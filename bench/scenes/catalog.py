@@ -5,10 +5,17 @@ one-way)."""
 
 from __future__ import annotations
 
-import bench.scenes.generators  # noqa: F401  (importing it registers every scene type's builder)
+from bench.scenes.generators import path_positions  # importing it registers every builder
 from bench.scenes.spec import _GENERATORS, Generator, build_scene, load_spec, scene_names
 
-__all__ = ["build_scene", "generator_functions", "generator_of", "load_spec", "scene_names"]
+__all__ = [
+    "build_scene",
+    "generator_functions",
+    "generator_of",
+    "load_spec",
+    "path_positions",
+    "scene_names",
+]
 
 
 def generator_of(name: str) -> Generator:

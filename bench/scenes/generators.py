@@ -4,6 +4,8 @@ camera path (documented in its `scenes/<name>.toml` description)."""
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 
 import bench.scenes.shapes as shapes
@@ -11,6 +13,12 @@ import bench.scenes.textures as textures
 from bench.camera import Camera, look_at
 from bench.scenes.shapes import Geom
 from bench.scenes.spec import Material, Mesh, generator
+
+
+def path_positions(views: int) -> list[Fraction]:
+    """The position of each of `views` cameras on its scene's path, 0 to 1 evenly, exact:
+    a rig of 21 views holds a rig of 6 at the same positions."""
+    return [Fraction(i, max(views - 1, 1)) for i in range(views)]
 
 
 def _mesh(name: str, g: Geom, material: Material, motion=None) -> Mesh:
@@ -28,7 +36,7 @@ def _arc_rig(
     p: dict, target, width: int, height: int, views: int, start_deg: float = -90.0
 ) -> list[Camera]:
     """`views` cameras evenly on an arc of `arc_deg` around `target`, centred at `start_deg`."""
-    az = np.radians(start_deg + np.linspace(-p["arc_deg"] / 2, p["arc_deg"] / 2, views))
+    az = np.radians([start_deg + p["arc_deg"] * (float(u) - 0.5) for u in path_positions(views)])
     tx, ty, _ = target
     eyes = [
         (tx + p["radius"] * np.cos(a), ty + p["radius"] * np.sin(a), p["cam_height"]) for a in az
@@ -207,7 +215,7 @@ def corridor(p: dict, rng: np.random.Generator, width: int, height: int, views: 
     # of the path position u, so that a rig of more views holds a rig of fewer on the same
     # path; points near the far end have little parallax
     rig, yaw = [], np.radians(p["pan_deg"])
-    for u in np.linspace(0.0, 1.0, views):
+    for u in map(float, path_positions(views)):
         x = p["start"] + u * p["travel"]
         eye = (x, p["sway"] * np.cos(2 * np.pi * p["weaves"] * u), p["cam_height"])
         target = (x + np.cos(yaw), eye[1] + np.sin(yaw), p["cam_height"] - 0.05 / max(L - x, 1))
@@ -291,7 +299,7 @@ def facade(p: dict, rng: np.random.Generator, width: int, height: int, views: in
     meshes.append(_sky_dome(90.0, p["sky"]))
     D = p["street_distance"]
     rig = []
-    for t in np.linspace(-1, 1, views):
+    for t in (2 * float(u) - 1 for u in path_positions(views)):
         eye = (t * p["span"] / 2, -D, p["cam_height"])
         yaw = np.radians(p["yaw_deg"]) * -t
         rig.append(
@@ -338,9 +346,20 @@ def vegetation(p: dict, rng: np.random.Generator, width: int, height: int, views
             leaves[rng.integers(3)].append(shapes.leaf(center, d, n, size, 0.45 * size))
     bark = textures.tint(textures.noise(rng, 128, (4, 32)), (0.2, 0.13, 0.08), (0.4, 0.28, 0.18))
     meshes.append(_mesh("branches", shapes.merge(branches), Material(bark)))
+    wind = int(rng.integers(2**63))
     for k, group in enumerate(leaves):
         g = shapes.merge(group)
-        per_leaf = rng.normal(0, p["wind"], (views, len(group), 3))
+        # each view's gust is drawn from its position on the path, u = i / (views - 1) in
+        # lowest terms, so that a rig of more views on the same path holds the same leaves
+        # where it holds the same cameras
+        per_leaf = np.stack(
+            [
+                np.random.default_rng([wind, k, u.numerator, u.denominator]).normal(
+                    0, p["wind"], (len(group), 3)
+                )
+                for u in path_positions(views)
+            ]
+        )
         motion = np.repeat(per_leaf, len(group[0].vertices), axis=1).astype(
             np.float32
         )  # six vertices a leaf
