@@ -210,15 +210,13 @@ def corridor(p: dict, rng: np.random.Generator, width: int, height: int, views: 
         yw = side * (W / 2 - 0.01)
         g = shapes.quad((x - w / 2 * side, yw, 1.0), (w * side, 0, 0), (0, 0, h))
         meshes.append(_mesh(f"poster_{k}", g, Material(textures.label(rng))))
-    # forward along the corridor, weaving from side to side, every camera turned by
-    # `pan_deg` from the corridor's axis towards the left wall; positions are functions
-    # of the path position u, so that a rig of more views holds a rig of fewer on the same
-    # path; points near the far end have little parallax
-    rig, yaw = [], np.radians(p["pan_deg"])
+    # forward along the corridor, weaving from side to side, every camera looking at the
+    # far end; positions are functions of the path position u, so that a rig of more views
+    # holds a rig of fewer on the same path; points near the far end have little parallax
+    rig, target = [], (L, 0.0, 0.95 * p["cam_height"])
     for u in map(float, path_positions(views)):
         x = p["start"] + u * p["travel"]
         eye = (x, p["sway"] * np.cos(2 * np.pi * p["weaves"] * u), p["cam_height"])
-        target = (x + np.cos(yaw), eye[1] + np.sin(yaw), p["cam_height"] - 0.05 / max(L - x, 1))
         rig.append(look_at(eye, target, width=width, height=height, fov_x_deg=p["fov_deg"]))
     return meshes, rig, None
 
