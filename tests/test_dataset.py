@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import shutil
 from dataclasses import replace
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -421,3 +422,24 @@ def test_several_datasets_run_at_once_with_tables_per_dataset_and_a_transfer_tab
     assert set(summary["metric"]) == {"acc_completeness_pct"} and (summary["methods"] == 3).all()
     assert (ranks.loc[ranks["dataset"] == "table-ds", "rank_shift"] == 0).all()
     assert (out / "figure_transfer.png").is_file()
+
+
+def test_each_dataset_is_matched_with_the_regime_nearest_its_view_count(monkeypatch):
+    """Against a 6-view and a 21-view rendered folder, an 8-view set is matched with the
+    sparse regime and a 16-view set with the dense one; ties go to the denser."""
+    from bench.report import transfer as module
+
+    def one(rows, vocab, rendered):
+        views = int(rendered.name)
+        summary = pd.DataFrame({"dataset": ["a", "b", "c"], "rendered_views": views})
+        return summary, summary.assign(method="texture")
+
+    monkeypatch.setattr(module, "transfer", one)
+    rows = pd.DataFrame({"scene": ["a", "b", "c"], "views": [8, 16, 27]})
+    summary, ranks = module.transfer_regimes(rows, None, [Path("6"), Path("21")])
+    matched = summary[summary["matched"]].set_index("dataset")["rendered_views"]
+    assert matched.to_dict() == {"a": 6, "b": 21, "c": 21}
+    assert ranks["matched"].tolist() == summary["matched"].tolist()
+    rows["views"] = [13.5, 13.5, 13.5]  # equidistant from 6 and 21
+    summary, _ = module.transfer_regimes(rows, None, [Path("6"), Path("21")])
+    assert set(summary.loc[summary["matched"], "rendered_views"]) == {21}

@@ -19,7 +19,7 @@ import pytest
 from bench import BenchError, vocabulary
 from bench.backend.reconstruction import known_pose_model
 from bench.cli import build_parser, main
-from bench.cli.common import LATEST, PUBLISHED, QUICK, parse_list
+from bench.cli.common import LATEST, PUBLISHED, QUICK, REGIMES, parse_list, regime_folder
 from bench.evaluation.layers import read_layers
 from bench.evaluation.truth import SceneTruth
 from bench.frontend import plugins
@@ -593,13 +593,31 @@ def test_repeated_list_items_run_once(capsys):
 
 
 def test_runs_never_write_the_published_snapshot():
-    args = build_parser().parse_args(["run"])
-    assert args.results is None  # resolved to results/latest (results/quick with --quick)
-    for argv in (["plot"], ["publish"], ["gallery"]):
+    for argv in (["run"], ["publish"]):  # resolved by the regime: results/latest(-dense)
+        assert build_parser().parse_args(argv).results is None
+    for argv in (["plot"], ["gallery"]):
         args = build_parser().parse_args(argv)
         target = args.out if argv == ["gallery"] else args.results
         assert PUBLISHED not in target.parents and target != PUBLISHED
-    assert LATEST != PUBLISHED and QUICK != PUBLISHED
+    for regime in REGIMES:
+        published = regime_folder(PUBLISHED, regime)
+        assert published not in {regime_folder(f, r) for f in (LATEST, QUICK) for r in REGIMES}
+
+
+def test_a_regime_sets_the_views_seeds_and_folders_that_are_not_given(tmp_path, monkeypatch):
+    """`--regime dense`: 21 views on each path, seeds 0,1, results/latest-dense, published
+    to results/published-dense; an option given wins over the regime."""
+    from bench.cli import publish
+    from bench.cli.run import run_config
+
+    parse = build_parser().parse_args
+    assert run_config(parse(["run", "--regime", "dense"])).render.views == 21
+    assert run_config(parse(["run"])).render.views == REGIMES["sparse"][0] == 6
+    assert run_config(parse(["run", "--regime", "dense", "--views", "11"])).render.views == 11
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(BenchError, match="results/latest-dense/runs.csv not found"):
+        publish.run(parse(["publish", "--regime", "dense"]))
+    assert not (tmp_path / "results").exists()
 
 
 def test_publish_copies_a_checked_folder_and_removes_stale_files(quick_results, tmp_path):

@@ -20,6 +20,38 @@ LATEST, QUICK, PUBLISHED = Path("results/latest"), Path("results/quick"), Path("
 """Default results folders, relative to the current directory. Runs never write to the
 published snapshot; only `bench publish` does."""
 
+REGIMES = {"sparse": (6, "0-4"), "dense": (21, "0,1")}
+"""Rig regimes: (views on each scene's path, default seeds). The sparse regime's views are
+every fourth of the dense one's (`bench.scenes.catalog.path_positions`), rendered once.
+Dense has two seeds: its 21-view units cost three times a sparse unit, and both regimes'
+cold run stays within the hour the sparse one alone took (README)."""
+
+
+def regime_folder(base: Path, regime: str) -> Path:
+    """A regime's results folder: `base` for the sparse regime, `base`-`regime` else
+    (results/latest-dense, results/published-dense)."""
+    return base if regime == "sparse" else base.with_name(f"{base.name}-{regime}")
+
+
+def regime_arg(parser: argparse.ArgumentParser, what: str) -> None:
+    parser.add_argument(
+        "--regime",
+        choices=tuple(REGIMES),
+        default=None,
+        help=f"rig regime: {', '.join(f'{k} ({v} views, seeds {s})' for k, (v, s) in REGIMES.items())}; "
+        f"{what} (default: sparse)",
+    )
+
+
+def published_snapshots() -> list[Path]:
+    """The package's published snapshot of each regime that has one (what a dataset run
+    compares its ranking with by default)."""
+    return [
+        ROOT / regime_folder(PUBLISHED, r)
+        for r in REGIMES
+        if (ROOT / regime_folder(PUBLISHED, r) / "runs.csv").is_file()
+    ]
+
 
 class Parser(argparse.ArgumentParser):
     """Usage errors as one line, like every other error of the CLI."""

@@ -6,7 +6,14 @@ import argparse
 from pathlib import Path
 
 from bench import ROOT
-from bench.cli.common import LATEST, PUBLISHED, renders_arg, results_arg
+from bench.cli.common import (
+    LATEST,
+    PUBLISHED,
+    published_snapshots,
+    regime_folder,
+    renders_arg,
+    results_arg,
+)
 
 HELP = "rebuild the tables and figures from runs.csv (no rendering, no reconstruction)"
 DESCRIPTION = (
@@ -25,10 +32,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--rendered",
         type=Path,
-        default=ROOT / PUBLISHED,
+        action="append",
+        default=None,
         metavar="DIR",
-        help="for a results folder of datasets: the rendered results whose ranking "
-        "transfer.csv compares with theirs (default: %(default)s)",
+        help="for a results folder of datasets: a rendered results folder whose ranking "
+        "transfer.csv compares with theirs (repeatable; default: the package's snapshot of "
+        f"each regime, {ROOT / PUBLISHED} and {ROOT / regime_folder(PUBLISHED, 'dense')})",
     )
 
 
@@ -38,5 +47,10 @@ def run(args: argparse.Namespace) -> None:
 
     runs_csv = runs_file(args.results / "runs.csv")
     with holding(args.results):  # refused while a run writes the folder
-        write_report(read_runs(runs_csv), args.results, args.renders, args.rendered)
+        write_report(
+            read_runs(runs_csv),
+            args.results,
+            args.renders,
+            args.rendered or published_snapshots(),
+        )
     print(f"tables and figures rewritten in {args.results}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from bench.cli.common import LATEST, PUBLISHED, results_arg
+from bench.cli.common import LATEST, PUBLISHED, regime_arg, regime_folder, results_arg
 
 HELP = "copy a results folder's runs, tables and figures into the published snapshot"
 DESCRIPTION = (
@@ -18,10 +18,15 @@ DESCRIPTION = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    results_arg(parser, LATEST, f"results folder to publish (default: ./{LATEST})")
+    dense = regime_folder(LATEST, "dense"), regime_folder(PUBLISHED, "dense")
+    results_arg(parser, None, f"results folder to publish (default: ./{LATEST}, or ./{dense[0]})")
     parser.add_argument(
-        "--to", type=Path, default=PUBLISHED, help=f"snapshot folder (default: ./{PUBLISHED})"
+        "--to",
+        type=Path,
+        default=None,
+        help=f"snapshot folder (default: ./{PUBLISHED}, or ./{dense[1]})",
     )
+    regime_arg(parser, "sets the default --results and --to")
     parser.add_argument(
         "--replace",
         action="store_true",
@@ -34,6 +39,9 @@ def run(args: argparse.Namespace) -> None:
     from bench.report.write import publish
     from bench.results import holding, runs_file, snapshot_differences
 
+    regime = args.regime or "sparse"
+    args.results = args.results or regime_folder(LATEST, regime)
+    args.to = args.to or regime_folder(PUBLISHED, regime)
     runs_file(args.results / "runs.csv")
     try:
         args.to.mkdir(parents=True, exist_ok=True)

@@ -13,10 +13,14 @@ from bench.cli.common import (
     LIST_FORM,
     PUBLISHED,
     QUICK,
+    REGIMES,
     add_config_args,
     apply_settings,
     field_docs,
     parse_list,
+    published_snapshots,
+    regime_arg,
+    regime_folder,
     renders_arg,
     results_arg,
     settings_arg,
@@ -90,7 +94,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "own table)",
     )
     list_arg(
-        "seeds", None, "N1,N2", "scene seeds, e.g. 0,1,2 or 0-9 (default: 0-4, or 0 with --quick)"
+        "seeds",
+        None,
+        "N1,N2",
+        "scene seeds, e.g. 0,1,2 or 0-9 (default: the regime's, 0-4 or 0,1; 0 with --quick)",
     )
     list_arg(
         "weights",
@@ -136,10 +143,19 @@ def _input_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--rendered",
         type=Path,
+        action="append",
         default=None,
         metavar="DIR",
-        help="with --dataset: the rendered results whose ranking transfer.csv compares with "
-        f"the datasets' (default: the package's snapshot, {ROOT / PUBLISHED})",
+        help="with --dataset: a rendered results folder whose ranking transfer.csv compares "
+        "with the datasets' (repeatable; default: the package's snapshot of each regime, "
+        f"{ROOT / PUBLISHED} and {ROOT / regime_folder(PUBLISHED, 'dense')}); each dataset's "
+        "`matched` rows are those of the regime nearest its view count",
+    )
+    regime_arg(
+        parser,
+        "sets the default --views, --seeds (0 with --quick) and --results "
+        f"(./{LATEST} or ./{regime_folder(LATEST, 'dense')}; --quick: ./{QUICK} or "
+        f"./{regime_folder(QUICK, 'dense')})",
     )
     parser.add_argument(
         "--policy-module",
@@ -165,7 +181,7 @@ def _folder_arguments(parser: argparse.ArgumentParser) -> None:
     results_arg(
         parser,
         None,
-        f"results folder (default: ./{LATEST}, or ./{QUICK} with --quick; runs never write "
+        f"results folder (default: the regime's, ./{LATEST}, or ./{QUICK} with --quick; runs never write "
         f"the published snapshot ./{PUBLISHED}, see `bench publish`)",
     )
     renders_arg(parser)
@@ -244,6 +260,8 @@ def run_config(args: argparse.Namespace):
     from bench.harness.config import RunConfig
 
     render = QUICK_RENDER if args.quick else RenderConfig()
+    if args.regime and args.views is None and not args.dataset:
+        render = dataclasses.replace(render, views=REGIMES[args.regime][0])
     overrides = {
         f.name: getattr(args, f.name)
         for f in dataclasses.fields(RenderConfig)
@@ -319,6 +337,9 @@ def run(args: argparse.Namespace) -> None:
     tasks = parse_list("--tasks", args.tasks, str, HEADLINE[0])
     if args.rendered is not None and not datasets:
         log("--rendered is ignored without --dataset: it is what datasets are compared with")
+    regime = args.regime or "sparse"
+    if args.regime and datasets:
+        log("--regime is ignored with --dataset: a dataset's views are what they are")
     if datasets:
         if args.seeds is not None:
             log("--seeds is ignored with --dataset: a dataset is one scene, recorded as seed 0")
@@ -327,7 +348,10 @@ def run(args: argparse.Namespace) -> None:
         methods = tuple(p for p in methods if p != ORACLE or truth)
     else:
         seeds = parse_list(
-            "--seeds", args.seeds or ("0" if args.quick else "0-4"), int, "0,1,2 or 100-119"
+            "--seeds",
+            args.seeds or ("0" if args.quick else REGIMES[regime][1]),
+            int,
+            "0,1,2 or 100-119",
         )
         scenes = parse_list("--scenes", args.scenes or ",".join(scene_names()), str, "table,facade")
         methods = with_reference(methods, tasks)
@@ -343,11 +367,9 @@ def run(args: argparse.Namespace) -> None:
         datasets=tuple(map(str, datasets)),
     )
     results = args.results or (
-        QUICK
-        if args.quick
-        else LATEST.with_name(f"dataset-{datasets[0].name}" if len(datasets) == 1 else "datasets")
+        LATEST.with_name(f"dataset-{datasets[0].name}" if len(datasets) == 1 else "datasets")
         if datasets
-        else LATEST
+        else regime_folder(QUICK if args.quick else LATEST, regime)
     )
     if args.workers is not None and args.workers < 1:
         raise BenchError(f"--workers must be at least 1, got {args.workers}")
@@ -357,7 +379,7 @@ def run(args: argparse.Namespace) -> None:
         reevaluate=args.reevaluate,
         cluster=Cluster(args.workers or default_workers(), args.scheduler),
     )
-    report = partial(write_report, rendered=args.rendered or ROOT / PUBLISHED)
+    report = partial(write_report, rendered=args.rendered or published_snapshots())
     df = run_benchmark(cfg, Workspace(results, args.renders), options, report=report)
     protocol = "multiview" if "multiview" in cfg.protocols else cfg.protocols[0]
     vocab = Vocabulary.load(results)

@@ -13,11 +13,17 @@ out); tied means share their mean rank. `transfer.csv` has Kendall's tau-b betwe
 two rankings with a 95% percentile bootstrap interval (the methods resampled with
 replacement, `DRAWS` draws, seed 0), the winner on each side and the methods whose rank
 moves most; `transfer_ranks.csv` has every method's values and ranks.
+
+Against several rendered folders (one per rig regime, `bench.cli.common.REGIMES`), the rows
+of each carry its views per scene (`rendered_views`), and `matched` marks, per dataset, the
+regime nearest the dataset's view count (ties: the denser): the comparison the README reports.
 """
 
 from __future__ import annotations
 
+import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -69,6 +75,7 @@ def transfer(
     vocabulary) against the rendered results folder `rendered` (module docstring)."""
     mine = headline_frame(dataset_rows, vocab, dataset=True)
     theirs = headline_frame(read_runs(Path(rendered) / "runs.csv"), Vocabulary.load(rendered))
+    views = json.loads((Path(rendered) / "config.json").read_text())["settings"]["render"]["views"]
     summary, ranks = [], []
     sign = {m: 1 if m in vocab.lower_better() else -1 for m in vocab.first_headline()}
     for dataset, rows in mine.groupby("scene", sort=False):
@@ -90,6 +97,7 @@ def transfer(
                 summary.append(
                     {
                         "dataset": dataset,
+                        "rendered_views": views,
                         "metric": metric,
                         "budget": int(budget),
                         "methods": len(methods),
@@ -107,6 +115,7 @@ def transfer(
                     ranks.append(
                         {
                             "dataset": dataset,
+                            "rendered_views": views,
                             "metric": metric,
                             "budget": int(budget),
                             "method": m,
@@ -118,6 +127,23 @@ def transfer(
                         }
                     )
     return pd.DataFrame(summary), pd.DataFrame(ranks)
+
+
+def transfer_regimes(
+    dataset_rows: pd.DataFrame, vocab: Vocabulary, rendered: Sequence[Path]
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """`transfer` against each rendered folder in turn, with `matched` (module docstring)."""
+    parts = [transfer(dataset_rows, vocab, Path(r)) for r in rendered]
+    summary = pd.concat([p[0] for p in parts], ignore_index=True)
+    ranks = pd.concat([p[1] for p in parts], ignore_index=True)
+    if summary.empty:
+        return summary, ranks
+    own = dataset_rows.groupby("scene")["views"].median()
+    offered = set(summary["rendered_views"])
+    nearest = {d: max(offered, key=lambda o: (-abs(o - v), o)) for d, v in own.items()}
+    for frame in (summary, ranks):
+        frame.insert(2, "matched", frame["rendered_views"] == frame["dataset"].map(nearest))
+    return summary, ranks
 
 
 def _winner(rank: pd.Series) -> str:

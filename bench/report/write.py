@@ -8,7 +8,7 @@ Written files: `table1.csv` (headline task and protocol), `table1_twoview.csv`,
 and `figure2.png` (`bench.report.figures`), and last the folder's page, `README.md`
 (`bench.report.page`). A results folder of datasets also gets
 `table1-<dataset>.csv` per dataset when it holds several, and `transfer.csv`,
-`transfer_ranks.csv` and `figure_transfer.png` against a rendered results folder
+`transfer_ranks.csv` and `figure_transfer.png` against rendered results folders
 (`bench.report.transfer`). A table or figure that cannot be drawn from these rows is
 removed, never left stale.
 """
@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from collections.abc import Sequence
 from pathlib import Path
 
 import pandas as pd
@@ -43,7 +44,7 @@ from bench.report.tables import (
     table_scenes,
     with_oracle_share,
 )
-from bench.report.transfer import transfer
+from bench.report.transfer import transfer_regimes
 from bench.results import read_runs
 from bench.summary import exclusions, failures
 from bench.vocabulary import VOCABULARY_FILE, Vocabulary
@@ -63,11 +64,11 @@ def is_dataset_run(results: Path) -> bool:
 
 
 def write_report(
-    df: pd.DataFrame, results: Path, renders: Path, rendered: Path | None = None
+    df: pd.DataFrame, results: Path, renders: Path, rendered: Sequence[Path] = ()
 ) -> None:
     """Every table and figure of `results` from the rows `df`, under the vocabulary
     recorded in `results`; for a results folder of datasets, the transfer tables against
-    the rendered results folder `rendered`; last, the folder's page."""
+    the rendered results folders `rendered`; last, the folder's page."""
     results = Path(results)
     vocab = Vocabulary.load(results)
     df = with_oracle_share(df)
@@ -143,25 +144,28 @@ def _per_dataset(frame: pd.DataFrame, vocab: Vocabulary, results: Path) -> dict:
     return tables
 
 
-def _write_transfer(df: pd.DataFrame, vocab: Vocabulary, results: Path, rendered: Path | None):
-    """transfer.csv, transfer_ranks.csv and figure_transfer.png, or why not (logged)."""
+def _write_transfer(df: pd.DataFrame, vocab: Vocabulary, results: Path, rendered: Sequence[Path]):
+    """transfer.csv, transfer_ranks.csv and figure_transfer.png (the matched regime's), or
+    why not (logged)."""
     names = ("transfer.csv", "transfer_ranks.csv")
-    if rendered is None or not (Path(rendered) / "runs.csv").is_file():
+    missing = [Path(r) / "runs.csv" for r in rendered if not (Path(r) / "runs.csv").is_file()]
+    if not rendered or missing:
         _drop(*(results / n for n in (*names, "figure_transfer.png")))
-        where = "none given" if rendered is None else f"{Path(rendered) / 'runs.csv'} is missing"
+        where = "; ".join(f"{m} is missing" for m in missing) or "none given"
         log(
             f"no transfer.csv: no rendered results to compare with ({where}; give a rendered "
             "results folder with --rendered DIR)"
         )
         return
-    summary, ranks = transfer(df, vocab, Path(rendered))
+    summary, ranks = transfer_regimes(df, vocab, rendered)
     _write_tables(results, dict(zip(names, (summary, ranks))))
     if summary.empty:
         _drop(results / "figure_transfer.png")
         log("no transfer.csv: the datasets and the rendered results share no ranked budget")
         return
     budget = headline_budget(summary)
-    figure_transfer(ranks, summary, budget, results / "figure_transfer")
+    matched = summary["matched"], ranks["matched"]
+    figure_transfer(ranks[matched[1]], summary[matched[0]], budget, results / "figure_transfer")
 
 
 PUBLISHED_FILES = ("runs.csv", "config.json", VOCABULARY_FILE, "manifest.json", "scenes.png")
