@@ -9,12 +9,15 @@ integrator around `path`, box filter).
 
 from __future__ import annotations
 
+import hashlib
 import math
+from fractions import Fraction
 
 import numpy as np
 
 from bench.camera import Camera
 from bench.render.config import RenderConfig
+from bench.scenes.catalog import path_positions
 from bench.scenes.spec import Mesh, SceneDescription
 
 MITSUBA_FROM_OPENCV = np.diag([-1.0, -1.0, 1.0])
@@ -126,11 +129,20 @@ def srgb8(linear: np.ndarray) -> np.ndarray:
     return (s * 255 + 0.5).astype(np.uint8)
 
 
+def noise_seed(seed: int, u: Fraction) -> int:
+    """The sampler's seed of the view at path position `u` of scene seed `seed`: a view's
+    noise is the same in every rig that holds it, whichever rendered it first."""
+    digest = hashlib.sha256(f"{seed}:{u.numerator}/{u.denominator}".encode()).digest()
+    return int.from_bytes(digest[:4], "little")
+
+
 def render_view(desc: SceneDescription, view: int, cfg: RenderConfig, variant: str):
     """Path-trace one view: (linear RGB, ground-truth layers, shape names by shape index)."""
     mi = _mi()
     mi.set_variant(variant)
     sc = mi.load_dict(mitsuba_scene_dict(desc, view, cfg))
-    img = np.array(mi.render(sc, seed=desc.seed * 1000 + view))
+    img = np.array(
+        mi.render(sc, seed=noise_seed(desc.seed, path_positions(len(desc.cameras))[view]))
+    )
     rgb, gt = split_layers(img, desc.cameras[view])
     return rgb, gt, [s.id() for s in sc.shapes()]
