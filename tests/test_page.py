@@ -6,6 +6,7 @@ import shutil
 from pathlib import Path
 
 import pandas as pd
+import pytest
 
 from bench.report.page import PAGE, results_page
 from bench.report.tables import with_oracle_share
@@ -16,15 +17,17 @@ from bench.vocabulary import Vocabulary
 PUBLISHED = Path(__file__).resolve().parents[1] / "results" / "published"
 
 
-def test_the_published_page_is_what_its_runs_csv_gives(tmp_path):
-    """Every table of the published snapshot computed again from its runs.csv alone gives
-    its page, word for word: no number on it is typed by hand or left from older rows."""
-    folder = tmp_path / "published"
-    shutil.copytree(PUBLISHED, folder, ignore=shutil.ignore_patterns("*.csv", PAGE))
-    shutil.copyfile(PUBLISHED / "runs.csv", folder / "runs.csv")
+@pytest.mark.parametrize("regime", ["published", "published-dense"])
+def test_the_published_page_is_what_its_runs_csv_gives(tmp_path, regime):
+    """Every table of each regime's published snapshot computed again from its runs.csv
+    alone gives its page, word for word: no number on it is typed by hand or left from
+    older rows."""
+    snapshot, folder = PUBLISHED.with_name(regime), tmp_path / regime
+    shutil.copytree(snapshot, folder, ignore=shutil.ignore_patterns("*.csv", PAGE))
+    shutil.copyfile(snapshot / "runs.csv", folder / "runs.csv")
     df = with_oracle_share(read_runs(folder / "runs.csv"))
     write_tables(df, folder, Vocabulary.load(folder))
-    assert results_page(folder) == (PUBLISHED / PAGE).read_text()
+    assert results_page(folder) == (snapshot / PAGE).read_text()
 
 
 def test_the_page_shows_each_interval_and_no_interval_where_a_table_has_none(tmp_path):
