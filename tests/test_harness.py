@@ -962,7 +962,7 @@ def test_a_task_is_added_in_one_place(renders_dir, tmp_path):
         with pytest.raises(BenchError, match="task name 'count' is taken"):
             tasks.register(runner)
         grid = dataclasses.replace(
-            SMALL, scenes=("table",), methods=("texture",), tasks=("tri", "count")
+            SMALL, scenes=("facade",), methods=("texture",), tasks=("tri", "count")
         )
         runs = bench_run(grid, tmp_path, renders_dir)
     finally:  # the registry as it was, for the other tests

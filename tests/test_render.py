@@ -6,12 +6,13 @@ import json
 import subprocess
 import sys
 from dataclasses import replace
+from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
-from bench import BenchError
+from bench import BenchError, files
 from bench.camera import look_at
 from bench.cli import main
 from bench.render import entry as render
@@ -154,26 +155,28 @@ def test_cache_hit_renders_nothing(tiny_entry, renders_dir, counted):
 
 
 def test_damaged_entry_is_detected_and_rendered_again(tmp_path, counted, capsys):
+    """A damaged entry is made again; only a view whose pixels or ground truth are damaged
+    (in the entry and in the per-view cache it is linked from) is rendered again."""
     entry = render.render_scene("table", 2, TINY, tmp_path)
-    assert len(counted) == 6
+    assert counted == list(range(6))
     gt = entry / "gt_03.npz"
-    gt.write_bytes(gt.read_bytes()[:100])  # truncated
+    gt.write_bytes(gt.read_bytes()[:100])  # truncated (the per-view cache's file with it)
     assert render.render_scene("table", 2, TINY, tmp_path) == entry
-    assert len(counted) == 12 and "damaged cache entry" in capsys.readouterr().err
-    (entry / "view_01.png").unlink()
-    render.render_scene("table", 2, TINY, tmp_path)
-    assert len(counted) == 18
+    assert counted[6:] == [3] and "damaged cache entry" in capsys.readouterr().err
     np.load(entry / "gt_03.npz")["position"]  # whole again
+    (entry / "view_01.png").unlink()  # the per-view cache still has it: linked again
+    render.render_scene("table", 2, TINY, tmp_path)
+    assert counted[7:] == [] and (entry / "view_01.png").is_file()
     (entry / "meta.json").write_text("{not json")
     render.render_scene("table", 2, TINY, tmp_path)
-    assert len(counted) == 24 and json.loads((entry / "meta.json").read_text())["seed"] == 2
+    assert counted[7:] == [] and json.loads((entry / "meta.json").read_text())["seed"] == 2
     # hole 6 of issue 10: a view overwritten with other bytes of the same size
     png = entry / "view_01.png"
     png.write_bytes(
         np.random.default_rng(0).integers(0, 256, png.stat().st_size, np.uint8).tobytes()
     )
     render.render_scene("table", 2, TINY, tmp_path)
-    assert len(counted) == 30 and "view_01.png altered" in capsys.readouterr().err
+    assert counted[7:] == [1] and "view_01.png altered" in capsys.readouterr().err
     assert cv2.imread(str(png)) is not None
 
 
@@ -188,9 +191,19 @@ def test_interrupted_render_leaves_no_entry(tmp_path, monkeypatch):
     monkeypatch.setattr(render, "render_view", dies_at_view_3)
     with pytest.raises(KeyboardInterrupt):
         render.render_scene("table", 5, TINY, tmp_path)
-    assert [p.name for p in tmp_path.iterdir() if not p.name.startswith(".")] == []
-    assert not list(tmp_path.glob(".tmp-*"))
-    assert not list(tmp_path.glob(".*.lock"))  # issue 10, hole 7: no lock file left behind
+    # no rig entry; the three views rendered before the interruption are kept, whole
+    assert [p.name for p in tmp_path.iterdir() if not p.name.startswith(".")] == ["views"]
+    assert_no_partial_work(tmp_path, views=3)
+
+
+def assert_no_partial_work(renders: Path, views: int | None = None) -> None:
+    """No temporary folder or lock file is left (issue 10, hole 7) in a renders folder or
+    its per-view cache, and every cached view is whole (`views`: how many)."""
+    for folder in (renders, renders / "views"):
+        assert not list(folder.glob(".tmp-*")) and not list(folder.glob(".*.lock"))
+    kept = sorted((renders / "views").glob("[!.]*")) if (renders / "views").is_dir() else []
+    assert all(files.entry_problem(v) is None for v in kept)
+    assert views is None or len(kept) == views
 
 
 def test_two_processes_rendering_one_entry(tmp_path):
@@ -302,4 +315,5 @@ def test_a_signal_during_a_render_leaves_no_lock_or_temporary_folder(tmp_path, s
     err = proc.communicate(timeout=120)[1]
     assert proc.returncode == code, err
     assert err.strip().splitlines()[-1].startswith("bench: ")
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".variant-probes.json"]
+    assert {p.name for p in tmp_path.iterdir()} - {"views"} == {".variant-probes.json"}
+    assert_no_partial_work(tmp_path)
