@@ -24,7 +24,7 @@ REGIMES = {"sparse": (6, "0-4"), "dense": (21, "0,1")}
 """Rig regimes: (views on each scene's path, default seeds). The sparse regime's views are
 every fourth of the dense one's (`bench.scenes.catalog.path_positions`), rendered once.
 Dense has two seeds: its 21-view units cost three times a sparse unit, and both regimes'
-cold run stays within the hour the sparse one alone took (README)."""
+cold run stays within the hour (50 min measured, README)."""
 
 
 def regime_folder(base: Path, regime: str) -> Path:
