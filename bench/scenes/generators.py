@@ -147,13 +147,15 @@ def corridor(p: dict, rng: np.random.Generator, width: int, height: int, views: 
 
     # painted plaster, tiles and ceiling boards with detail at every scale (`fractal`), each
     # one texture over its whole surface (texels of 6.35 mm), so that only the tile grid
-    # and the fittings repeat
+    # and the fittings repeat; the plaster has its own contrast (`paint_contrast`): with too
+    # little, a forward pair's matches lie on the floor alone, and a pair on one plane
+    # does not tell its relative pose (COLMAP classes it planar)
     def px(metres: float) -> int:
         return int(round(metres / 0.00635))
 
     paint = textures.contrast(
         textures.tint(textures.fractal(rng, (px(H), px(L))), (0.45, 0.47, 0.45), (0.9, 0.9, 0.86)),
-        c,
+        c * p["paint_contrast"],
     )
     floor = textures.tiles(rng, (px(W), px(L)), px(0.3), (0.35, 0.33, 0.3), (0.5, 0.47, 0.43))
     chips = [(0.3, 0.28, 0.25), (0.55, 0.52, 0.47), (0.2, 0.2, 0.2)]  # terrazzo
