@@ -373,6 +373,28 @@ def test_rows_computed_by_other_code_are_computed_again(
     assert runs.groupby("method")["prediction_hash"].nunique().max() == 1
 
 
+def test_a_changed_scene_is_computed_again_and_no_other(
+    quick_results, renders_dir, tmp_path, monkeypatch, capsys
+):
+    """A row records the render entry it was computed on: a scene whose generator,
+    parameters or render settings changed since (here its render code) is rendered and
+    computed again; the other scene's rows are kept as they are."""
+    shutil.copytree(quick_results, tmp_path / "r")
+    real = render.render_code_hash
+    monkeypatch.setattr(render, "render_code_hash", lambda s: real(s) + "-edited" * (s == "table"))
+    calls = []
+    spy(monkeypatch, calls, what=lambda unit: unit.scene)
+    runs = bench_run(SMALL, tmp_path / "r", renders_dir)
+    assert calls == ["table"] * 8
+    assert "the scene table (its generator, parameters or render settings) changed" in (
+        capsys.readouterr().err
+    )
+    before = read_runs(quick_results / "runs.csv").set_index(list(KEY))["render_key"]
+    after = runs.set_index(list(KEY))["render_key"].reindex(before.index)
+    table = before.index.get_level_values("scene") == "table"
+    assert (after[table] != before[table]).all() and (after[~table] == before[~table]).all()
+
+
 def test_a_changed_metric_rescores_the_stored_predictions_alone(
     quick_results, renders_dir, tmp_path, monkeypatch
 ):

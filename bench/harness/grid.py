@@ -6,8 +6,10 @@ interrupt keeps every finished row; a cut last row is caught as damage, `bench.r
 The settings are stored in `config.json` beside the results and the vocabulary of the rows
 in `vocabulary.json`; a run into a folder holding other settings is refused unless
 `overwrite`. Rows whose prediction is current but whose scoring is not (or every row,
-with `reevaluate`) are scored again from the stored predictions; rows that could not be
-computed (a policy raised, a worker died) are computed again. The last line says how many
+with `reevaluate`) are scored again from the stored predictions; rows computed on another
+render entry (the scene's generator, parameters or render settings changed) or on a
+dataset whose contents changed, and rows that could not be computed (a policy raised, a
+worker died), are computed again. The last line says how many
 of the grid's rows failed, by reason, and which (scene, seed) the sfm means leave out.
 """
 
@@ -37,7 +39,7 @@ from bench.harness.evaluate import evaluation_hash
 from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
 from bench.harness.predict import prediction_hash
 from bench.harness.tasks import RUNNERS
-from bench.render.entry import render_scene
+from bench.render.entry import entry_name, render_scene
 from bench.results import (
     DAMAGED,
     Workspace,
@@ -240,6 +242,19 @@ def _current_rows(
             log(
                 f"the contents of {folder} changed since {int(changed.sum())} row(s) were "
                 "computed; computing them again"
+            )
+        stale |= changed
+    for scene in set(df["scene"]) & set(cfg.scenes) - {Path(d).name for d in cfg.datasets}:
+        rows = ~stale & (df["scene"] == scene)
+        key = {
+            sd: entry_name(scene, int(sd), cfg.run.render, ws.renders)
+            for sd in set(df["seed"][rows])
+        }
+        changed = rows & (df["render_key"] != df["seed"].map(key))
+        if changed.any():
+            log(
+                f"the scene {scene} (its generator, parameters or render settings) changed "
+                f"since {int(changed.sum())} row(s) were computed; computing them again"
             )
         stale |= changed
     errored = ~stale & df["failure"].str.startswith(ERROR)

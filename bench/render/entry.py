@@ -126,21 +126,27 @@ def _link(src: Path, dst: Path) -> None:
         shutil.copy2(src, dst)
 
 
+def entry_name(name: str, seed: int, cfg: RenderConfig, renders_dir: Path) -> str:
+    """The name of the cache entry of (scene, seed, settings), without rendering it: what
+    a row of `runs.csv` records as its `render_key`, so a changed scene is noticed."""
+    cfg.validate()
+    if not isinstance(seed, int) or seed < 0:
+        raise BenchError(f"seed must be a non-negative integer, got {seed!r}")
+    variant, why = resolve_variant(cfg.variant, Path(renders_dir))
+    if why not in _announced:  # once per process
+        log(why)
+        _announced.add(why)
+    return f"{name}-s{seed}-{render_key(load_spec(name), seed, cfg, variant)}"
+
+
 def render_scene(
     name: str, seed: int, cfg: RenderConfig, renders_dir: Path, force: bool = False
 ) -> Path:
     """The cache entry of (scene, seed, settings), rendered only if missing or damaged
     (every file's size and checksum are verified on a hit)."""
-    cfg.validate()
-    if not isinstance(seed, int) or seed < 0:
-        raise BenchError(f"seed must be a non-negative integer, got {seed!r}")
-    spec = load_spec(name)
     renders_dir = Path(renders_dir)
-    variant, why = resolve_variant(cfg.variant, renders_dir)
-    if why not in _announced:  # once per process
-        log(why)
-        _announced.add(why)
-    entry = renders_dir / f"{name}-s{seed}-{render_key(spec, seed, cfg, variant)}"
+    entry = renders_dir / entry_name(name, seed, cfg, renders_dir)
+    spec, variant = load_spec(name), resolve_variant(cfg.variant, renders_dir)[0]
     if force or not entry.exists() or files.entry_problem(entry):
         load_renderer(variant)
     with files.locked(entry):
