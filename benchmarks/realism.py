@@ -15,7 +15,8 @@ Measures (each at the working size the front end detects at, `detector.max_image
   (0.04 / 3). Flat walls, sky and blurred backgrounds are not textured.
 - `noise_unrepeatable_pct` (renders only): the share of candidates at the default spp
   with no candidate within 1 px in the same view rendered at `--ref-spp` (the first
-  `--ref-views` views): candidates made by render noise, which a photograph does not have.
+  `--ref-views` views): candidates made by render noise, which a photograph does not have;
+  `candidates_per_mp_ref` is `candidates_per_mp` of those views at `--ref-spp`.
 - `verified_per_pair_<policy>`: verified matches per pair of views at B = 256 in the sfm
   task (multiview protocol), mean over the rows of a results folder's `runs.csv`
   (`--rendered-results` for scenes, `--dataset-results` for datasets); all pairs count.
@@ -70,21 +71,26 @@ def image_measures(views: list[View]) -> dict:
     }
 
 
-def noise_unrepeatable_pct(
+def reference_measures(
     scene: str, seed: int, views: list[View], ref_spp: int, ref_views: int, renders: Path
-) -> float:
-    """Candidates of the default render with no candidate within 1 px at `ref_spp`."""
+) -> dict:
+    """The share of the default render's candidates with no candidate within 1 px at
+    `ref_spp`, and the candidates per megapixel at `ref_spp` (with little render noise)."""
     cfg = RenderConfig(spp=ref_spp)
     variant, _ = resolve_variant(cfg.variant, renders)
     desc = build_scene(load_spec(scene), seed, cfg.width, cfg.height, cfg.views)
-    lost, total = 0, 0
+    lost, total, ref_total = 0, 0, 0
     for v in range(ref_views):
         rgb, _, _ = render_view(desc, v, cfg, variant)
-        ref = View(v, "ref", srgb8(rgb), views[v].camera)
-        a, b = detect(views[v], UNCAPPED).xy, detect(ref, UNCAPPED).xy
+        ref = working(View(v, "ref", srgb8(rgb), views[v].camera))
+        a, b = detect(working(views[v]), UNCAPPED).xy, detect(ref, UNCAPPED).xy
         d, _ = cKDTree(b).query(a, distance_upper_bound=1.0)
-        lost, total = lost + int(np.isinf(d).sum()), total + len(a)
-    return 100.0 * lost / max(total, 1)
+        lost, total, ref_total = lost + int(np.isinf(d).sum()), total + len(a), ref_total + len(b)
+    mp = ref.camera.width * ref.camera.height / 1e6
+    return {
+        "noise_unrepeatable_pct": 100.0 * lost / max(total, 1),
+        "candidates_per_mp_ref": ref_total / ref_views / mp,
+    }
 
 
 def verified_per_pair(results: Path | None, scene: str) -> dict:
@@ -121,7 +127,7 @@ def main() -> None:
         entry = render_scene(scene, args.seed, RenderConfig(), args.renders)
         views = load_views(entry)
         row = {"set": f"{scene} s{args.seed}", **image_measures(views)}
-        row["noise_unrepeatable_pct"] = noise_unrepeatable_pct(
+        row |= reference_measures(
             scene, args.seed, views, args.ref_spp, args.ref_views, args.renders
         )
         rows.append(row | verified_per_pair(args.rendered_results, scene))
