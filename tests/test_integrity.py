@@ -13,6 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 from bench import ROOT, BenchError
@@ -179,7 +180,13 @@ def test_publish_keeps_a_snapshot_of_other_settings_unless_replace(small_run, tm
 def test_the_published_snapshot_carries_its_checksums():
     rows = read_runs(PUBLISHED / "runs.csv")
     assert len(rows) == 5000 and rows["row_checksum"].str.len().eq(12).all()
-    assert set(rows["reference_maps"].dropna()) == {0, 1}  # derived from its colmap rows
+    # derived on reading from its colmap rows: every view registered with mAA >= 0.5
+    ref = rows[(rows["method"] == "colmap") & (rows["task"] == "sfm")]
+    ref = ref[ref["protocol"] == "multiview"].set_index(["scene", "seed"])
+    maps = (ref["registered_views"] == ref["views"]) & (ref["maa"] >= 0.5)
+    cells = pd.MultiIndex.from_frame(rows[["scene", "seed"]])
+    assert rows["reference_maps"].notna().all()
+    assert (rows["reference_maps"].to_numpy() == maps.reindex(cells).astype(int).to_numpy()).all()
 
 
 def _read_only(folder: Path, *argv: str) -> subprocess.CompletedProcess:
