@@ -438,6 +438,13 @@ def _differing(there: dict, here: dict, now: str = "now") -> list[str]:
     return [f"{k}: {there.get(k)!r} there, {here.get(k)!r} {now}" for k in keys]
 
 
+def _new_at_default(older: dict, newer: dict, defaults: dict | None) -> set[str]:
+    """The flattened settings `newer` has and `older` lacks, at their value in `defaults`:
+    settings added since `older` was written, whose default is the behaviour before them."""
+    default = _flatten(_shared(json.loads(json.dumps(defaults or {}))))
+    return {k for k, v in newer.items() if k not in older and k in default and default[k] == v}
+
+
 def check_results_dir(
     results: Path, settings: dict, overwrite: bool, defaults: dict | None = None
 ) -> None:
@@ -453,8 +460,7 @@ def check_results_dir(
         # a stored setting this code no longer has (one that moved to its method), or a
         # method's own setting, decides nothing here; nor does a setting added since the
         # folder was made, at its default (a new setting's default is the behaviour before it)
-        default = _flatten(_shared(json.loads(json.dumps(defaults or {}))))
-        added = {k for k, v in now.items() if k not in stored and k in default and default[k] == v}
+        added = _new_at_default(stored, now, defaults)
         now = {k: v for k, v in now.items() if k not in added}
         differ = _differing({k: stored.get(k) for k in now}, now)
         if differ:
@@ -471,15 +477,19 @@ def _grid(runs_csv: Path) -> dict[str, set[str]]:
     return {k: {r[k] for r in rows if r.get(k)} for k in KEY}
 
 
-def snapshot_differences(results: Path, to: Path) -> list[str]:
+def snapshot_differences(results: Path, to: Path, defaults: dict | None = None) -> list[str]:
     """How the snapshot `to` differs from the results folder `results` in its settings
-    (`config.json`) and its grid (the values of each key column of `runs.csv`), one phrase
-    each; none when `to` holds no snapshot."""
+    (`config.json`; a setting one of them lacks is no difference where the other has it at
+    its value in `defaults`) and its grid (the values of each key column of `runs.csv`),
+    one phrase each; none when `to` holds no snapshot."""
     differ = []
     there, here = Path(to) / "config.json", Path(results) / "config.json"
     if there.is_file() and here.is_file():
         remedy = "use --replace to replace the snapshot"
-        differ += _differing(_settings(there, remedy), _settings(here, remedy), "here")
+        old, new = _settings(there, remedy), _settings(here, remedy)
+        same = _new_at_default(old, new, defaults) | _new_at_default(new, old, defaults)
+        old, new = ({k: v for k, v in d.items() if k not in same} for d in (old, new))
+        differ += _differing(old, new, "here")
     if (Path(to) / "runs.csv").is_file():
         old, new = _grid(Path(to) / "runs.csv"), _grid(Path(results) / "runs.csv")
         for k in KEY:

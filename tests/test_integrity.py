@@ -177,6 +177,28 @@ def test_publish_keeps_a_snapshot_of_other_settings_unless_replace(small_run, tm
     assert main(argv) == 0  # the same settings and grid again: no --replace needed
 
 
+def test_a_setting_added_since_the_snapshot_differs_only_off_its_default(
+    small_run, tmp_path, capsys
+):
+    """A snapshot of the code before backend.matcher existed is published over without
+    --replace when the new folder has it at its default (the behaviour before), not when it
+    has another value."""
+    snap, r = tmp_path / "published", tmp_path / "r"
+    shutil.copytree(small_run, snap)
+    shutil.copytree(small_run, r)
+    old = json.loads((snap / "config.json").read_text())
+    del old["settings"]["backend"]["matcher"]
+    (snap / "config.json").write_text(json.dumps(old))
+    argv = ["publish", "--results", str(r), "--to", str(snap)]
+    assert main(argv) == 0
+    (snap / "config.json").write_text(json.dumps(old))
+    new = json.loads((r / "config.json").read_text())
+    new["settings"]["backend"]["matcher"] = "lightglue"
+    (r / "config.json").write_text(json.dumps(new))
+    assert main(argv) == 2
+    assert "(backend.matcher: None there, 'lightglue' here); --replace" in _one_line(capsys)
+
+
 def test_the_published_snapshot_carries_its_checksums():
     rows = read_runs(PUBLISHED / "runs.csv")
     assert len(rows) == 5000 and rows["row_checksum"].str.len().eq(12).all()

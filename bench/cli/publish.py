@@ -36,6 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> None:
     from bench import BenchError
+    from bench.harness.config import RunConfig
     from bench.report.write import publish
     from bench.results import holding, runs_file, snapshot_differences
 
@@ -48,7 +49,8 @@ def run(args: argparse.Namespace) -> None:
     except OSError as e:
         raise BenchError(f"cannot write to {args.to}: {e.strerror}") from None
     with holding(args.results, reading=True), holding(args.to):
-        differ = [] if args.replace else snapshot_differences(args.results, args.to)
+        defaults = RunConfig().as_dict()
+        differ = [] if args.replace else snapshot_differences(args.results, args.to, defaults)
         if differ:
             raise BenchError(
                 f"{args.to} holds a snapshot of other settings or another grid "
