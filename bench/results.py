@@ -41,7 +41,7 @@ import math
 import numbers
 import os
 import shutil
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager, nullcontext
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -477,18 +477,22 @@ def _grid(runs_csv: Path) -> dict[str, set[str]]:
     return {k: {r[k] for r in rows if r.get(k)} for k in KEY}
 
 
-def snapshot_differences(results: Path, to: Path, defaults: dict | None = None) -> list[str]:
+def snapshot_differences(
+    results: Path, to: Path, defaults: Callable[[], dict] | None = None
+) -> list[str]:
     """How the snapshot `to` differs from the results folder `results` in its settings
     (`config.json`; a setting one of them lacks is no difference where the other has it at
-    its value in `defaults`) and its grid (the values of each key column of `runs.csv`),
-    one phrase each; none when `to` holds no snapshot."""
+    its value in `defaults()`, called only then) and its grid (the values of each key
+    column of `runs.csv`), one phrase each; none when `to` holds no snapshot."""
     differ = []
     there, here = Path(to) / "config.json", Path(results) / "config.json"
     if there.is_file() and here.is_file():
         remedy = "use --replace to replace the snapshot"
         old, new = _settings(there, remedy), _settings(here, remedy)
-        same = _new_at_default(old, new, defaults) | _new_at_default(new, old, defaults)
-        old, new = ({k: v for k, v in d.items() if k not in same} for d in (old, new))
+        if set(old) != set(new) and defaults:
+            default = defaults()
+            same = _new_at_default(old, new, default) | _new_at_default(new, old, default)
+            old, new = ({k: v for k, v in d.items() if k not in same} for d in (old, new))
         differ += _differing(old, new, "here")
     if (Path(to) / "runs.csv").is_file():
         old, new = _grid(Path(to) / "runs.csv"), _grid(Path(results) / "runs.csv")

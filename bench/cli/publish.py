@@ -34,9 +34,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _defaults() -> dict:
+    """The settings' defaults (imports OpenCV and COLMAP: only where a setting is missing)."""
+    from bench.harness.config import RunConfig
+
+    return RunConfig().as_dict()
+
+
 def run(args: argparse.Namespace) -> None:
     from bench import BenchError
-    from bench.harness.config import RunConfig
     from bench.report.write import publish
     from bench.results import holding, runs_file, snapshot_differences
 
@@ -49,8 +55,7 @@ def run(args: argparse.Namespace) -> None:
     except OSError as e:
         raise BenchError(f"cannot write to {args.to}: {e.strerror}") from None
     with holding(args.results, reading=True), holding(args.to):
-        defaults = RunConfig().as_dict()
-        differ = [] if args.replace else snapshot_differences(args.results, args.to, defaults)
+        differ = [] if args.replace else snapshot_differences(args.results, args.to, _defaults)
         if differ:
             raise BenchError(
                 f"{args.to} holds a snapshot of other settings or another grid "
