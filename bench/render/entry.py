@@ -126,9 +126,10 @@ def _link(src: Path, dst: Path) -> None:
         shutil.copy2(src, dst)
 
 
-def entry_name(name: str, seed: int, cfg: RenderConfig, renders_dir: Path) -> str:
-    """The name of the cache entry of (scene, seed, settings), without rendering it: what
-    a row of `runs.csv` records as its `render_key`, so a changed scene is noticed."""
+def _resolved(
+    name: str, seed: int, cfg: RenderConfig, renders_dir: Path
+) -> tuple[SceneSpec, str, str]:
+    """The scene's spec, the variant it renders with and the name of its cache entry."""
     cfg.validate()
     if not isinstance(seed, int) or seed < 0:
         raise BenchError(f"seed must be a non-negative integer, got {seed!r}")
@@ -136,7 +137,14 @@ def entry_name(name: str, seed: int, cfg: RenderConfig, renders_dir: Path) -> st
     if why not in _announced:  # once per process
         log(why)
         _announced.add(why)
-    return f"{name}-s{seed}-{render_key(load_spec(name), seed, cfg, variant)}"
+    spec = load_spec(name)
+    return spec, variant, f"{name}-s{seed}-{render_key(spec, seed, cfg, variant)}"
+
+
+def entry_name(name: str, seed: int, cfg: RenderConfig, renders_dir: Path) -> str:
+    """The name of the cache entry of (scene, seed, settings), without rendering it: what
+    a row of `runs.csv` records as its `render_key`, so a changed scene is noticed."""
+    return _resolved(name, seed, cfg, renders_dir)[2]
 
 
 def render_scene(
@@ -145,8 +153,8 @@ def render_scene(
     """The cache entry of (scene, seed, settings), rendered only if missing or damaged
     (every file's size and checksum are verified on a hit)."""
     renders_dir = Path(renders_dir)
-    entry = renders_dir / entry_name(name, seed, cfg, renders_dir)
-    spec, variant = load_spec(name), resolve_variant(cfg.variant, renders_dir)[0]
+    spec, variant, entry = _resolved(name, seed, cfg, renders_dir)
+    entry = renders_dir / entry
     if force or not entry.exists() or files.entry_problem(entry):
         load_renderer(variant)
     with files.locked(entry):
