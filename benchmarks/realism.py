@@ -9,6 +9,12 @@ rendered scenes and for datasets of photographs, one row per image set.
 Measures (each at the working size the front end detects at, `detector.max_image_size`):
 
 - `candidates_per_mp`: SIFT candidates (the pool's detector, uncapped) per megapixel.
+- `strong_pct`: the share of those candidates whose response reaches OpenCV's default
+  SIFT contrast threshold (0.04 / 3; the pool detects down to 0.005 / 3): a surplus of
+  candidates made of weak ones shows here.
+- `dog_kurtosis`: the excess kurtosis of the finest difference of Gaussians (sigma 1.6 and
+  2.0) over the image: band-pass responses of photographs are sparse (a few strong edges,
+  much flat area: heavy-tailed, well above 0), texture spread evenly over the image is not.
 - `textured_pct`: the share of pixels with texture at SIFT's scales: where the largest
   absolute difference of Gaussians over two octaves (sigma 1.6 * 2^(k/3), k = 0..6, on
   the grey image in [0, 1]) reaches OpenCV's default SIFT contrast threshold per scale
@@ -32,6 +38,7 @@ import cv2
 import numpy as np
 import pandas as pd
 from scipy.spatial import cKDTree
+from scipy.stats import kurtosis
 
 from bench.frontend.features import DetectorConfig, detect
 from bench.frontend.views import View, load_views
@@ -59,14 +66,22 @@ def textured_pct(gray: np.ndarray) -> float:
     return 100.0 * float((dog >= CONTRAST).mean())
 
 
+def dog_kurtosis(gray: np.ndarray) -> float:
+    g = gray.astype(np.float32) / 255.0
+    dog = cv2.GaussianBlur(g, (0, 0), SIGMAS[1]) - cv2.GaussianBlur(g, (0, 0), SIGMAS[0])
+    return float(kurtosis(dog.ravel()))
+
+
 def image_measures(views: list[View]) -> dict:
     views = [working(v) for v in views]
     mp = [v.camera.width * v.camera.height / 1e6 for v in views]
-    n = [len(detect(v, UNCAPPED)) for v in views]
+    responses = [detect(v, UNCAPPED).response for v in views]
     return {
         "views": len(views),
         "size": f"{views[0].camera.width}x{views[0].camera.height}",
-        "candidates_per_mp": float(np.mean(np.divide(n, mp))),
+        "candidates_per_mp": float(np.mean(np.divide([len(r) for r in responses], mp))),
+        "strong_pct": float(np.mean([100.0 * np.mean(r >= CONTRAST) for r in responses])),
+        "dog_kurtosis": float(np.mean([dog_kurtosis(v.gray) for v in views])),
         "textured_pct": float(np.mean([textured_pct(v.gray) for v in views])),
     }
 
