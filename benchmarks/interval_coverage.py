@@ -1,12 +1,13 @@
 """Coverage of the tables' 95% intervals at this grid's shape, by simulation.
 
-Each simulated grid has S scenes (3 or 4) x 5 seeds of paired differences A - B with a
-known mean: d = mu + a_s + e, a scene effect a_s (drawn per grid) and noise e of one of
-several models (normal, unequal spread per scene, skewed, heavy-tailed), or an mAA-like
-metric in [0, 1] (a method maps a cell or not, all-or-nothing, and a mapped cell has a
-Beta-distributed mAA; A and B share the cell's difficulty). The target is the mean over
-the grid's scenes of each scene's expected difference (the tables' estimand: the mix of
-scenes is fixed). Per scene (5 seeds) the target is that scene's expected difference.
+Each simulated grid has S scenes (3 or 4) x N seeds (5: the sparse regime; `--seeds 2`:
+the dense one) of paired differences A - B with a known mean: d = mu + a_s + e, a scene
+effect a_s (drawn per grid) and noise e of one of several models (normal, unequal spread
+per scene, skewed, heavy-tailed), or an mAA-like metric in [0, 1] (a method maps a cell or
+not, all-or-nothing, and a mapped cell has a Beta-distributed mAA; A and B share the
+cell's difficulty). The target is the mean over the grid's scenes of each scene's expected
+difference (the tables' estimand: the mix of scenes is fixed). Per scene (N seeds) the
+target is that scene's expected difference.
 
 Measured: how often each method's 95% interval holds the target, over GRIDS grids per
 model: the percentile bootstrap that resamples seeds within scenes (the method before
@@ -14,7 +15,7 @@ this benchmark), the stratified t-interval of `bench.report.stats`, and for comp
 t-interval on the S scene means (S - 1 degrees of freedom: an interval for a new mix of
 scenes, which is wider). A method is honest here when it covers 93-97%.
 
-    .venv/bin/python benchmarks/interval_coverage.py [--grids 2000]
+    .venv/bin/python benchmarks/interval_coverage.py [--grids 2000] [--seeds 5]
 """
 
 from __future__ import annotations
@@ -27,7 +28,6 @@ from scipy.special import stdtrit
 
 from bench.report.stats import stratified_interval
 
-SEEDS = 5
 RESAMPLES = 10_000
 
 
@@ -52,20 +52,20 @@ def stratified_t(d: np.ndarray) -> tuple[float, float]:
 
 
 def continuous(noise: str):
-    """A model of differences: (draw(rng, S) -> (d of shape S x SEEDS, per-scene target))."""
+    """A model of differences: (draw(rng, S, N) -> (d of shape S x N, per-scene target))."""
     spreads = np.array([0.1, 0.5, 1.0, 2.0])
 
-    def draw(rng, s):
+    def draw(rng, s, n):
         effect = 0.3 + rng.normal(0, 1.0, s)  # mu = 0.3, scene effects of sd 1
         sd = spreads[:s, None] if noise == "unequal" else 0.5
         if noise in ("normal", "unequal"):
-            e = rng.normal(0, 1, (s, SEEDS))
+            e = rng.normal(0, 1, (s, n))
         elif noise == "skewed":  # exponential (skewness 2), centred, sd 1
-            e = rng.exponential(1, (s, SEEDS)) - 1
+            e = rng.exponential(1, (s, n)) - 1
         elif noise == "very skewed":  # lognormal(0, 1) (skewness 6), centred, sd 1
-            e = (rng.lognormal(0, 1, (s, SEEDS)) - math.exp(0.5)) / math.sqrt((math.e - 1) * math.e)
+            e = (rng.lognormal(0, 1, (s, n)) - math.exp(0.5)) / math.sqrt((math.e - 1) * math.e)
         else:  # heavy tails: Student t with 3 degrees of freedom, scaled to sd 1
-            e = rng.standard_t(3, (s, SEEDS)) / math.sqrt(3)
+            e = rng.standard_t(3, (s, n)) / math.sqrt(3)
         return effect[:, None] + sd * e, effect
 
     return draw
@@ -76,12 +76,12 @@ def maa(floor: bool):
     below the method's mapping rate in the scene, and a mapped cell's mAA is Beta(8, 2)
     (mean 0.8). `floor`: low mapping rates (most cells at 0, as the rendered grid had)."""
 
-    def draw(rng, s):
+    def draw(rng, s, n):
         top = 0.35 if floor else 1.0
         p = rng.uniform(0, top, (2, s))  # mapping rates of A and B per scene
-        u = rng.uniform(0, 1, (s, SEEDS))  # the cell's difficulty, shared by A and B
-        a = (u < p[0][:, None]) * rng.beta(8, 2, (s, SEEDS))
-        b = (u < p[1][:, None]) * rng.beta(8, 2, (s, SEEDS))
+        u = rng.uniform(0, 1, (s, n))  # the cell's difficulty, shared by A and B
+        a = (u < p[0][:, None]) * rng.beta(8, 2, (s, n))
+        b = (u < p[1][:, None]) * rng.beta(8, 2, (s, n))
         return a - b, 0.8 * (p[0] - p[1])
 
     return draw
@@ -108,12 +108,14 @@ METHODS = {
 """Each method and whether it is applied to the grid (`pooled`) or to its first scene."""
 
 
-def coverage(draw, scenes: int, grids: int, seed: int) -> dict[str, tuple[float, float]]:
+def coverage(
+    draw, scenes: int, seeds: int, grids: int, seed: int
+) -> dict[str, tuple[float, float]]:
     """Per method: (% of the intervals that hold the target, % of grids with no interval)."""
     rng = np.random.default_rng(seed)
     hits, missing = dict.fromkeys(METHODS, 0), dict.fromkeys(METHODS, 0)
     for _ in range(grids):
-        d, per_scene = draw(rng, scenes)
+        d, per_scene = draw(rng, scenes, seeds)
         for name, (method, scope) in METHODS.items():
             data, target = (d, per_scene.mean()) if scope == "pooled" else (d[:1], per_scene[0])
             lo, hi = method(data, rng)
@@ -129,15 +131,18 @@ def coverage(draw, scenes: int, grids: int, seed: int) -> dict[str, tuple[float,
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--grids", type=int, default=2000)
+    parser.add_argument("--seeds", type=int, default=5, help="seeds a scene (at least 2)")
     args = parser.parse_args()
+    if args.seeds < 2:
+        parser.error("--seeds: at least 2 (one seed a scene gives no interval)")
     print(
         f"coverage of the 95% interval, % of the intervals given ({args.grids} grids a row, "
-        f"{SEEDS} seeds a scene); in brackets the % of grids given no interval (no spread)"
+        f"{args.seeds} seeds a scene); in brackets the % of grids given no interval (no spread)"
     )
     print(f"{'model':28s} S  " + "".join(f"{k:>21s}" for k in METHODS))
     for scenes in (3, 4):
         for i, (name, draw) in enumerate(MODELS.items()):
-            row = coverage(draw, scenes, args.grids, seed=100 * scenes + i)
+            row = coverage(draw, scenes, args.seeds, args.grids, seed=100 * scenes + i)
             cells = [f"{c:.1f}" + (f" ({m:.0f})" if m else "") for c, m in row.values()]
             print(f"{name:28s} {scenes}  " + "".join(f"{c:>21s}" for c in cells))
 

@@ -62,8 +62,9 @@ def pairs_differences(runs: pd.DataFrame) -> str:
         for a, b in itertools.combinations(PAPER, 2):
             d = (wide[a] - wide[b]).dropna()
             mean, lo, hi, note = stratified_interval(d, d.index.get_level_values("scene"))
-            sep = "*" if lo > 0 or hi < 0 else " "
-            cells.append(f"{a}-{b} {mean:+.2f} [{lo:+.2f}, {hi:+.2f}]{sep}{note}")
+            sep = "*" if lo > 0 or hi < 0 else ""
+            interval = note or f"[{lo:+.2f}, {hi:+.2f}]{sep}"
+            cells.append(f"{a}-{b} {mean:+.2f} {interval}")
         n = len(wide)
         lines.append(f"  B = {budget} ({n} units): " + "; ".join(cells))
     return "\n".join(lines) + "\n  (* the interval excludes 0)"
@@ -77,7 +78,8 @@ def main() -> None:
         runs = pd.read_csv(folder / "runs.csv")
         runs = runs[runs["protocol"] == "multiview"]
         seeds = ",".join(str(s) for s in sorted(runs["seed"].unique()))
-        print(f"{folder} ({runs['views'].iloc[0]} views, seeds {seeds})")
+        views = ",".join(str(v) for v in sorted(runs["views"].unique()))
+        print(f"{folder} ({views} views, seeds {seeds})")
         print(" sfm mAA (registered views) of the stock peers, seeds in order:")
         print(peers(runs))
         print(f" budgeted sfm cells at mAA <= {ZERO}:")
