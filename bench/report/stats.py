@@ -58,13 +58,16 @@ def stratified_interval(x, strata=None) -> tuple[float, float, float, str]:
     return mean, mean - half, mean + half, ""
 
 
-def paired_difference(a: pd.Series, b: pd.Series, strata: pd.Series, lower_better: bool) -> dict:
-    """A - B over the units (index) both have: its mean with the stratified interval
-    (`stratified_interval`, `strata` the units' scenes), and wins / ties / losses of A
-    (`lower_better`: the metric's direction, `Task.lower_better`)."""
-    d = (a - b).dropna()
+def paired_difference(d, strata, lower_better: bool) -> dict:
+    """Paired differences A - B, one a unit (NaN where A or B has no value: the unit is left
+    out), and each unit's scene (`strata`): their mean with the stratified interval
+    (`stratified_interval`), and wins / ties / losses of A (`lower_better`: the metric's
+    direction, `Task.lower_better`)."""
+    d, strata = np.asarray(d, float), np.asarray(strata)
+    keep = ~np.isnan(d)
+    d, strata = d[keep], strata[keep]
     better = -d if lower_better else d
-    mean, lo, hi, note = stratified_interval(d.to_numpy(), strata.loc[d.index].to_numpy())
+    mean, lo, hi, note = stratified_interval(d, strata)
     return {
         "n": len(d),
         "mean_diff": mean,

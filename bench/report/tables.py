@@ -94,12 +94,13 @@ def headline_frame(
 
 
 def solvable(rows: pd.DataFrame, metric: str, vocab: Vocabulary) -> pd.DataFrame:
-    """The rows that count for `metric`: for a metric of a task with the exclusion rule
-    (sfm), those of (scene, seed) cells that stock COLMAP with all features maps (a cell
-    it does not map measures nothing)."""
+    """The rows that count for `metric`, with their unit (`UNIT`) and `metric` alone: for a
+    metric of a task with the exclusion rule (sfm), those of (scene, seed) cells that stock
+    COLMAP with all features maps (a cell it does not map measures nothing)."""
+    part = rows[[*UNIT, metric]]
     if REFERENCE_MAPS not in rows or not vocab.excluded(metric):
-        return rows
-    return rows[rows[REFERENCE_MAPS].ne(0)]
+        return part
+    return part[rows[REFERENCE_MAPS].ne(0)]
 
 
 def with_oracle_share(df: pd.DataFrame) -> pd.DataFrame:
@@ -130,6 +131,14 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     others = [t for t in vocab.tasks if t != HEADLINE[0]]
     metrics = [*vocab.tasks[HEADLINE[0]].columns]
     metrics += [vocab.column(t, m) for t in others for m in vocab.tasks[t].columns]
+    summaries = {}  # (metric, method, budget): (mean, lo, hi, note, whether any value)
+    for m in (m for m in metrics if m in rows):
+        for (policy, budget), x in solvable(rows, m, vocab).groupby(["method", "budget"]):
+            values = x[m].astype(float)
+            summaries[m, policy, budget] = (
+                *stratified_interval(values, x["scene"]),
+                values.notna().any(),
+            )
     for (policy, budget), g in rows.groupby(["method", "budget"], sort=False):
         row = {"strategy": vocab.label(policy), "method": policy, "budget": budget}
         row["runs"] = len(g)
@@ -144,11 +153,11 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
         notes = []
         for m in metrics:
             if m in g:
-                x = solvable(g, m, vocab)
-                row[m], lo, hi, note = stratified_interval(x[m].astype(float), x["scene"])
+                none = (math.nan, math.nan, math.nan, "", False)  # no row counts for m
+                row[m], lo, hi, note, seen = summaries.get((m, policy, budget), none)
                 bounds = vocab.range_of(vocab.split(m)[1])
                 row[f"{m}_lo"], row[f"{m}_hi"] = _within(lo, hi, bounds)
-                notes += [note] if note and x[m].notna().any() else []
+                notes += [note] if note and seen else []
         row["note"] = "; ".join(dict.fromkeys(notes))
         out.append(row)
     t = pd.DataFrame(out)
@@ -160,10 +169,13 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     return t.loc[order.sort_values().index].reset_index(drop=True)
 
 
-def _units(rows: pd.DataFrame, budget: int, metric: str) -> dict[str, pd.Series]:
-    """Each method's values of `metric` at `budget`, by (scene, seed)."""
-    at = rows[rows["budget"] == budget].set_index(["scene", "seed"])
-    return {m: g[metric].astype(float) for m, g in at.groupby("method", sort=False)}
+def _units(rows: pd.DataFrame, budget: int, metric: str) -> tuple[np.ndarray, dict]:
+    """The (scene, seed) units at `budget`: each unit's scene, and each method's values of
+    `metric` over them (NaN where it has none)."""
+    at = rows[rows["budget"] == budget]
+    wide = at.pivot(index=["scene", "seed"], columns="method", values=metric).astype(float)
+    scenes = wide.index.get_level_values("scene").to_numpy()
+    return scenes, {m: wide[m].to_numpy() for m in wide.columns}
 
 
 def _paired(
@@ -173,16 +185,15 @@ def _paired(
     per budget and metric, over the (scene, seed) units both ran."""
     out = []
     lower = vocab.lower_better()
-    none = pd.Series(dtype=float, index=pd.MultiIndex.from_tuples([], names=["scene", "seed"]))
     for budget in sorted(b for b in pd.unique(rows["budget"]) if b > 0):
         for scope in [*pd.unique(rows["scene"]), "all scenes"]:
             part = rows if scope == "all scenes" else rows[rows["scene"] == scope]
             units = {m: _units(solvable(part, m, vocab), budget, m) for m in metrics if m in part}
             for policy, base in pairs:
-                for m in units:
-                    a, b = units[m].get(policy, none), units[m].get(base, none)
-                    strata = pd.Series(a.index.get_level_values("scene"), index=a.index)
-                    res = paired_difference(a, b, strata, m in lower)  # n = 0: one is missing
+                for m, (scenes, values) in units.items():
+                    both = policy in values and base in values  # else n = 0: one is missing
+                    d = values[policy] - values[base] if both else []
+                    res = paired_difference(d, scenes if both else [], m in lower)
                     out.append(
                         {
                             "scene": scope,
