@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from bench.report.stats import stratified_interval
+from bench.report.stats import paired_difference
 
 PAPER = ["adaptive", "texture", "grid", "random"]
 PEERS = ["colmap", "all"]
@@ -60,8 +60,8 @@ def pairs_differences(runs: pd.DataFrame) -> str:
         wide = g.pivot_table(index=["scene", "seed"], columns="method", values="auc_10")
         cells = []
         for a, b in itertools.combinations(PAPER, 2):
-            d = (wide[a] - wide[b]).dropna()
-            mean, lo, hi, note = stratified_interval(d, d.index.get_level_values("scene"))
+            d = paired_difference(wide[a] - wide[b], wide.index.get_level_values("scene"), False)
+            mean, lo, hi, note = d["mean_diff"], d["lo"], d["hi"], d["note"]
             sep = "*" if lo > 0 or hi < 0 else ""
             interval = note or f"[{lo:+.2f}, {hi:+.2f}]{sep}"
             cells.append(f"{a}-{b} {mean:+.2f} {interval}")

@@ -139,6 +139,7 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
                 *stratified_interval(values, x["scene"]),
                 values.notna().any(),
             )
+    none = (math.nan, math.nan, math.nan, "", False)  # no row counts for the metric
     for (policy, budget), g in rows.groupby(["method", "budget"], sort=False):
         row = {"strategy": vocab.label(policy), "method": policy, "budget": budget}
         row["runs"] = len(g)
@@ -153,7 +154,6 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
         notes = []
         for m in metrics:
             if m in g:
-                none = (math.nan, math.nan, math.nan, "", False)  # no row counts for m
                 row[m], lo, hi, note, seen = summaries.get((m, policy, budget), none)
                 bounds = vocab.range_of(vocab.split(m)[1])
                 row[f"{m}_lo"], row[f"{m}_hi"] = _within(lo, hi, bounds)
