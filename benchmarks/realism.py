@@ -44,7 +44,7 @@ from bench.frontend.features import DetectorConfig, detect
 from bench.frontend.views import View, load_views
 from bench.render.config import RenderConfig
 from bench.render.entry import render_scene
-from bench.render.mitsuba import render_view, srgb8
+from bench.render.mitsuba import render_view
 from bench.render.variant import resolve_variant
 from bench.scenes.catalog import build_scene, load_spec
 
@@ -96,8 +96,8 @@ def reference_measures(
     desc = build_scene(load_spec(scene), seed, cfg.width, cfg.height, cfg.views)
     lost, total, ref_total = 0, 0, 0
     for v in range(ref_views):
-        rgb, _, _ = render_view(desc, v, cfg, variant)
-        ref = working(View(v, "ref", srgb8(rgb), views[v].camera))
+        image, _, _ = render_view(desc, v, cfg, variant)
+        ref = working(View(v, "ref", image, views[v].camera))
         a, b = detect(working(views[v]), UNCAPPED).xy, detect(ref, UNCAPPED).xy
         d, _ = cKDTree(b).query(a, distance_upper_bound=1.0)
         lost, total, ref_total = lost + int(np.isinf(d).sum()), total + len(a), ref_total + len(b)

@@ -317,3 +317,17 @@ def test_a_signal_during_a_render_leaves_no_lock_or_temporary_folder(tmp_path, s
     assert err.strip().splitlines()[-1].startswith("bench: ")
     assert {p.name for p in tmp_path.iterdir()} - {"views"} == {".variant-probes.json"}
     assert_no_partial_work(tmp_path)
+
+
+def test_the_developing_step_enters_the_key_and_leaves_the_ground_truth(tiny_entry, renders_dir):
+    raw = tiny_entry("table")
+    developed = render.render_scene("table", 0, replace(TINY, denoise=3.0), renders_dir)
+    assert developed.name != raw.name
+    for v in (0, 3):
+        a, b = (np.load(e / f"gt_{v:02d}.npz") for e in (raw, developed))
+        for layer in a.files:
+            np.testing.assert_array_equal(a[layer], b[layer])
+        img = [cv2.imread(str(e / f"view_{v:02d}.png")).astype(int) for e in (raw, developed)]
+        assert 0 < np.abs(img[0] - img[1]).mean() < 10  # denoised, not another picture
+    with pytest.raises(BenchError, match="denoise must be at least 0"):
+        render.render_scene("table", 0, replace(TINY, denoise=-1.0), renders_dir)

@@ -23,6 +23,10 @@ class RenderConfig:
     layers, which come from the same pass."""
     max_depth: int = 3
     """Longest light path the path tracer follows (3 = direct light and one bounce)."""
+    denoise: float = 0.0
+    """How the exposure is developed into the image (`bench.render.develop`): the strength of
+    the denoiser applied to its light, in multiples of the noise measured in each view (0:
+    none). Photographs carry no Monte Carlo noise; a camera denoises before it encodes."""
     variant: str = "auto"
     """Mitsuba variant: auto (cuda_ad_rgb if a GPU renders, else llvm_ad_rgb if a probe
     renders, else scalar_rgb), or one of them by name."""
@@ -35,6 +39,8 @@ class RenderConfig:
         for name in ("width", "height", "spp", "max_depth"):
             if getattr(self, name) <= 0:
                 raise BenchError(f"{name} must be positive, got {getattr(self, name)}")
+        if not self.denoise >= 0:
+            raise BenchError(f"denoise must be at least 0, got {self.denoise}")
         if self.variant not in VARIANTS:
             raise BenchError(f"unknown variant {self.variant!r}; valid: {', '.join(VARIANTS)}")
         return self

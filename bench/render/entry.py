@@ -25,7 +25,7 @@ from bench.camera import write_colmap_rig
 from bench.codehash import code_hash
 from bench.console import log
 from bench.render.config import RenderConfig
-from bench.render.mitsuba import AOVS, GT_LAYERS, MITSUBA_FROM_OPENCV, render_view, srgb8
+from bench.render.mitsuba import AOVS, GT_LAYERS, MITSUBA_FROM_OPENCV, render_view
 from bench.render.variant import resolve_variant
 from bench.scenes.catalog import (
     build_scene,
@@ -36,7 +36,7 @@ from bench.scenes.catalog import (
 )
 from bench.scenes.spec import SceneSpec
 
-RENDER_CODE = (build_scene, render_view, srgb8, write_colmap_rig)
+RENDER_CODE = (build_scene, render_view, write_colmap_rig)
 """Where the code that decides a render entry's content starts (with the scene's own
 generator); this module's cache plumbing is not in it, so editing it re-renders nothing."""
 
@@ -61,6 +61,7 @@ def _pixel_fields(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -
         "height": cfg.height,
         "spp": cfg.spp,
         "max_depth": cfg.max_depth,
+        "denoise": cfg.denoise,
         "variant": variant,
         "code": render_code_hash(spec.name),
         "aovs": AOVS,
@@ -106,8 +107,8 @@ def render_view_entry(
             return json.loads((entry / "meta.json").read_text())
         with files.atomic_dir(entry) as tmp:
             t0 = time.perf_counter()
-            rgb, gt, names = render_view(desc, v, cfg, variant)
-            cv2.imwrite(str(tmp / "view.png"), srgb8(rgb)[..., ::-1])
+            image, gt, names = render_view(desc, v, cfg, variant)
+            cv2.imwrite(str(tmp / "view.png"), image[..., ::-1])
             np.savez(tmp / "gt.npz", **gt)
             meta = {"seconds": time.perf_counter() - t0, "shape_names": names}
             files.write_meta(tmp, meta)
@@ -190,6 +191,7 @@ def render_scene(
                     "height": cfg.height,
                     "spp": cfg.spp,
                     "max_depth": cfg.max_depth,
+                    "denoise": cfg.denoise,
                     "variant": variant,
                     "versions": {"mitsuba": version("mitsuba"), "drjit": version("drjit")},
                     "seconds_per_view": seconds,

@@ -17,11 +17,12 @@ import numpy as np
 
 from bench.camera import Camera
 from bench.render.config import RenderConfig
+from bench.render.develop import develop
 from bench.scenes.catalog import path_positions
 from bench.scenes.spec import Mesh, SceneDescription
 
 MITSUBA_FROM_OPENCV = np.diag([-1.0, -1.0, 1.0])
-AOVS = "dd:depth,pp:position,nn:sh_normal,si:shape_index"
+AOVS = "dd:depth,pp:position,nn:sh_normal,si:shape_index,al:albedo"
 GT_LAYERS = ("range", "z", "position", "normal", "shape_index")
 
 
@@ -104,10 +105,13 @@ def mitsuba_scene_dict(desc: SceneDescription, view: int, cfg: RenderConfig) -> 
     return d
 
 
-def split_layers(img: np.ndarray, cam: Camera) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Split the 11-channel AOV render into linear RGB and the ground-truth layers."""
-    if img.shape[-1] != 11:
-        raise RuntimeError(f"expected 11 channels from the AOV integrator, got {img.shape[-1]}")
+def split_layers(
+    img: np.ndarray, cam: Camera
+) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """Split the 14-channel AOV render into linear RGB, its albedo (what the developing
+    step separates the light from, `bench.render.develop`) and the ground-truth layers."""
+    if img.shape[-1] != 14:
+        raise RuntimeError(f"expected 14 channels from the AOV integrator, got {img.shape[-1]}")
     hit = img[..., 3] > 0
     pos = np.where(hit[..., None], img[..., 4:7], np.nan)
     normal = img[..., 7:10]
@@ -119,14 +123,7 @@ def split_layers(img: np.ndarray, cam: Camera) -> tuple[np.ndarray, dict[str, np
         "normal": np.where(hit[..., None], normal, np.nan),
         "shape_index": np.where(hit, img[..., 10], -1.0),
     }
-    return img[..., :3], {k: v.astype(np.float32) for k, v in gt.items()}
-
-
-def srgb8(linear: np.ndarray) -> np.ndarray:
-    """Linear RGB to 8-bit sRGB."""
-    x = np.clip(linear, 0, 1)
-    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    return (s * 255 + 0.5).astype(np.uint8)
+    return img[..., :3], img[..., 11:14], {k: v.astype(np.float32) for k, v in gt.items()}
 
 
 def noise_seed(seed: int, u: Fraction) -> int:
@@ -136,13 +133,21 @@ def noise_seed(seed: int, u: Fraction) -> int:
     return int.from_bytes(digest[:4], "little")
 
 
-def render_view(desc: SceneDescription, view: int, cfg: RenderConfig, variant: str):
-    """Path-trace one view: (linear RGB, ground-truth layers, shape names by shape index)."""
+def expose(desc: SceneDescription, view: int, cfg: RenderConfig, variant: str):
+    """Path-trace one view: (its linear RGB exposure, the albedo of the same pass, the
+    ground-truth layers, the shape names by shape index)."""
     mi = _mi()
     mi.set_variant(variant)
     sc = mi.load_dict(mitsuba_scene_dict(desc, view, cfg))
     img = np.array(
         mi.render(sc, seed=noise_seed(desc.seed, path_positions(len(desc.cameras))[view]))
     )
-    rgb, gt = split_layers(img, desc.cameras[view])
-    return rgb, gt, [s.id() for s in sc.shapes()]
+    rgb, albedo, gt = split_layers(img, desc.cameras[view])
+    return rgb, albedo, gt, [s.id() for s in sc.shapes()]
+
+
+def render_view(desc: SceneDescription, view: int, cfg: RenderConfig, variant: str):
+    """One view: (its 8-bit sRGB image, the exposure developed as `bench.render.develop`
+    says; the ground-truth layers; the shape names by shape index)."""
+    rgb, albedo, gt, names = expose(desc, view, cfg, variant)
+    return develop(rgb, albedo, cfg.denoise), gt, names
