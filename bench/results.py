@@ -6,7 +6,7 @@ a row cut in the middle is caught), the required columns, the key values (scene,
 seed >= 0, budget >= 0, a known task and protocol; no key twice), numbers where numbers
 belong, the status (`ok` rows have their task's headline metrics, `failed` rows a reason).
 Each row also carries its own integrity: every number lies in its declared range
-(`bench.vocabulary.RANGES`), and `row_checksum` (last) is a hash of the row's values as
+(`bench.vocabulary.Metric.range`), and `row_checksum` (last) is a hash of the row's values as
 written, so a value edited by hand is caught (against accidents, not an attacker with the
 code). A damaged file is one `BenchError` naming the file and the first bad row (line and
 key), and nothing is published from it. Recovery: `bench run --reevaluate` scores rows
@@ -43,7 +43,7 @@ import os
 import shutil
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager, nullcontext
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
@@ -57,11 +57,11 @@ from bench.vocabulary import (
     REFERENCE_MAPS,
     REFERENCE_MIN_MAA,
     REFERENCE_PEER,
-    REPORT_FIELDS,
     VOCABULARY_FILE,
     Job,
     Unit,
     Vocabulary,
+    older_fields,
 )
 
 HASHES = ("prediction_hash", "evaluation_hash")
@@ -179,7 +179,7 @@ def _altered(row: dict[str, str], vocab: Vocabulary) -> str | None:
             continue
         bounds = vocab.range_of(k)
         if bounds is None:
-            return f"{k} has no declared range (bench.vocabulary.RANGES)"
+            return f"{k} is no declared metric (bench.vocabulary.declare_metric)"
         lo, hi = bounds
         x = float(v)
         if not math.isfinite(x) or x < lo or (hi is not None and x > hi):
@@ -554,29 +554,28 @@ def bind_results_dir(results: Path, settings: dict, vocab: Vocabulary, overwrite
 def upgrade(results: Path, current: Vocabulary) -> list[str]:
     """Bring a results folder written by an older bench up to date, in place (`bench
     upgrade`): the `policy` column of its rows is renamed `method` (`_rename_method`),
-    and its recorded tasks get what the report reads of them (`REPORT_FIELDS`),
-    taken from `current`'s declarations of the same names. What it changed, one item each
-    (empty: the folder was up to date)."""
+    and a recorded vocabulary that lacks this one's fields (`older_fields`) gets the
+    package's declarations of its methods and tasks, by name, and of every metric. What it
+    changed, one item each (empty: the folder was up to date)."""
     results = Path(results)
     path = results / VOCABULARY_FILE
     if not path.is_file():
         raise BenchError(f"{path} not found: not a results folder of `bench run`")
     data = json.loads(path.read_text())
     changed = [c for name in ("runs.csv", DAMAGED) for c in _rename_method(results / name)]
-    for name, task in data["tasks"].items():
-        missing = [f for f in REPORT_FIELDS if f not in task]
-        if not missing:
-            continue
-        if name not in current.tasks:
+    older = older_fields(data)
+    if older:
+        recorded = [*data["methods"], *data["tasks"]]
+        unknown = [n for n in recorded if n not in current.methods and n not in current.tasks]
+        if unknown:
             raise BenchError(
-                f"{path}: task {name!r} lacks {', '.join(missing)} and this bench does not "
+                f"{path}: {unknown[0]!r} lacks {', '.join(older)} and this bench does not "
                 "declare it; run the folder again with a bench that does"
             )
-        declared = asdict(current.tasks[name])
-        task.update({f: declared[f] for f in missing})
-        changed.append(f"{VOCABULARY_FILE}: task {name} gets {', '.join(missing)}")
-    if changed:
-        write_text_atomic(path, Vocabulary.from_json(json.dumps(data)).to_json())
+        methods = {n: current.methods[n] for n in data["methods"]}
+        tasks = {n: current.tasks[n] for n in data["tasks"]}
+        write_text_atomic(path, Vocabulary(methods, tasks, current.metrics).to_json())
+        changed.append(f"{VOCABULARY_FILE}: declared as this bench does ({', '.join(older)})")
     return changed
 
 

@@ -17,7 +17,7 @@ This module imports nothing heavy, so every stage (and the report) may import it
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import NamedTuple
 
@@ -34,6 +34,8 @@ HEADLINE = ("tri", "multiview")
 HEADLINE_BUDGET = 256
 HEADLINE_POLICY = "adaptive"
 """The paper's method, compared with every baseline in `table2.csv` and `paired.csv`."""
+FIGURE_SCENE = "table"
+"""The scene of Figure 2 (the headline method's selection and its points)."""
 PAIRED_PEERS = ("colmap-b", "aliked-b", "disk-b")
 """The peers held to the same budget that `paired_sfm.csv` compares with, where they ran:
 stock COLMAP's, and a learned detector's own top-B with LightGlue (on its pool)."""
@@ -50,43 +52,52 @@ ORACLE = "oracle"
 ROLES = ("baseline", "contender", "reference", "peer")
 """A baseline competes for "best baseline"; a contender is compared with the baselines; a
 reference (`all`, the oracle) and a peer (stock COLMAP) are shown, never ranked as either."""
-PERCENT, FRACTION, DEGREES, AT_LEAST_0 = (0.0, 100.0), (0.0, 1.0), (0.0, 180.0), (0.0, None)
-RANGES: dict[str, tuple[float, float | None]] = {
-    "views": AT_LEAST_0,
-    "tentative_matches": AT_LEAST_0,
-    "verified_matches": AT_LEAST_0,
-    "inlier_pct": PERCENT,
-    "match_precision_pct": PERCENT,
-    "coverage_pct": PERCENT,
-    "runtime_proxy": AT_LEAST_0,
-    "runtime_scoring": AT_LEAST_0,
-    "runtime_matching": AT_LEAST_0,
-    "runtime_robust": AT_LEAST_0,
-    "reconstructable": AT_LEAST_0,
-    "points": AT_LEAST_0,
-    "rmse": AT_LEAST_0,
-    "median_error": AT_LEAST_0,
-    **{f"accuracy_pct{t}": PERCENT for t in ("", "_0.02", "_0.05", "_0.20")},
-    # accurate points per reconstructable point: above 100 where a model has more accurate
-    # points than there are reconstructable ones (the sfm rows count them against the
-    # multiview protocol's, two-view points included)
-    **{f"acc_completeness_pct{t}": AT_LEAST_0 for t in ("", "_0.02", "_0.05", "_0.20")},
-    "mean_track_length": AT_LEAST_0,
-    "mean_tri_angle_deg": DEGREES,
-    "render_s_per_view": AT_LEAST_0,
-    "registered_views": AT_LEAST_0,
-    "maa": FRACTION,
-    "median_pose_err_deg": DEGREES,
-    "cam_center_err": AT_LEAST_0,
-    "mean_reproj_px": AT_LEAST_0,
-    "keypoints_per_view": AT_LEAST_0,
+PER_VIEW, MULTI_VIEW, GROUND_TRUTH, OWN_PIPELINE = "per-view", "multi-view", "oracle", "peer"
+KINDS: dict[str, str] = {
+    PER_VIEW: "selects from each view's candidate pool alone (`@policy`)",
+    MULTI_VIEW: "selects from every view's pool at once, may match its own selections "
+    "(`@multiview_policy`: adaptive-loop)",
+    GROUND_TRUTH: "selects from the pools with the ground truth: a reference of the "
+    "evaluation side, never a policy (the oracle)",
+    OWN_PIPELINE: "extracts, matches and maps with a pipeline of its own (stock COLMAP)",
 }
-"""The range (low, high; None: no bound) of every number a row of `runs.csv` holds; any
-`*_ms` column (a stage's milliseconds) is at least 0, and a task declares its own metrics
-(`Task.ranges`). A value outside its range, or in an undeclared column, is refused."""
+"""How a method works, which decides how its units are run (`bench.harness.methods`: one
+runner per kind) and whether `bench select` can run it; a plugin declares a new kind with
+`declare_kind` and its runner with `bench.harness.methods.register_kind`."""
+PERCENT, FRACTION, DEGREES, AT_LEAST_0 = (0.0, 100.0), (0.0, 1.0), (0.0, 180.0), (0.0, None)
 GRANTS = ("rig", "images")
 """What a task's selection may see of the views' geometry: the rig's poses, or the images
 and intrinsics only (`bench.frontend.geometry`)."""
+
+
+@dataclass(frozen=True)
+class Metric:
+    """A number a row of `runs.csv` holds, declared once, where it is computed: everything
+    the runs contract, the tables, the figures, the results page and the transfer table
+    read of it. A task names the metrics it reports (`Task.metrics`)."""
+
+    name: str
+    range: tuple[float, float | None] = AT_LEAST_0
+    """(low, high; None: no bound): a value outside it is refused (`bench.results`)."""
+    lower_better: bool = False
+    """Its direction: the paired wins, the best baseline, the transfer's ranking."""
+    title: str = ""
+    """Its panel title in the figures (empty: its name)."""
+    failure: float | None = None
+    """What a run scores whose method failed (raised, broke its contract, lost its worker):
+    nothing was computed, so its rows hold this value and every mean counts it (mAA 0,
+    completeness 0). None: such a run has no value, and a mean over a method's runs
+    where one failed so is incomplete (not ranked)."""
+    of_model: bool = False
+    """Measured on the reconstructed points alone: a run whose task failed has none (rmse,
+    median error)."""
+    peers: bool = False
+    """Whether a stock-COLMAP peer's rows hold it (the peers' own metrics:
+    `bench.evaluation.metrics.pipeline_metrics`)."""
+    share_of: str = ""
+    """The report's own: this metric is `share_of` as a percentage of the ground-truth
+    method's (`GROUND_TRUTH`) in the same scene, seed, budget, task and protocol."""
+    doc: str = ""
 
 
 @dataclass(frozen=True)
@@ -103,6 +114,11 @@ class Method:
     pool: str = ""
     """The detector whose candidate pool it needs (a grid on another pool leaves it out);
     empty: any pool."""
+    kind: str = PER_VIEW
+    """How it works (`KINDS`)."""
+    matcher: str = ""
+    """The back end's matcher its selections are matched with (`backend.matcher`; empty:
+    the run's setting)."""
 
 
 @dataclass(frozen=True)
@@ -114,25 +130,22 @@ class Task:
     """`rig` or `images` (`GRANTS`)."""
     needs: tuple[str, ...]
     """The metrics an `ok` row must have."""
-    columns: tuple[str, ...]
-    """Its metrics in Table 1 (a task other than the headline's as `<task>_<metric>`)."""
+    metrics: tuple[str, ...]
+    """The metrics it reports (each declared: `Metric`), in Table 1's order (a task other
+    than the headline's as `<task>_<metric>`)."""
     peers: bool = False
     """Whether the stock-COLMAP peers run it (they have no known-pose mode)."""
     doc: str = ""
-    ranges: dict[str, tuple[float, float | None]] = field(default_factory=dict)
-    """The range of each metric of its own that `RANGES` does not declare."""
     headline: tuple[str, ...] = ()
     """The metrics the report compares methods in: `paired.csv` and `table2.csv`, the
     figures and the page; its first is the one the results page shows paired and the one
     `transfer.csv` ranks by."""
-    lower_better: tuple[str, ...] = ()
-    """Its metrics where lower is better (the paired wins and the best baseline)."""
     summary: tuple[str, ...] = ()
     """Its metrics in `table_scenes.csv` and, for a task the peers run, in the paired
     comparison with them (`paired_sfm.csv`); empty: the headline."""
-    titles: dict[str, str] = field(default_factory=dict)
-    """The figures' panel title of each metric they draw, in drawing order (a headline
-    metric without one is drawn under its column name)."""
+    drawn: tuple[str, ...] = ()
+    """The metrics the figures draw (each under its `Metric.title`), in drawing order,
+    before the headline metrics not among them."""
     exclusion_reference: bool = False
     """Whether a (scene, seed) that stock COLMAP with all its features (`REFERENCE_PEER`)
     does not map is left out of this task's means and paired differences (the task's
@@ -171,6 +184,7 @@ class Job(NamedTuple):
 
 METHODS: dict[str, Method] = {}
 TASKS: dict[str, Task] = {}
+METRICS: dict[str, Metric] = {}
 CODE: dict[str, tuple] = {}
 """The functions that implement each method: the roots of its rows' code hash."""
 SETTINGS: dict[str, type] = {}
@@ -183,6 +197,10 @@ def declare_method(method: Method, code: tuple = (), settings: type | None = Non
     if method.role not in ROLES:
         raise BenchError(
             f"policy {method.name}: unknown role {method.role!r}; valid: {', '.join(ROLES)}"
+        )
+    if method.kind not in KINDS:
+        raise BenchError(
+            f"method {method.name}: unknown kind {method.kind!r}; valid: {', '.join(KINDS)}"
         )
     if method.name in METHODS:
         raise BenchError(f"policy name {method.name!r} is taken; give the policy another name")
@@ -201,10 +219,31 @@ def implemented_by(names, *functions) -> None:
         CODE[name] = CODE.get(name, ()) + functions
 
 
+def declare_kind(name: str, doc: str) -> str:
+    """Declare a kind of method under a name no other kind has (its runner:
+    `bench.harness.methods.register_kind`)."""
+    if name in KINDS:
+        raise BenchError(f"kind name {name!r} is taken; give the kind another name")
+    KINDS[name] = doc
+    return name
+
+
+def declare_metric(metric: Metric) -> str:
+    """Register a metric under a name no other metric has; its name."""
+    if metric.name in METRICS and METRICS[metric.name] != metric:
+        raise BenchError(f"metric name {metric.name!r} is taken; give the metric another name")
+    METRICS[metric.name] = metric
+    return metric.name
+
+
 def declare_task(task: Task) -> Task:
-    """Register a task under a name no other task has."""
+    """Register a task under a name no other task has, reporting declared metrics."""
     if task.grant not in GRANTS:
         raise BenchError(f"task {task.name}: unknown grant {task.grant!r}")
+    listed = (*task.metrics, *task.needs, *task.headline, *task.summary, *task.drawn)
+    unknown = [m for m in listed if m not in METRICS]
+    if unknown:
+        raise BenchError(f"task {task.name}: undeclared metric {unknown[0]!r} (declare_metric)")
     if task.name in TASKS:
         raise BenchError(f"task name {task.name!r} is taken; give the task another name")
     TASKS[task.name] = task
@@ -217,11 +256,12 @@ class Vocabulary:
 
     methods: dict[str, Method] = field(default_factory=dict)
     tasks: dict[str, Task] = field(default_factory=dict)
+    metrics: dict[str, Metric] = field(default_factory=dict)
 
     @classmethod
     def current(cls) -> Vocabulary:
         """The declarations of this process (the compute stages imported)."""
-        return cls(dict(METHODS), dict(TASKS))
+        return cls(dict(METHODS), dict(TASKS), dict(METRICS))
 
     def label(self, policy: str) -> str:
         m = self.methods.get(policy)
@@ -247,16 +287,29 @@ class Vocabulary:
 
     def lower_better(self) -> set[str]:
         """The metrics (as the tables name them) where lower is better."""
-        return {self.column(n, m) for n, t in self.tasks.items() for m in t.lower_better}
+        return {
+            self.column(n, m)
+            for n, t in self.tasks.items()
+            for m in t.metrics
+            if self.metrics[m].lower_better
+        }
+
+    def columns(self, task: str) -> list[str]:
+        """A task's metrics as the tables name them, in Table 1's order."""
+        return [self.column(task, m) for m in self.tasks[task].metrics]
 
     def panels(self) -> list[tuple[str, str]]:
-        """(metric, title) of every panel the figures draw: each task's titled metrics,
-        then its headline metrics without a title, under their names."""
+        """(metric, title) of every panel the figures draw: each task's drawn metrics,
+        then its headline metrics not among them (`Task.drawn`, `Metric.title`)."""
         out = []
         for n, t in self.tasks.items():
-            titled = {**t.titles, **{m: t.titles.get(m, m) for m in t.headline}}
-            out += [(self.column(n, m), title) for m, title in titled.items()]
+            for m in dict.fromkeys((*t.drawn, *t.headline)):
+                out.append((self.column(n, m), self.metrics[m].title or m))
         return list(dict(out).items())
+
+    def shares(self) -> dict[str, str]:
+        """{metric: the metric it is a share of} for the report's own (`Metric.share_of`)."""
+        return {n: m.share_of for n, m in self.metrics.items() if m.share_of}
 
     @property
     def posefree_task(self) -> str | None:
@@ -284,6 +337,9 @@ class Vocabulary:
     def with_role(self, *roles: str) -> list[str]:
         return [n for n, m in self.methods.items() if m.role in roles]
 
+    def with_kind(self, *kinds: str) -> list[str]:
+        return [n for n, m in self.methods.items() if m.kind in kinds]
+
     def order(self, policy: str) -> tuple[int, int]:
         """Display order: baselines, contenders, references, peers; then declaration."""
         names = list(self.methods)
@@ -292,21 +348,24 @@ class Vocabulary:
         return ROLES.index(self.methods[policy].role), names.index(policy)
 
     def range_of(self, column: str) -> tuple[float, float | None] | None:
-        """The declared range of a number column of `runs.csv` (None: undeclared)."""
-        for task in self.tasks.values():
-            if column in task.ranges:
-                return task.ranges[column]
-        return RANGES.get(column, AT_LEAST_0 if column.endswith("_ms") else None)
+        """The declared range of a number column of `runs.csv` (None: undeclared); any
+        `*_ms` column is at least 0."""
+        if column in self.metrics:
+            return self.metrics[column].range
+        return AT_LEAST_0 if column.endswith("_ms") else None
 
     def merged(self, older: Vocabulary) -> Vocabulary:
         """This vocabulary, keeping `older`'s entries for names it does not declare."""
-        return Vocabulary(older.methods | self.methods, older.tasks | self.tasks)
+        return Vocabulary(
+            older.methods | self.methods, older.tasks | self.tasks, older.metrics | self.metrics
+        )
 
     def to_json(self) -> str:
         return json.dumps(
             {
                 "methods": {n: asdict(m) for n, m in self.methods.items()},
                 "tasks": {n: asdict(t) for n, t in self.tasks.items()},
+                "metrics": {n: asdict(m) for n, m in self.metrics.items()},
             },
             indent=1,
         )
@@ -317,33 +376,26 @@ class Vocabulary:
         methods = {
             n: Method(**{**m, "reads": tuple(m["reads"])}) for n, m in data["methods"].items()
         }
+        lists = ("needs", "metrics", "headline", "summary", "drawn")
         tasks = {
-            n: Task(
-                **{
-                    **t,
-                    "needs": tuple(t["needs"]),
-                    "columns": tuple(t["columns"]),
-                    **{f: tuple(t.get(f, ())) for f in ("headline", "lower_better", "summary")},
-                    "ranges": {k: tuple(r) for k, r in t.get("ranges", {}).items()},
-                }
-            )
-            for n, t in data["tasks"].items()
+            n: Task(**{**t, **{f: tuple(t[f]) for f in lists}}) for n, t in data["tasks"].items()
         }
-        return cls(methods, tasks)
+        metrics = {
+            n: Metric(**{**m, "range": tuple(m["range"])}) for n, m in data["metrics"].items()
+        }
+        return cls(methods, tasks, metrics)
 
     @classmethod
     def load(cls, results: Path) -> Vocabulary:
         """The vocabulary recorded in a results folder (`vocabulary.json`); one recorded
-        before tasks declared what the report reads of them (`REPORT_FIELDS`) is refused,
-        with `bench upgrade` as the remedy."""
+        by an older bench (`older_fields`) is refused, with `bench upgrade` as the remedy."""
         path = Path(results) / VOCABULARY_FILE
         try:
             text = path.read_text()
-            tasks = json.loads(text)["tasks"].values()
-            older = sorted({f for t in tasks for f in REPORT_FIELDS if f not in t})
+            older = older_fields(json.loads(text))
             if older:
                 raise BenchError(
-                    f"{path} was written by an older bench (its tasks lack {', '.join(older)}); "
+                    f"{path} was written by an older bench (it lacks {', '.join(older)}); "
                     f"`bench upgrade --results {results}` brings the folder up to date"
                 )
             return cls.from_json(text)
@@ -357,5 +409,16 @@ class Vocabulary:
 
 
 VOCABULARY_FILE = "vocabulary.json"
-REPORT_FIELDS = ("headline", "lower_better", "summary", "titles", "exclusion_reference")
-"""What the report reads of a task (`Task`); a recorded vocabulary without them is older."""
+
+
+def older_fields(data: dict) -> list[str]:
+    """What a recorded vocabulary lacks of this one's declarations (a field of a method or
+    a task, the metrics): empty where it is current."""
+    fields_of = {"methods": Method, "tasks": Task}
+    missing = [
+        f"{section} field {f.name}"
+        for section, cls in fields_of.items()
+        for f in fields(cls)
+        if any(f.name not in entry for entry in data.get(section, {}).values())
+    ]
+    return sorted(set(missing)) + ([] if "metrics" in data else ["metrics"])

@@ -164,16 +164,17 @@ def test_the_shared_prediction_code_is_derived_and_leaves_the_methods_and_scorin
 
 
 def test_every_method_has_its_own_code_hash():
-    from bench.backend.peers import COLMAP_PEERS, LEARNED_PEERS
     from bench.harness.predict import method_code_hash
-    from bench.vocabulary import CODE, METHODS
+    from bench.vocabulary import CODE, METHODS, OWN_PIPELINE
 
     assert set(METHODS) <= set(CODE)
     hashes = {m: method_code_hash(m) for m in METHODS}
     assert all(hashes.values())
-    for peers in (COLMAP_PEERS, tuple(LEARNED_PEERS)):
-        assert len({hashes[m] for m in peers}) == 1  # one function implements them
-    shared = len(COLMAP_PEERS) + len(LEARNED_PEERS) - 2
+    colmap = [m for m in METHODS if METHODS[m].kind == OWN_PIPELINE]
+    top_b = ["response", *(m for m in METHODS if METHODS[m].matcher)]  # the strongest B
+    for same in (colmap, top_b):
+        assert len(same) > 1 and len({hashes[m] for m in same}) == 1  # one function each
+    shared = len(colmap) + len(top_b) - 2
     assert len(set(hashes.values())) == len(METHODS) - shared
 
 

@@ -966,14 +966,9 @@ def test_a_task_is_added_in_one_place(renders_dir, tmp_path):
     def count_points(truth, model, names, protocol, poses):
         return {"observed_points": 0 if model is None else model.num_points3D()}
 
+    vocabulary.declare_metric(vocabulary.Metric("observed_points"))
     runner = tasks.TaskRunner(
-        vocabulary.Task(
-            "count",
-            "rig",
-            needs=("observed_points",),
-            columns=("observed_points",),
-            ranges={"observed_points": vocabulary.AT_LEAST_0},
-        ),
+        vocabulary.Task("count", "rig", needs=("observed_points",), metrics=("observed_points",)),
         reconstruct=lambda m, cfg, protocol: known_pose_task(
             m.image_dir, m.cams, m.names, m.xy, m.pairs, cfg, protocol
         ),
@@ -988,7 +983,7 @@ def test_a_task_is_added_in_one_place(renders_dir, tmp_path):
         )
         runs = bench_run(grid, tmp_path, renders_dir)
     finally:  # the registry as it was, for the other tests
-        del tasks.RUNNERS["count"], vocabulary.TASKS["count"]
+        del tasks.RUNNERS["count"], vocabulary.TASKS["count"], vocabulary.METRICS["observed_points"]
     counted = runs[runs["task"] == "count"].set_index("protocol")["observed_points"]
     tri = runs[runs["task"] == "tri"].set_index("protocol")["points"]
     assert (counted == tri).all() and counted.sum() > 0

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from bench.report.page import PAGE, results_page
-from bench.report.tables import with_oracle_share
+from bench.report.tables import with_shares
 from bench.report.write import write_tables
 from bench.results import read_runs
 from bench.vocabulary import Vocabulary
@@ -25,8 +25,9 @@ def test_the_published_page_is_what_its_runs_csv_gives(tmp_path, regime):
     snapshot, folder = PUBLISHED.with_name(regime), tmp_path / regime
     shutil.copytree(snapshot, folder, ignore=shutil.ignore_patterns("*.csv", PAGE))
     shutil.copyfile(snapshot / "runs.csv", folder / "runs.csv")
-    df = with_oracle_share(read_runs(folder / "runs.csv"))
-    write_tables(df, folder, Vocabulary.load(folder))
+    vocab = Vocabulary.load(folder)
+    df = with_shares(read_runs(folder / "runs.csv"), vocab)
+    write_tables(df, folder, vocab)
     assert results_page(folder) == (snapshot / PAGE).read_text()
 
 

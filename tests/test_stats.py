@@ -17,7 +17,7 @@ from bench.evaluation.export import export_dataset
 from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig, with_reference
 from bench.report.stats import paired_difference, stratified_interval
-from bench.report.tables import headline_frame, paired, paired_sfm, table1, with_oracle_share
+from bench.report.tables import headline_frame, paired, paired_sfm, table1, with_shares
 from bench.results import ROW_CHECKSUM, append_runs, mark_reference, read_runs
 from bench.vocabulary import REFERENCE_MAPS, Vocabulary
 from tests.conftest import MEDIUM, bench_run
@@ -176,7 +176,8 @@ def test_the_oracle_share_of_a_grid_without_completeness_is_empty():
             for m in ("oracle", "texture")
         ]
     )
-    assert with_oracle_share(rows)["completeness_vs_oracle_pct"].isna().all()
+    vocab = Vocabulary.current()
+    assert with_shares(rows, vocab)["completeness_vs_oracle_pct"].isna().all()
 
 
 def test_a_grid_that_scores_sfm_runs_the_reference():
@@ -243,8 +244,8 @@ def test_the_front_end_cost_reads_its_tasks_from_the_vocabulary():
     from bench.vocabulary import Method, Task
 
     tasks = {
-        "tri": Task("tri", "rig", needs=(), columns=()),
-        "free": Task("free", "images", needs=(), columns=(), peers=True),
+        "tri": Task("tri", "rig", needs=(), metrics=()),
+        "free": Task("free", "images", needs=(), metrics=(), peers=True),
     }
     vocab = Vocabulary({"texture": Method("texture", "Texture", "baseline")}, tasks)
     assert vocab.posefree_task == "free"
@@ -264,33 +265,28 @@ def test_the_front_end_cost_reads_its_tasks_from_the_vocabulary():
 # --- a task is one declaration -----------------------------------------------------
 
 
-def test_a_task_declared_once_is_in_every_table_figure_and_the_page(tmp_path, monkeypatch):
-    """A task declares what the report shows of it (`Task.headline`, `lower_better`,
-    `titles`): a new one, with a headline metric of its own where lower is better, is in
-    Table 1, the paired tables, Table 2, the per-scene table, the figures and the page,
-    with no other change."""
+def test_a_task_and_a_metric_declared_once_are_in_every_table_figure_and_the_page(
+    tmp_path, monkeypatch
+):
+    """A metric is declared once (`Metric`: range, direction, title) and a task names it
+    (`Task.metrics`, `headline`): a new task with a metric of its own where lower is better
+    is in Table 1, the paired tables, Table 2, the per-scene table, the figures, the page
+    and the runs contract (its range), with no other change."""
     from bench.harness.tasks import RUNNERS, TaskRunner, register
     from bench.report import figures
     from bench.report.page import results_page
     from bench.report.write import write_tables
-    from bench.vocabulary import TASKS, VOCABULARY_FILE, Task
+    from bench.vocabulary import METRICS, TASKS, VOCABULARY_FILE, Metric, Task, declare_metric
 
-    toy = Task(
-        "toy",
-        "images",
-        needs=("score",),
-        columns=("score",),
-        ranges={"score": (0.0, 1.0)},
-        headline=("score",),
-        lower_better=("score",),
-        titles={"score": "Toy score"},
-    )
+    declare_metric(Metric("score", (0.0, 1.0), lower_better=True, title="Toy score"))
+    toy = Task("toy", "images", needs=("score",), metrics=("score",), headline=("score",))
     register(TaskRunner(toy, reconstruct=None, evaluate=None))
     try:
         vocab = Vocabulary.current()
     finally:
-        RUNNERS.pop("toy"), TASKS.pop("toy")
+        RUNNERS.pop("toy"), TASKS.pop("toy"), METRICS.pop("score")
     assert "toy" not in Vocabulary.current().tasks  # the other tests see the package's
+    assert vocab.range_of("score") == (0.0, 1.0) and "toy_score" in vocab.lower_better()
     rows = []
     for seed in range(3):
         cell = dict(scene="s", seed=seed, budget=256, protocol="multiview", status="ok")
@@ -304,7 +300,7 @@ def test_a_task_declared_once_is_in_every_table_figure_and_the_page(tmp_path, mo
             rows.append(cell | dict(method=policy, task="toy", score=score + 0.01 * seed))
     (tmp_path / VOCABULARY_FILE).write_text(vocab.to_json())
     assert Vocabulary.load(tmp_path).tasks["toy"] == toy  # recorded as declared
-    df = with_oracle_share(pd.DataFrame(rows))
+    df = with_shares(pd.DataFrame(rows), vocab)
     t1 = write_tables(df, tmp_path, vocab).set_index("method")
     assert t1.loc["adaptive", "toy_score"] == pytest.approx(0.11)
     pairs = pd.read_csv(tmp_path / "paired.csv").set_index(["scene", "baseline", "metric"])
@@ -323,21 +319,27 @@ def test_a_task_declared_once_is_in_every_table_figure_and_the_page(tmp_path, mo
     assert "| adaptive | random | toy_score | 3 |" in page
 
 
-def test_a_folder_recorded_before_the_report_fields_is_refused_and_upgraded(tmp_path, capsys):
-    """A `vocabulary.json` whose tasks lack what the report reads would give tables
-    without their headline metrics: refused in one line naming `bench upgrade`, which
-    records the fields as the package declares them."""
-    from bench.vocabulary import REPORT_FIELDS, VOCABULARY_FILE
+@pytest.mark.parametrize(
+    "section, field", [("tasks", "headline"), ("methods", "kind"), ("", "metrics")]
+)
+def test_a_folder_recorded_by_an_older_bench_is_refused_and_upgraded(
+    tmp_path, capsys, section, field
+):
+    """A `vocabulary.json` that lacks a field the report reads (a task's headline, a
+    method's kind, the metrics) would give wrong tables: refused in one line naming
+    `bench upgrade`, which records the package's declarations of the same names."""
+    from bench.vocabulary import VOCABULARY_FILE
 
     data = json.loads(Vocabulary.current().to_json())
-    for task in data["tasks"].values():
-        for f in REPORT_FIELDS:
-            task.pop(f)
+    for entry in data[section].values() if section else [data]:
+        entry.pop(field)
     (tmp_path / VOCABULARY_FILE).write_text(json.dumps(data))
-    with pytest.raises(BenchError, match=f"`bench upgrade --results {tmp_path}`"):
+    with pytest.raises(BenchError, match=f"lacks .*{field}.*`bench upgrade --results {tmp_path}`"):
         Vocabulary.load(tmp_path)
     assert main(["upgrade", "--results", str(tmp_path)]) == 0
-    assert "task sfm gets headline" in capsys.readouterr().out
-    assert Vocabulary.load(tmp_path).tasks == Vocabulary.current().tasks
+    assert f"declared as this bench does ({section + ' field ' if section else ''}{field}" in (
+        capsys.readouterr().out
+    )
+    assert Vocabulary.load(tmp_path) == Vocabulary.current()
     assert main(["upgrade", "--results", str(tmp_path)]) == 0
     assert "up to date" in capsys.readouterr().out

@@ -30,7 +30,7 @@ from __future__ import annotations
 import shutil
 import tempfile
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from itertools import combinations
 from pathlib import Path
 
@@ -41,8 +41,8 @@ from bench.backend.matching import BackendConfig, PairMatches, verify
 from bench.backend.reconstruction import Reconstruction, map_database, quiet_colmap, write_images
 from bench.camera import Camera
 from bench.frontend.features import strongest_first
-from bench.frontend.policies import policy
-from bench.vocabulary import Method, declare_method, implemented_by
+from bench.frontend.policies import register_policy, response_policy
+from bench.vocabulary import OWN_PIPELINE, Method, declare_method, implemented_by
 
 
 @dataclass
@@ -183,29 +183,23 @@ implemented_by(
     [  # peer rows: `colmap` (budget 0: COLMAP's default), the others one per budget
         declare_method(m).name
         for m in (
-            Method("colmap", "COLMAP default SIFT (peer)", "peer", whole_pool=True),
-            Method("colmap-b", "COLMAP SIFT, B largest-scale (peer)", "peer"),
-            Method("colmap-soft-b", "COLMAP SIFT soft limit B (peer)", "peer"),
+            Method("colmap", "COLMAP default SIFT (peer)", "peer", True, kind=OWN_PIPELINE),
+            Method("colmap-b", "COLMAP SIFT, B largest-scale (peer)", "peer", kind=OWN_PIPELINE),
+            Method("colmap-soft-b", "COLMAP SIFT soft limit B (peer)", "peer", kind=OWN_PIPELINE),
         )
     ],
     run_peer,
 )
 
-COLMAP_PEERS = ("colmap", "colmap-b", "colmap-soft-b")
-"""The peers that extract, match and map with stock COLMAP (`run_peer`)."""
-LEARNED_PEERS = {"aliked-b": "aliked", "disk-b": "disk"}
-"""The learned peers (module docstring) and the detector of each."""
 
-
-def top_by_score(inp, budget, rng, cfg):
-    """The detector's B highest-scoring keypoints."""
-    return strongest_first(inp.candidates.response)[:budget]
-
-
-policy("aliked-b", "ALIKED top-B + LightGlue (peer)", role="peer", pool="aliked")(top_by_score)
-policy("disk-b", "DISK top-B + LightGlue (peer)", role="peer", pool="disk")(top_by_score)
-
-
-def backend_for(method: str, cfg: BackendConfig) -> BackendConfig:
-    """The back-end settings a method's matches are made with: a learned peer's LightGlue."""
-    return replace(cfg, matcher="lightglue") if method in LEARNED_PEERS else cfg
+for _name, _detector in (("aliked-b", "ALIKED"), ("disk-b", "DISK")):
+    register_policy(  # the learned detector's own top-B (`response`), matched with LightGlue
+        Method(
+            _name,
+            f"{_detector} top-B + LightGlue (peer)",
+            "peer",
+            pool=_detector.lower(),
+            matcher="lightglue",
+        ),
+        response_policy,
+    )

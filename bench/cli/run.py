@@ -322,12 +322,12 @@ def has_pixel_truth(dataset: Path) -> bool:
 def run(args: argparse.Namespace) -> None:
     from bench.harness.execute import Cluster, default_workers
     from bench.harness.grid import BenchConfig, RunOptions, in_grid, run_benchmark, with_reference
-    from bench.report.tables import headline_frame, table1, with_oracle_share
+    from bench.report.tables import headline_frame, table1, with_shares
     from bench.report.write import write_report
     from bench.results import Workspace
     from bench.scenes.spec import scene_names
     from bench.summary import errors
-    from bench.vocabulary import HEADLINE, ORACLE, Vocabulary
+    from bench.vocabulary import GROUND_TRUTH, HEADLINE, METHODS, Vocabulary
 
     if args.scheduler is not None and args.workers is not None:
         raise BenchError("--workers does not apply with --scheduler: the cluster has its workers")
@@ -344,8 +344,9 @@ def run(args: argparse.Namespace) -> None:
         if args.seeds is not None:
             log("--seeds is ignored with --dataset: a dataset is one scene, recorded as seed 0")
         scenes, seeds = tuple(d.name for d in datasets), (0,)
-        truth = ORACLE in methods and all([has_pixel_truth(d) for d in datasets])
-        methods = tuple(p for p in methods if p != ORACLE or truth)
+        truth = all([has_pixel_truth(d) for d in datasets])  # what the oracle selects by
+        kinds = {p: METHODS[p].kind for p in methods if p in METHODS}
+        methods = tuple(p for p in methods if truth or kinds.get(p) != GROUND_TRUTH)
     else:
         seeds = parse_list(
             "--seeds",
@@ -383,7 +384,7 @@ def run(args: argparse.Namespace) -> None:
     df = run_benchmark(cfg, Workspace(results, args.renders), options, report=report)
     protocol = "multiview" if "multiview" in cfg.protocols else cfg.protocols[0]
     vocab = Vocabulary.load(results)
-    t = table1(headline_frame(with_oracle_share(df), vocab, protocol, bool(datasets)), vocab)
+    t = table1(headline_frame(with_shares(df, vocab), vocab, protocol, bool(datasets)), vocab)
     print(f"Table 1 ({protocol} protocol; {', '.join(cfg.tasks)}):")
     cols = ["strategy", "budget", "runs"]  # each task's headline and summary metrics
     cols += [vocab.column(n, m) for n, t in vocab.tasks.items() for m in (*t.headline, *t.summary)]

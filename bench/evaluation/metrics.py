@@ -58,9 +58,60 @@ from bench.backend.matching import PairMatches, expected_ransac_iterations
 from bench.camera import Camera
 from bench.evaluation.truth import SceneTruth, Surface
 from bench.frontend.features import Candidates, tile_of
+from bench.vocabulary import DEGREES, PERCENT, Metric, declare_metric
 
 THRESHOLDS = (0.02, 0.05, 0.10, 0.20)
 COVERAGE_GRID = (16, 12)
+SUFFIXES = tuple("" if tau == 0.10 else f"_{tau:.2f}" for tau in THRESHOLDS)
+"""The names' suffix of each threshold (0.10, the headline's, has none)."""
+
+for _metric in (
+    Metric("views", doc="views in the scene (a row's bookkeeping)"),
+    Metric("render_s_per_view", doc="the render entry's mean seconds per view"),
+    Metric("wall_ms", lower_better=True, doc="the unit's measured milliseconds, scoring aside"),
+    Metric("task_ms", lower_better=True, doc="the task's reconstruction, milliseconds"),
+    Metric("tentative_matches", peers=True),
+    Metric("verified_matches", peers=True),
+    Metric("inlier_pct", PERCENT, title="Inlier %", peers=True),
+    Metric("match_precision_pct", PERCENT),
+    Metric("coverage_pct", PERCENT, title="Coverage %", peers=True),
+    Metric("keypoints_per_view", peers=True, doc="a peer's keypoints per view (COLMAP's)"),
+    Metric("runtime_proxy", lower_better=True, title="Runtime proxy (k ops)"),
+    Metric("runtime_scoring"),
+    Metric("runtime_matching"),
+    Metric("runtime_robust"),
+    Metric("reconstructable"),
+    Metric("points", failure=0.0),
+    Metric("rmse", lower_better=True, title="RMSE (scene units)", of_model=True),
+    Metric("median_error", lower_better=True, title="Median error (scene units)", of_model=True),
+    Metric("mean_track_length"),
+    Metric("mean_tri_angle_deg", DEGREES),
+    Metric(
+        "completeness_vs_oracle_pct",
+        title="Completeness, % of the oracle's",
+        share_of="acc_completeness_pct",
+        doc="the report's: a run's completeness as a share of the oracle's",
+    ),
+):
+    declare_metric(_metric)
+for _suffix, _tau in zip(SUFFIXES, THRESHOLDS):
+    declare_metric(
+        Metric(
+            f"accuracy_pct{_suffix}",
+            PERCENT,
+            title=f"Accuracy % (points with e < {_tau:.2f})" if not _suffix else "",
+        )
+    )
+    # accurate points per reconstructable point: above 100 where a model has more accurate
+    # points than there are reconstructable ones (the sfm rows count them against the
+    # multiview protocol's, two-view points included)
+    declare_metric(
+        Metric(
+            f"acc_completeness_pct{_suffix}",
+            failure=0.0,
+            title=f"Acc. completeness % (e < {_tau:.2f})" if not _suffix else "",
+        )
+    )
 
 
 def point_error(X: np.ndarray, surface: Surface) -> np.ndarray:

@@ -39,9 +39,9 @@ from scipy.sparse.csgraph import connected_components
 from bench.backend.matching import tentative_matches
 from bench.evaluation.truth import SceneTruth, scene_truth
 from bench.frontend.features import Candidates, strongest_first
-from bench.vocabulary import ORACLE, Method, declare_method, implemented_by
+from bench.vocabulary import GROUND_TRUTH, ORACLE, Method, declare_method, implemented_by
 
-declare_method(Method(ORACLE, "Oracle (ground truth, reference)", "reference"))
+declare_method(Method(ORACLE, "Oracle (ground truth, reference)", "reference", kind=GROUND_TRUTH))
 
 
 def matchable_tracks(truth: SceneTruth, pools: list[Candidates], ratio: float) -> list[np.ndarray]:

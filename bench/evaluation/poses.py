@@ -30,8 +30,18 @@ import numpy as np
 from bench.camera import Camera
 from bench.evaluation.metrics import model_points, point_metrics, track_metrics
 from bench.evaluation.truth import SceneTruth
+from bench.vocabulary import DEGREES, FRACTION, Metric, declare_metric
 
 MAA_THRESHOLDS_DEG = tuple(range(1, 11))
+
+for _metric in (
+    Metric("maa", FRACTION, title="SfM pose mAA (1-10 deg), unknown poses", failure=0.0),
+    Metric("registered_views", failure=0.0),
+    Metric("median_pose_err_deg", DEGREES, lower_better=True),
+    Metric("cam_center_err", lower_better=True),
+    Metric("mean_reproj_px", lower_better=True),
+):
+    declare_metric(_metric)
 
 
 def _angle_deg(cos: float) -> float:

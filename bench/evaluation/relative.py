@@ -44,12 +44,23 @@ import numpy as np
 from bench.camera import Camera
 from bench.evaluation.poses import MAA_THRESHOLDS_DEG, _angle_deg
 from bench.evaluation.truth import SceneTruth
+from bench.vocabulary import FRACTION, Metric, declare_metric
 
 MIN_SHARED = 15
 """The fewest ground-truth points two views must share for their pair to be scored."""
 AUC_THRESHOLDS_DEG = (5, 10, 20)
 MISSING_DEG = 180.0
 """The pose error of a pair without an estimate."""
+
+for _metric in (
+    Metric("auc_5", FRACTION, title="Relative-pose AUC @5 deg", failure=0.0),
+    Metric("auc_10", FRACTION, title="Relative-pose AUC @10 deg, unknown poses", failure=0.0),
+    Metric("auc_20", FRACTION, title="Relative-pose AUC @20 deg", failure=0.0),
+    Metric("maa_pairs", FRACTION, title="Relative-pose mAA (1-10 deg)", failure=0.0),
+    Metric("pairs_scored"),
+    Metric("pairs_estimated", failure=0.0),
+):
+    declare_metric(_metric)
 
 RelativePoses = dict[tuple[int, int], np.ndarray]
 """{(i, j), i < j: [R | t] (3, 4) of view j's camera from view i's}."""

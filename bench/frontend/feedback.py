@@ -42,9 +42,9 @@ from bench.frontend.policies import (
     adaptive_score,
     capped_greedy,
     contract_violation,
+    multiview_policy,
     settings_for,
 )
-from bench.vocabulary import Method, declare_method, implemented_by
 
 
 @dataclass(frozen=True)
@@ -61,10 +61,7 @@ class LoopConfig(PolicyConfig):
         return self
 
 
-NAME = declare_method(
-    Method("adaptive-loop", "Adaptive feedback loop", "contender", reads=ADAPTIVE_SIGNALS),
-    settings=LoopConfig,
-).name
+NAME = "adaptive-loop"
 MIN_ANGLE_DEG = 1.5
 EXPLORE = 0.05
 
@@ -188,6 +185,7 @@ def revise(
     return chosen, log
 
 
+@multiview_policy(NAME, "Adaptive feedback loop", reads=ADAPTIVE_SIGNALS, config=LoopConfig)
 def feedback_select(
     inputs: list[PolicyInput], budget: int, cfg: PolicyConfig, match: Match
 ) -> tuple[list[np.ndarray], list[dict]]:
@@ -226,6 +224,3 @@ def feedback_select(
         if broken:
             raise RuntimeError(f"{NAME} broke the contract rule '{broken}'")
     return sel, rounds
-
-
-implemented_by([NAME], feedback_select)

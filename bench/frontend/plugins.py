@@ -40,7 +40,7 @@ from pathlib import Path
 
 from bench import BenchError
 from bench.files import checksum, content_key
-from bench.frontend.policies import POLICIES
+from bench.vocabulary import METHODS
 
 FORBIDDEN_IMPORTS = ("bench.scenes", "bench.render", "bench.evaluation", "bench.harness")
 FORBIDDEN_TEXT = re.compile(r"gt_\d|gt_\{|meta\.json|ground_truth|groundtruth")
@@ -190,7 +190,7 @@ def load_module(path: str) -> tuple[str, ...]:
     if not file.is_file():
         raise BenchError(f"policy module {path} does not exist")
     _check(file.read_text(), path)
-    before = set(POLICIES)
+    before = set(METHODS)
     name = f"bench_policy_module_{content_key(str(file.resolve()), 8)}"
     spec = importlib.util.spec_from_file_location(name, file)
     module = importlib.util.module_from_spec(spec)
@@ -204,7 +204,7 @@ def load_module(path: str) -> tuple[str, ...]:
         raise BenchError(f"policy module {path} {e}") from None
     except (Exception, SystemExit) as e:
         raise BenchError(f"policy module {path} failed to import: {type(e).__name__}: {e}") from e
-    added = tuple(p for p in POLICIES if p not in before)
+    added = tuple(p for p in METHODS if p not in before)
     if not added:
         raise BenchError(
             f"policy module {path} registers no new policy (decorate a function with "
@@ -217,21 +217,21 @@ def load_module(path: str) -> tuple[str, ...]:
 @cache
 def load_entry_points() -> tuple[str, ...]:
     """Register the policies of installed packages (entry point group `bench.policies`)."""
-    before = set(POLICIES)
+    before = set(METHODS)
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         module = sys.modules.get(ep.module) or importlib.util.find_spec(ep.module)
         origin = getattr(module, "origin", None) or getattr(module, "__file__", None)
         if origin and Path(origin).is_file():
             _check(Path(origin).read_text(), f"{ep.module} (entry point {ep.name})")
-        names = set(POLICIES)
+        names = set(METHODS)
         try:
             with firewall():
                 ep.load()
         except Exception as e:
             raise BenchError(f"policy entry point {ep.name} failed: {type(e).__name__}: {e}") from e
         if origin:
-            ORIGIN.update(dict.fromkeys(set(POLICIES) - names, str(origin)))
-    return tuple(p for p in POLICIES if p not in before)
+            ORIGIN.update(dict.fromkeys(set(METHODS) - names, str(origin)))
+    return tuple(p for p in METHODS if p not in before)
 
 
 def load(modules=()) -> None:

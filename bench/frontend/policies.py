@@ -20,7 +20,7 @@ import json
 import math
 import traceback
 from collections.abc import Callable
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from functools import cache
 from pathlib import Path
 
@@ -30,7 +30,7 @@ from bench import BenchError
 from bench.frontend.features import Candidates, strongest_first, tile_of
 from bench.frontend.signals import SIGNALS, Signals
 from bench.frontend.views import View
-from bench.vocabulary import METHODS, SETTINGS, Method, declare_method
+from bench.vocabulary import METHODS, MULTI_VIEW, PER_VIEW, SETTINGS, Method, declare_method
 
 
 @dataclass(frozen=True)
@@ -105,7 +105,29 @@ def settings_for(name: str, cfg: PolicyConfig, own: dict | None = None) -> Polic
 
 Policy = Callable[[PolicyInput, int, np.random.Generator, PolicyConfig], np.ndarray]
 POLICIES: dict[str, Policy] = {}
-"""The selection function of every policy (its metadata: `bench.vocabulary.METHODS`)."""
+"""The selection function of every per-view policy (its metadata: `bench.vocabulary.METHODS`)."""
+MultiviewPolicy = Callable[[list[PolicyInput], int, PolicyConfig, Callable], tuple[list, list]]
+MULTIVIEW: dict[str, MultiviewPolicy] = {}
+"""The selection function of every multi-view policy: (every view's input, budget,
+settings, `match`: selections per view -> their verified pairs) -> (selection per view,
+diagnostics per round)."""
+
+
+def _check_reads(name: str, reads) -> None:
+    unknown = [s for s in reads if s not in SIGNALS]
+    if unknown:
+        raise BenchError(
+            f"policy {name} reads unknown signal {unknown[0]!r}; valid: {', '.join(SIGNALS)}"
+        )
+
+
+def register_policy(method: Method, fn: Policy, config: type | None = None) -> Policy:
+    """Register a per-view policy's declaration (its kind: `PER_VIEW`), its selection
+    function and the class of its own settings (`policy` does this for a decorated one)."""
+    _check_reads(method.name, method.reads)
+    declare_method(replace(method, kind=PER_VIEW), code=(fn,), settings=config)
+    POLICIES[method.name] = fn
+    return fn
 
 
 def policy(
@@ -117,22 +139,32 @@ def policy(
     config: type | None = None,
     pool: str = "",
 ) -> Callable[[Policy], Policy]:
-    """Register a policy under a name no other method has: its display label (default:
-    the name), its role (`bench.vocabulary.ROLES`), whether it takes the whole pool
-    (then it runs once per scene and seed, as budget 0), the signals it reads (for its
+    """Register a per-view policy under a name no other method has: its display label
+    (default: the name), its role (`bench.vocabulary.ROLES`), whether it takes the whole
+    pool (then it runs once per scene and seed, as budget 0), the signals it reads (for its
     reported cost, and so that `bench select` computes the costly ones), the class of
     its own settings (a `PolicyConfig` subclass; `--set <name>.<field>=value`) and the
     detector whose pool it needs (`Method.pool`; empty: any)."""
-    unknown = [s for s in reads if s not in SIGNALS]
-    if unknown:
-        raise BenchError(
-            f"policy {name} reads unknown signal {unknown[0]!r}; valid: {', '.join(SIGNALS)}"
-        )
+    method = Method(name, label or name, role, whole_pool, tuple(reads), pool)
+    _check_reads(name, reads)
+    return lambda fn: register_policy(method, fn, config)
 
-    def register(fn: Policy) -> Policy:
-        method = Method(name, label or name, role, whole_pool, tuple(reads), pool)
+
+def multiview_policy(
+    name: str,
+    label: str | None = None,
+    role: str = "contender",
+    reads: tuple[str, ...] = (),
+    config: type | None = None,
+) -> Callable[[MultiviewPolicy], MultiviewPolicy]:
+    """Register a multi-view policy (`MULTIVIEW`) under a name no other method has; the
+    arguments as `policy`'s."""
+    _check_reads(name, reads)
+
+    def register(fn: MultiviewPolicy) -> MultiviewPolicy:
+        method = Method(name, label or name, role, reads=tuple(reads), kind=MULTI_VIEW)
         declare_method(method, code=(fn,), settings=config)
-        POLICIES[name] = fn
+        MULTIVIEW[name] = fn
         return fn
 
     return register

@@ -1,6 +1,6 @@
-"""A policy's selection in every view of a scene: the registry's policies view by view
-with a generator seeded per view, or the feedback loop over all views with the back
-end's matcher (passed in: the front end does not import the back end).
+"""A policy's selection in every view of a scene: a per-view policy view by view with a
+generator seeded per view, a multi-view policy over all views with the back end's
+matcher (passed in: the front end does not import the back end).
 
 A policy sees the signals it declares (`@policy(..., reads=...)`) and no other: reading
 another is refused in one line (`bench run` computes every signal, `bench select` only
@@ -14,9 +14,15 @@ from dataclasses import replace
 import numpy as np
 
 from bench import BenchError
-from bench.frontend import feedback, plugins
-from bench.frontend.feedback import Match
-from bench.frontend.policies import PolicyConfig, PolicyInput, check_methods, select
+from bench.frontend.plugins import firewall
+from bench.frontend.policies import (
+    MULTIVIEW,
+    POLICIES,
+    PolicyConfig,
+    PolicyInput,
+    check_methods,
+    select,
+)
 from bench.frontend.signals import SIGNALS, Signals
 from bench.vocabulary import METHODS
 
@@ -47,17 +53,18 @@ def select_views(
     budget: int,
     seed: int,
     cfg: PolicyConfig,
-    match: Match,
+    match,
 ) -> tuple[list[np.ndarray], list[dict]]:
-    """Every view's selection (outside policies registered first), and the feedback
-    loop's rounds (none for other policies); the policy runs behind the ground-truth
-    firewall (`bench.frontend.plugins.firewall`) and reads only the signals it declares."""
-    plugins.load(cfg.modules)
+    """Every view's selection and a multi-view policy's rounds (none for a per-view
+    policy); the policy runs behind the ground-truth firewall
+    (`bench.frontend.plugins.firewall`) and reads only the signals it declares."""
     reads = METHODS[check_methods([policy])[0]].reads
     inputs = [replace(i, signals=DeclaredSignals(i.signals, policy, reads)) for i in inputs]
-    if policy == feedback.NAME:
-        with plugins.firewall():
-            return feedback.feedback_select(inputs, budget, cfg, match)
+    if policy in MULTIVIEW:
+        with firewall():
+            return MULTIVIEW[policy](inputs, budget, cfg, match)
+    if policy not in POLICIES:
+        raise BenchError(f"{policy} is not a selection policy (a reference or a peer)")
     rngs = [policy_rng(seed, policy, budget, i.view.index) for i in inputs]
-    with plugins.firewall():
+    with firewall():
         return [select(policy, i, budget, r, cfg) for i, r in zip(inputs, rngs)], []

@@ -9,7 +9,6 @@ from dataclasses import asdict, dataclass, field, replace
 
 from bench import BenchError
 from bench.backend.matching import BackendConfig, check_matcher
-from bench.frontend import feedback  # noqa: F401 (declares adaptive-loop and its own settings)
 from bench.frontend.features import DetectorConfig
 from bench.frontend.geometry import SignalConfig
 from bench.frontend.policies import PolicyConfig, own_fields, settings_for

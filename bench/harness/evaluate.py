@@ -4,8 +4,8 @@ failure reason if any.
 
 It reads the prediction `bench.harness.predict` stored (selections, verified matches,
 exported models, seconds) and never selects, matches or maps, so `bench run --reevaluate`
-(or a change to a metric alone) re-scores a grid in seconds per unit. A tri model's point
-errors are written beside it (`point_errors.csv`, for Figure 2).
+(or a change to a metric alone) re-scores a grid in seconds per unit. What a task keeps
+beside a model (`TaskRunner.keep`: tri's point errors, for Figure 2) is written here.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import json
 import math
 import sys
 import time
+from collections.abc import Callable
 from functools import cache
 from pathlib import Path
 
@@ -21,9 +22,8 @@ import numpy as np
 import pycolmap
 
 from bench.codehash import code_hash
-from bench.evaluation.metrics import coverage_pct, match_metrics, model_points, point_error
+from bench.evaluation.metrics import coverage_pct, match_metrics
 from bench.evaluation.truth import scene_truth
-from bench.files import atomic_path
 from bench.frontend.colmap_model import read_model
 from bench.frontend.signals import seconds_of
 from bench.frontend.views import Source, source_key
@@ -37,7 +37,7 @@ from bench.harness.predict import (
 )
 from bench.harness.tasks import RUNNERS
 from bench.results import PREDICTION, Workspace
-from bench.vocabulary import CODE, HEADLINE, METHODS, Job, Unit
+from bench.vocabulary import CODE, METHODS, METRICS, Job, Unit
 
 SCORING_CODE = (sys.modules[__name__], scene_truth)
 """Where the scoring's code starts: this module and the loading of the ground truth."""
@@ -51,16 +51,23 @@ def evaluation_hash() -> str:
     return code_hash(SCORING_CODE, cut=(prediction_hash, *methods))
 
 
+Shared = Callable[[LoadedScene, Unit, dict, str, Path], tuple[dict, dict, dict]]
+"""How a kind of method's stored prediction is read back (`bench.harness.methods`): (the
+scene, the unit, its record, a grant, its folder) -> (the metrics the grant's jobs share,
+the seconds of the stages before the task, the stored relative poses of its pairs)."""
+
+
 def evaluate(
-    scene: LoadedScene, unit: Unit, jobs: list[Job], cfg: RunConfig, ws: Workspace
+    scene: LoadedScene, unit: Unit, jobs: list[Job], cfg: RunConfig, ws: Workspace, read: Shared
 ) -> list[dict]:
-    """The rows of `jobs` from the unit's stored prediction (module docstring)."""
+    """The rows of `jobs` from the unit's stored prediction, read back by its kind's
+    `read` (module docstring)."""
     folder = ws.unit_dir(unit)
     record = read_record(folder)
     names = record["names"]
     shared = {}
     for grant in {record["jobs"][j.key]["grant"] for j in jobs}:
-        shared[grant] = _shared(scene, unit, record, grant, folder)
+        shared[grant] = read(scene, unit, record, grant, folder)
     rows, render_s = [], render_seconds(scene.entry)
     for job, ident in zip(jobs, identities(scene.entry, unit, jobs, cfg)):
         done = record["jobs"][job.key]
@@ -68,35 +75,40 @@ def evaluate(
         out = ws.model_dir(unit, job)
         model = pycolmap.Reconstruction(str(out)) if done["model"] else None
         t = time.perf_counter()
-        scores = RUNNERS[job.task].evaluate(scene.truth, model, names, job.protocol, poses)
-        if job.task == HEADLINE[0] and model is not None and scene.truth.surface is not None:
-            _write_point_errors(model, scene, out)
+        runner = RUNNERS[job.task]
+        scores = runner.evaluate(scene.truth, model, names, job.protocol, poses)
+        if runner.keep is not None:
+            runner.keep(model, scene.truth, out)
         timing = seconds | {"task": done["task_s"], "evaluate": time.perf_counter() - t}
         rows.append(make_row(ident, metrics_of | scores, timing, done["failure"], render_s))
     return rows
 
 
-def _shared(scene: LoadedScene, unit: Unit, record: dict, grant: str, folder: Path):
-    """The metrics a grant's jobs share (of the selection and its matches), the seconds of
-    the stages before the task, and the stored relative poses of its verified pairs."""
+def own_pipeline_shared(scene: LoadedScene, unit: Unit, record: dict, grant: str, folder: Path):
+    """`Shared` of a method with a pipeline of its own (stock COLMAP): its keypoints and
+    matches as its database held them."""
+    with np.load(folder / f"{PREDICTION}-{grant}.npz") as arrays:
+        keypoints = [arrays[f"keypoints_{v}"] for v in range(len(record["names"]))]
+        peer = record["peer"]
+        poses = stored_poses(peer.get("pairs", []), arrays)
+    shared = {
+        "tentative_matches": peer["tentative"],
+        "verified_matches": peer["verified"],
+        "inlier_pct": 100.0 * peer["verified"] / peer["tentative"]
+        if peer["tentative"]
+        else math.nan,
+        "coverage_pct": coverage_pct(keypoints, scene.truth.cams),
+        "keypoints_per_view": float(np.mean([len(k) for k in keypoints])),
+        "ground_truth": scene.truth.kind,
+    }
+    return shared, dict(peer["seconds"]), poses
+
+
+def selection_shared(scene: LoadedScene, unit: Unit, record: dict, grant: str, folder: Path):
+    """`Shared` of a method that selects from the pools: the metrics of the selection and
+    its matches (`bench.evaluation.metrics.match_metrics`)."""
     t = time.perf_counter()
     with np.load(folder / f"{PREDICTION}-{grant}.npz") as arrays:
-        if grant == "peer":
-            keypoints = [arrays[f"keypoints_{v}"] for v in range(len(record["names"]))]
-            peer = record["peer"]
-            poses = stored_poses(peer.get("pairs", []), arrays)
-            cams = scene.truth.cams
-            shared = {
-                "tentative_matches": peer["tentative"],
-                "verified_matches": peer["verified"],
-                "inlier_pct": 100.0 * peer["verified"] / peer["tentative"]
-                if peer["tentative"]
-                else math.nan,
-                "coverage_pct": coverage_pct(keypoints, cams),
-                "keypoints_per_view": float(np.mean([len(k) for k in keypoints])),
-                "ground_truth": scene.truth.kind,
-            }
-            return shared, dict(peer["seconds"]), poses
         stored = record["grants"][grant]
         selections = [arrays[f"selection_{v}"] for v in range(len(record["names"]))]
         pairs = stored_pairs(record, grant, arrays)
@@ -113,23 +125,6 @@ def _shared(scene: LoadedScene, unit: Unit, record: dict, grant: str, folder: Pa
         "evaluate_matches": time.perf_counter() - t,
     }
     return shared, seconds, poses
-
-
-def _write_point_errors(model, scene: LoadedScene, out: Path) -> None:
-    """Each point's distance to the ground-truth surface (`point3D_id,error`)."""
-    ids = list(model.points3D)
-    if not ids:
-        return
-    errors = point_error(model_points(model), scene.truth.surface)  # kept from the scores
-    with atomic_path(out / "point_errors.csv") as tmp:
-        np.savetxt(
-            tmp,
-            np.c_[ids, errors],
-            fmt=["%d", "%.6g"],
-            delimiter=",",
-            header="point3D_id,error",
-            comments="",
-        )
 
 
 def identities(entry: Path, unit: Unit, jobs: list[Job], cfg: RunConfig) -> list[dict]:
@@ -174,6 +169,6 @@ def make_row(
         "status": "ok" if failure is None else "failed",
         "failure": failure or "",
     }
-    if failure:
-        row["rmse"] = row["median_error"] = math.nan
+    if failure:  # a failed task's model has no points to measure (`Metric.of_model`)
+        row |= {k: math.nan for k in row if k in METRICS and METRICS[k].of_model}
     return row

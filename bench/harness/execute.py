@@ -33,12 +33,14 @@ from pathlib import Path
 
 from bench import BenchError
 from bench.evaluation.truth import scene_truth
+from bench.frontend import plugins
 from bench.frontend.geometry import RIG
 from bench.frontend.policies import PolicyFailed
 from bench.frontend.stage import FrontEnd, front_end
 from bench.frontend.views import load_views
 from bench.harness.config import RunConfig
 from bench.harness.evaluate import evaluate, identities
+from bench.harness.methods import runner
 from bench.harness.predict import LoadedScene, has_prediction, predict
 from bench.harness.tasks import RUNNERS
 from bench.results import Workspace
@@ -131,19 +133,21 @@ def compute_unit(
 ) -> list[dict]:
     """The rows of one unit: predicted (unless it only re-scores a current prediction),
     then scored; failed rows saying where, if its policy fails."""
-    jobs = list(work.jobs)
+    jobs, run = list(work.jobs), runner(unit.method)
     try:
         if not (work.rescore and has_prediction(ws, unit, jobs, cfg)):
-            predict(scene, unit, jobs, cfg, ws)
+            predict(scene, unit, jobs, cfg, ws, run.store)
     except PolicyFailed as e:
         tasks = ", ".join(getattr(e, "tasks", ())) or "?"
         why = f"{e} in {unit.scene} seed {unit.seed}, task {tasks}"
         return failed_rows(scene.entry, unit, jobs, cfg, why)
-    return evaluate(scene, unit, jobs, cfg, ws)
+    return evaluate(scene, unit, jobs, cfg, ws, run.read)
 
 
 def unit_task(unit: Unit, plan: Plan, cfg: RunConfig, ws: Workspace, *_after) -> list[dict]:
-    """The rows of one unit of a plan (`_after`: what it waits for)."""
+    """The rows of one unit of a plan (`_after`: what it waits for); a worker process
+    registers the policies from outside first."""
+    plugins.load(cfg.policy.modules)
     scene = _scene(plan.entries[unit.group], cfg, ws.renders, plan.grants)
     return compute_unit(scene, unit, plan.work[unit], cfg, ws)
 

@@ -31,14 +31,15 @@ import json
 import shutil
 import sys
 import time
-from dataclasses import dataclass
-from functools import cache
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from functools import cache, partial
 from pathlib import Path
 
 import numpy as np
 
 from bench.backend.matching import PairMatches, match_and_verify, matcher
-from bench.backend.peers import COLMAP_PEERS, backend_for, run_peer
+from bench.backend.peers import run_peer
 from bench.codehash import code_hash
 from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.evaluation.truth import SceneTruth
@@ -51,7 +52,7 @@ from bench.frontend.views import Source
 from bench.harness.config import RunConfig
 from bench.harness.tasks import RUNNERS, Matched
 from bench.results import PREDICTION, Workspace
-from bench.vocabulary import CODE, ORACLE, Job, Unit
+from bench.vocabulary import CODE, METHODS, Job, Unit
 
 
 @dataclass(frozen=True)
@@ -99,41 +100,41 @@ def _own_code_hash(method: str, code: tuple) -> str:
     return code_hash(code, cut=_method_roots(but=method))
 
 
-def prediction_hash(cfg: RunConfig, policy: str) -> str:
-    """The `prediction_hash` of a policy's rows: the shared settings and code, the
-    policy's own settings, code and input files (the learned weights), and for a policy
-    from a module (`--policy-module`, an entry point) its module's content as well."""
-    plugins.load(cfg.policy.modules)
-    own = cfg.policy_config(policy)
+def prediction_hash(cfg: RunConfig, method: str) -> str:
+    """The `prediction_hash` of a method's rows: the shared settings and code, the
+    method's own settings, matcher, code and input files (the learned weights), and for a
+    method from a module (`--policy-module`, an entry point) its module's content as well."""
+    own = cfg.policy_config(method)
     base = content_key(
         {
             "settings": cfg.shared(),
-            "own": cfg.own(policy),
+            "own": cfg.own(method),
+            "matcher": METHODS[method].matcher,
             "code": shared_code_hash(),
-            "method": method_code_hash(policy),
+            "method": method_code_hash(method),
             "inputs": plugins.files_hash(own.inputs()) if hasattr(own, "inputs") else "",
         }
     )
-    origin = plugins.ORIGIN.get(policy)
+    origin = plugins.ORIGIN.get(method)
     return content_key([base, plugins.files_hash([origin])]) if origin else base
 
 
-def select_features(
-    fe: FrontEnd, scene_truth: SceneTruth, unit: Unit, cfg: RunConfig
-) -> tuple[list[np.ndarray], float, list[dict]]:
-    """Every view's selection, the seconds it took, and the feedback loop's rounds."""
-    t = time.perf_counter()
-    if unit.method == ORACLE:
-        found = matchable_tracks(scene_truth, fe.pools, cfg.backend.ratio)
-        sel = oracle_select(found, [c.response for c in fe.pools], unit.budget)
-        rounds = []
-    else:
-        inputs = [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
-        match = matcher([v.camera for v in fe.views], fe.pools, cfg.backend, cfg.detector.detector)
-        sel, rounds = select_views(
-            unit.method, inputs, unit.budget, unit.seed, cfg.policy_config(unit.method), match
-        )
-    return sel, time.perf_counter() - t, rounds
+Selection = tuple[list[np.ndarray], list[dict]]
+"""Every view's selection (indices into its pool) and a multi-view policy's rounds."""
+
+
+def policy_selection(fe: FrontEnd, truth: SceneTruth, unit: Unit, cfg: RunConfig) -> Selection:
+    """A policy's selection (`bench.frontend.selection`; it never sees `truth`)."""
+    inputs = [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
+    match = matcher([v.camera for v in fe.views], fe.pools, cfg.backend, cfg.detector.detector)
+    policy_cfg = cfg.policy_config(unit.method)
+    return select_views(unit.method, inputs, unit.budget, unit.seed, policy_cfg, match)
+
+
+def oracle_selection(fe: FrontEnd, truth: SceneTruth, unit: Unit, cfg: RunConfig) -> Selection:
+    """The ground-truth selection (`bench.evaluation.oracle`): a reference."""
+    found = matchable_tracks(truth, fe.pools, cfg.backend.ratio)
+    return oracle_select(found, [c.response for c in fe.pools], unit.budget), []
 
 
 MODEL_FILES = ("cameras.txt", "images.txt", "points3D.txt", "rigs.txt", "frames.txt", "points.ply")
@@ -174,27 +175,40 @@ def _export_or_clear(model, out: Path) -> None:
         clear_model(out)
 
 
-def predict(scene: LoadedScene, unit: Unit, jobs: list[Job], cfg: RunConfig, ws: Workspace) -> None:
-    """Compute and store the prediction of `unit` for `jobs` (module docstring)."""
+Store = Callable[[LoadedScene, Unit, list[Job], RunConfig, Workspace, dict], None]
+"""How a kind of method computes and stores a unit's prediction, filling its record
+(`bench.harness.methods`)."""
+
+
+def predict(
+    scene: LoadedScene, unit: Unit, jobs: list[Job], cfg: RunConfig, ws: Workspace, store: Store
+) -> None:
+    """Compute and store the prediction of `unit` for `jobs` with its kind's `store`
+    (module docstring)."""
     folder = ws.unit_dir(unit)
     folder.mkdir(parents=True, exist_ok=True)
     record = {"hash": prediction_hash(cfg, unit.method), "grants": {}, "jobs": {}}
     earlier = read_record(folder)
     if earlier.get("hash") == record["hash"]:
         record |= {k: earlier[k] for k in ("grants", "jobs", "peer") if k in earlier}
-    if unit.method in COLMAP_PEERS:
-        _predict_peer(scene, unit, jobs, cfg, ws, record)
-    else:
-        _predict_policy(scene, unit, jobs, cfg, ws, record)
+    store(scene, unit, jobs, cfg, ws, record)
     write_text_atomic(folder / f"{PREDICTION}.json", json.dumps(record, indent=1))
 
 
-def _predict_policy(scene, unit, jobs, cfg, ws, record) -> None:
+def store_selection(select: Callable[..., Selection]) -> Store:
+    """The `Store` of a method that selects from the pools with `select` (a policy, the
+    oracle): the selection matched and verified by the back end, then each job's task."""
+    return partial(_store_selection, select=select)
+
+
+def _store_selection(scene, unit, jobs, cfg, ws, record, select) -> None:
     folder, matched = ws.unit_dir(unit), {}
     for grant in dict.fromkeys(RUNNERS[j.task].spec.grant for j in jobs):
         fe = scene.fronts[grant]
         try:
-            selections, select_s, rounds = select_features(fe, scene.truth, unit, cfg)
+            t = time.perf_counter()
+            selections, rounds = select(fe, scene.truth, unit, cfg)
+            select_s = time.perf_counter() - t
         except PolicyFailed as e:
             e.tasks = tuple(
                 dict.fromkeys(j.task for j in jobs if RUNNERS[j.task].spec.grant == grant)
@@ -205,7 +219,9 @@ def _predict_policy(scene, unit, jobs, cfg, ws, record) -> None:
         if key not in matched:
             desc = [c.descriptors[s] for c, s in zip(fe.pools, selections)]
             cams = [v.camera for v in fe.views]
-            backend = backend_for(unit.method, cfg.backend)
+            backend = cfg.backend
+            if METHODS[unit.method].matcher:
+                backend = replace(backend, matcher=METHODS[unit.method].matcher)
             matched[key] = match_and_verify(cams, xy, desc, backend, cfg.detector.detector)
         pairs, match_s = matched[key]
         record["names"] = [v.name for v in fe.views]
@@ -243,8 +259,8 @@ def _predict_policy(scene, unit, jobs, cfg, ws, record) -> None:
             write_text_atomic(loop / "loop.json", json.dumps(rounds, indent=1))
 
 
-def _predict_peer(scene, unit, jobs, cfg, ws, record) -> None:
-    """A peer maps its own database for a task that maps (`TaskRunner.maps`); a task that
+def store_own_pipeline(scene, unit, jobs, cfg, ws, record) -> None:
+    """The `Store` of a method with a pipeline of its own (stock COLMAP): it maps its own database for a task that maps (`TaskRunner.maps`); a task that
     does not is given the peer's keypoints and verified pairs, with their poses."""
     fe = next(iter(scene.fronts.values()))
     names, cams = [v.name for v in fe.views], [v.camera for v in fe.views]

@@ -27,12 +27,13 @@ from bench.backend.matching import matcher
 from bench.backend.reconstruction import camera_ids, write_database
 from bench.console import log
 from bench.files import atomic_path
-from bench.frontend import feedback, plugins
-from bench.frontend.policies import POLICIES, PolicyInput, check_methods
+from bench.frontend import plugins
+from bench.frontend.policies import PolicyInput, check_methods
 from bench.frontend.selection import select_views
 from bench.frontend.stage import compute
 from bench.frontend.views import View, load_image_folder
 from bench.harness.config import RunConfig
+from bench.harness.methods import runner
 from bench.vocabulary import METHODS
 
 
@@ -67,7 +68,7 @@ def select_to_database(request: SelectRequest, out: Path, seconds: dict | None =
         )
     plugins.load(cfg.policy.modules)
     check_methods([policy])
-    if policy not in POLICIES and policy != feedback.NAME:
+    if not runner(policy).photos:
         raise BenchError(f"{policy} is not a selection policy; valid: a policy of `bench run`")
     t = time.perf_counter()
     views = load_image_folder(request.images, request.cameras)

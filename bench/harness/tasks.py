@@ -31,12 +31,13 @@ from bench.backend.reconstruction import (
     mapping_task,
 )
 from bench.camera import Camera
-from bench.evaluation.metrics import evaluate_known_pose
+from bench.evaluation.metrics import evaluate_known_pose, model_points, point_error
 from bench.evaluation.poses import evaluate_mapping
-from bench.evaluation.relative import AUC_THRESHOLDS_DEG, RelativePoses, evaluate_pairs
+from bench.evaluation.relative import RelativePoses, evaluate_pairs
 from bench.evaluation.truth import SceneTruth
+from bench.files import atomic_path
 from bench.frontend.geometry import IMAGES, RIG
-from bench.vocabulary import AT_LEAST_0, FRACTION, PROTOCOLS, Task, declare_task
+from bench.vocabulary import PROTOCOLS, Task, declare_task
 
 
 @dataclass(frozen=True)
@@ -67,6 +68,9 @@ class TaskRunner:
     """Whether it runs COLMAP's incremental mapper: a stock-COLMAP peer maps its own
     database for it (`bench.backend.peers.run_peer`); a peer gives a task that does not
     its keypoints and verified pairs (`Matched`), as a policy does."""
+    keep: Callable[[object, SceneTruth, Path], None] | None = None
+    """What the scoring writes beside a job's exported model (the model, the truth, the
+    model's folder); None: nothing."""
 
 
 RUNNERS: dict[str, TaskRunner] = {}
@@ -81,7 +85,29 @@ def view_of_name(names: list[str]) -> dict[str, int]:
     return {name: k for k, name in enumerate(names)}
 
 
-TRI_COLUMNS = (
+POINT_ERRORS = "point_errors.csv"
+"""Beside a tri model: each point's distance to the ground-truth surface (Figure 2)."""
+
+
+def write_point_errors(model, truth: SceneTruth, out: Path) -> None:
+    """Each point's distance to the ground-truth surface (`point3D_id,error`), where there
+    are points and a surface."""
+    ids = list(model.points3D) if model is not None else []
+    if not ids or truth.surface is None:
+        return
+    errors = point_error(model_points(model), truth.surface)
+    with atomic_path(out / POINT_ERRORS) as tmp:
+        np.savetxt(
+            tmp,
+            np.c_[ids, errors],
+            fmt=["%d", "%.6g"],
+            delimiter=",",
+            header="point3D_id,error",
+            comments="",
+        )
+
+
+TRI_METRICS = (
     "rmse",
     "acc_completeness_pct",
     "completeness_vs_oracle_pct",
@@ -107,7 +133,7 @@ TRI_COLUMNS = (
     "runtime_robust",
     "task_ms",
 )
-SFM_COLUMNS = (
+SFM_METRICS = (
     "maa",
     "keypoints_per_view",
     "registered_views",
@@ -129,21 +155,20 @@ register(
             "tri",
             RIG,
             needs=("points", "acc_completeness_pct"),
-            columns=TRI_COLUMNS,
+            metrics=TRI_METRICS,
             doc="known poses, scored against the ground-truth surface",
             headline=("acc_completeness_pct", "accuracy_pct", "rmse", "median_error"),
-            lower_better=("rmse", "median_error", "runtime_proxy", "wall_ms", "task_ms"),
             summary=("acc_completeness_pct", "accuracy_pct", "rmse", "points", "coverage_pct"),
-            titles={
-                "acc_completeness_pct": "Acc. completeness % (e < 0.10)",
-                "completeness_vs_oracle_pct": "Completeness, % of the oracle's",
-                "accuracy_pct": "Accuracy % (points with e < 0.10)",
-                "rmse": "RMSE (scene units)",
-                "median_error": "Median error (scene units)",
-                "inlier_pct": "Inlier %",
-                "coverage_pct": "Coverage %",
-                "runtime_proxy": "Runtime proxy (k ops)",
-            },
+            drawn=(
+                "acc_completeness_pct",
+                "completeness_vs_oracle_pct",
+                "accuracy_pct",
+                "rmse",
+                "median_error",
+                "inlier_pct",
+                "coverage_pct",
+                "runtime_proxy",
+            ),
         ),
         reconstruct=lambda m, cfg, protocol: known_pose_task(
             m.image_dir, m.cams, m.names, m.xy, m.pairs, cfg, protocol
@@ -152,6 +177,7 @@ register(
             truth, model, PROTOCOLS[protocol]
         ),
         record=lambda m: known_pose_model(m.cams, m.names, m.xy),
+        keep=write_point_errors,
     )
 )
 register(
@@ -160,21 +186,12 @@ register(
             "sfm",
             IMAGES,
             needs=("maa", "registered_views"),
-            columns=SFM_COLUMNS,
+            metrics=SFM_METRICS,
             peers=True,
             doc="unknown poses, scored by pose mAA",
             headline=("maa",),
-            lower_better=(
-                "rmse",
-                "median_error",
-                "median_pose_err_deg",
-                "cam_center_err",
-                "mean_reproj_px",
-                "wall_ms",
-                "task_ms",
-            ),
             summary=("maa", "registered_views"),
-            titles={"maa": "SfM pose mAA (1-10 deg), unknown poses"},
+            drawn=("maa",),
             exclusion_reference=True,
         ),
         reconstruct=lambda m, cfg, protocol: mapping_task(
@@ -198,7 +215,7 @@ def relative_poses(m: Matched, cfg: BackendConfig, protocol: str) -> Reconstruct
     return Reconstruction(None, None, 0.0)
 
 
-PAIRS_COLUMNS = (
+PAIRS_METRICS = (
     "auc_5",
     "auc_10",
     "auc_20",
@@ -216,24 +233,12 @@ register(
             "pairs",
             IMAGES,
             needs=("auc_10", "maa_pairs", "pairs_scored"),
-            columns=PAIRS_COLUMNS,
+            metrics=PAIRS_METRICS,
             peers=True,
             doc="relative poses of the verified pairs, scored by pose AUC",
-            ranges={
-                **{f"auc_{t}": FRACTION for t in AUC_THRESHOLDS_DEG},
-                "maa_pairs": FRACTION,
-                "pairs_scored": AT_LEAST_0,
-                "pairs_estimated": AT_LEAST_0,
-            },
             headline=("auc_10", "auc_5", "auc_20", "maa_pairs"),
-            lower_better=("median_pose_err_deg", "wall_ms", "task_ms"),
             summary=("auc_10", "maa_pairs", "pairs_estimated"),
-            titles={
-                "auc_10": "Relative-pose AUC @10 deg, unknown poses",
-                "auc_5": "Relative-pose AUC @5 deg",
-                "auc_20": "Relative-pose AUC @20 deg",
-                "maa_pairs": "Relative-pose mAA (1-10 deg)",
-            },
+            drawn=("auc_10", "auc_5", "auc_20", "maa_pairs"),
         ),
         reconstruct=relative_poses,
         evaluate=lambda truth, model, names, protocol, poses: evaluate_pairs(truth, poses),

@@ -19,7 +19,17 @@ from matplotlib.ticker import FixedLocator, NullLocator  # noqa: E402
 
 from bench.files import atomic_path  # noqa: E402
 from bench.results import Workspace  # noqa: E402
-from bench.vocabulary import HEADLINE, HEADLINE_BUDGET, ORACLE, Job, Unit, Vocabulary  # noqa: E402
+from bench.vocabulary import (  # noqa: E402
+    FIGURE_SCENE,
+    GROUND_TRUTH,
+    HEADLINE,
+    HEADLINE_BUDGET,
+    HEADLINE_POLICY,
+    PER_VIEW,
+    Job,
+    Unit,
+    Vocabulary,
+)
 
 LOG_SCALE = {"runtime_proxy", "rmse"}
 
@@ -115,12 +125,13 @@ def figure_budget(t1: pd.DataFrame, vocab: Vocabulary, out: Path) -> None:
         if m not in t1:
             ax.set_visible(False)
             continue
-        curves = [p for p in t1.loc[t1["budget"] > 0, "method"].unique() if p != ORACLE]
+        truth = vocab.with_kind(GROUND_TRUTH)
+        curves = [p for p in t1.loc[t1["budget"] > 0, "method"].unique() if p not in truth]
         for policy, g in t1[t1["budget"] > 0].groupby("method", sort=False):
             g = g.sort_values("budget")
             style = (
                 {"linestyle": ":", "color": "black", "marker": "o"}
-                if policy == ORACLE
+                if policy in truth
                 else _line_style(curves.index(policy))
             )
             line = ax.plot(g["budget"], g[m], label=g["strategy"].iloc[0], **style)
@@ -129,7 +140,7 @@ def figure_budget(t1: pd.DataFrame, vocab: Vocabulary, out: Path) -> None:
             )
         for policy, ref in t1[t1["budget"] == 0].groupby("method", sort=False):
             if np.isfinite(ref[m].iloc[0]):
-                style = "--" if policy == "all" else "-."
+                style = "--" if policy in vocab.with_kind(PER_VIEW) else "-."
                 ax.axhline(
                     ref[m].iloc[0], color="gray", linestyle=style, label=ref["strategy"].iloc[0]
                 )
@@ -182,29 +193,29 @@ def read_text_model(folder: Path) -> tuple[dict, np.ndarray, np.ndarray]:
 
 
 def figure2_expected(df: pd.DataFrame) -> bool:
-    """Whether the rows ask for Figure 2 (they hold adaptive on table), so that not drawing
-    it is worth saying."""
-    return bool(((df["scene"] == "table") & (df["method"] == "adaptive")).any())
+    """Whether the rows ask for Figure 2 (they hold the headline method on the figure's
+    scene), so that not drawing it is worth saying."""
+    return bool(((df["scene"] == FIGURE_SCENE) & (df["method"] == HEADLINE_POLICY)).any())
 
 
 def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | None:
-    """Two views of `table` with the adaptive selection, and its sparse points coloured by
-    their error (`point_errors.csv`, written by the evaluation). Returns why it could not
-    be drawn, or None."""
+    """Two views of the figure's scene (`FIGURE_SCENE`) with the headline method's
+    selection, and its sparse points coloured by their error (`POINT_ERRORS`, written by
+    the evaluation). Returns why it could not be drawn, or None."""
     rows = df[
-        (df["scene"] == "table")
-        & (df["method"] == "adaptive")
+        (df["scene"] == FIGURE_SCENE)
+        & (df["method"] == HEADLINE_POLICY)
         & (df["task"] == HEADLINE[0])
         & (df["protocol"] == HEADLINE[1])
     ]
     if rows.empty:
         return (
-            "it shows the points of the known-pose (tri) task of adaptive on table under "
-            "the multiview protocol, and runs.csv holds none"
+            f"it shows the points of the {HEADLINE[0]} task of {HEADLINE_POLICY} on "
+            f"{FIGURE_SCENE} under the {HEADLINE[1]} protocol, and runs.csv holds none"
         )
     rows = rows.assign(off=(rows["budget"] - HEADLINE_BUDGET).abs()).sort_values(["off", "seed"])
     r = rows.iloc[0]
-    unit = Unit("table", int(r["seed"]), "adaptive", int(r["budget"]))
+    unit = Unit(FIGURE_SCENE, int(r["seed"]), HEADLINE_POLICY, int(r["budget"]))
     model_dir = Workspace(results, renders).model_dir(unit, Job(*HEADLINE))
     entry = renders / r["render_key"]
     if not (model_dir / "images.txt").is_file() or not entry.is_dir():
@@ -231,7 +242,7 @@ def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | 
             label="selected",
         )
         ax.scatter(*xy[tri].T, s=8, c="red", label="selected and triangulated")
-        ax.set_title(f"{name}: {len(xy)} adaptive features", fontsize=10)
+        ax.set_title(f"{name}: {len(xy)} {HEADLINE_POLICY} features", fontsize=10)
         ax.axis("off")
         if k == 0:
             ax.legend(loc="lower left", fontsize=8)
@@ -246,7 +257,8 @@ def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | 
         fig.colorbar(sc, ax=ax, shrink=0.6, label="point error (scene units, clipped at 0.2)")
         ax.view_init(elev=25, azim=-100)
     ax.set_title(
-        f"{len(X)} sparse points (table, seed {r['seed']}, budget {r['budget']})", fontsize=10
+        f"{len(X)} sparse points ({FIGURE_SCENE}, seed {r['seed']}, budget {r['budget']})",
+        fontsize=10,
     )
     fig.tight_layout()
     save(fig, out, ("png",))

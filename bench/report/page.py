@@ -24,7 +24,7 @@ page shows; the CSV has them all."""
 FIGURES = {
     "figure3.png": "Headline metrics per method at the headline budget, 95% intervals",
     "figure_budget.png": "Each headline metric against the budget",
-    "figure2.png": "Figure 2: the adaptive selection and its points coloured by error",
+    "figure2.png": f"Figure 2: the {HEADLINE_POLICY} selection and its points coloured by error",
     "figure_transfer.png": "The rendered ranking against each dataset's",
 }
 
@@ -102,7 +102,7 @@ def _table1_section(t1: pd.DataFrame, vocab: Vocabulary, title: str) -> list[str
     out = [f"## {title}", ""]
     for task in vocab.tasks.values():
         prefix = "" if task.name == HEADLINE[0] else f"{task.name}_"
-        cols = [prefix + c for c in task.columns[:TASK_COLUMNS] if prefix + c in t1]
+        cols = [prefix + c for c in task.metrics[:TASK_COLUMNS] if prefix + c in t1]
         rows = t1.dropna(subset=cols, how="all") if cols else t1.iloc[0:0]
         if rows.empty:
             continue

@@ -48,9 +48,9 @@ import pandas as pd
 from bench.report.stats import paired_difference, stratified_interval
 from bench.summary import exclusion_rule
 from bench.vocabulary import (
+    GROUND_TRUTH,
     HEADLINE,
     HEADLINE_POLICY,
-    ORACLE,
     PAIRED_PEERS,
     REFERENCE_MAPS,
     UNIT_KEY,
@@ -77,7 +77,7 @@ def headline_frame(
     rows = df[df["protocol"] == protocol]
     frame = rows[rows["task"] == HEADLINE[0]].drop(columns=REFERENCE_MAPS, errors="ignore")
     for task in (t for t in vocab.tasks if t != HEADLINE[0]):
-        cols = [c for c in (*vocab.tasks[task].columns, "status") if c in df]
+        cols = [c for c in (*vocab.tasks[task].metrics, "status") if c in df]
         part = rows[rows["task"] == task][UNIT + cols]
         frame = frame.merge(
             part.rename(columns={c: f"{task}_{c}" for c in cols}), on=UNIT, how="outer"
@@ -103,17 +103,22 @@ def solvable(rows: pd.DataFrame, metric: str, vocab: Vocabulary) -> pd.DataFrame
     return part[rows[REFERENCE_MAPS].ne(0)]
 
 
-def with_oracle_share(df: pd.DataFrame) -> pd.DataFrame:
-    """Add `completeness_vs_oracle_pct` (NaN where there is no oracle run or it is 0, or
-    no task of the rows measures completeness)."""
-    if "acc_completeness_pct" not in df:
-        return df.assign(completeness_vs_oracle_pct=math.nan)
+def with_shares(df: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
+    """Add the report's own metrics (`Metric.share_of`, `completeness_vs_oracle_pct`): a
+    run's metric as a percentage of the ground-truth method's in the same cell (NaN where
+    that did not run or is 0, or the rows do not measure the metric)."""
     keys = ["scene", "seed", "budget", "task", "protocol"]
-    oracle = df[df["method"] == ORACLE].set_index(keys)["acc_completeness_pct"]
-    ref = np.array([oracle.get(k, math.nan) for k in df.set_index(keys).index], dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        share = 100.0 * df["acc_completeness_pct"].to_numpy(dtype=float) / ref
-    return df.assign(completeness_vs_oracle_pct=np.where(ref > 0, share, math.nan))
+    truth = df["method"].isin(vocab.with_kind(GROUND_TRUTH))
+    for share, of in vocab.shares().items():
+        if of not in df:
+            df = df.assign(**{share: math.nan})
+            continue
+        ref = df[truth].set_index(keys)[of]
+        ref = np.array([ref.get(k, math.nan) for k in df.set_index(keys).index], dtype=float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            value = 100.0 * df[of].to_numpy(dtype=float) / ref
+        df = df.assign(**{share: np.where(ref > 0, value, math.nan)})
+    return df
 
 
 def _within(lo: float, hi: float, bounds) -> tuple[float, float]:
@@ -129,8 +134,7 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     as strata (`rows`: `headline_frame`, or the rows of one task and protocol)."""
     out = []
     others = [t for t in vocab.tasks if t != HEADLINE[0]]
-    metrics = [*vocab.tasks[HEADLINE[0]].columns]
-    metrics += [vocab.column(t, m) for t in others for m in vocab.tasks[t].columns]
+    metrics = [c for t in (HEADLINE[0], *others) for c in vocab.columns(t)]
     summaries = {}  # (metric, method, budget): (mean, lo, hi, note, whether any value)
     for m in (m for m in metrics if m in rows):
         for (policy, budget), x in solvable(rows, m, vocab).groupby(["method", "budget"]):
@@ -222,7 +226,7 @@ def paired_sfm(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     every contender (and the oracle) minus every baseline. Cells stock COLMAP does not
     map are left out (`solvable`)."""
     present = list(pd.unique(rows["method"]))
-    ranked = {*vocab.with_role("baseline", "contender"), ORACLE}
+    ranked = {*vocab.with_role("baseline", "contender"), *vocab.with_kind(GROUND_TRUTH)}
     policies = [p for p in present if p in ranked]
     pairs = [(p, peer) for peer in PAIRED_PEERS if peer in present for p in policies]
     bases = [p for p in present if p in vocab.with_role("baseline")]
@@ -252,7 +256,7 @@ def table2(rows: pd.DataFrame, pairs: pd.DataFrame, vocab: Vocabulary) -> pd.Dat
             )
             row = {"scene": scope, "budget": budget}
             for m in (m for m in metrics if m in means):
-                row[f"adaptive_{m}"] = means[m].get(HEADLINE_POLICY, math.nan)
+                row[f"{HEADLINE_POLICY}_{m}"] = means[m].get(HEADLINE_POLICY, math.nan)
                 baselines = vocab.with_role("baseline")
                 base = means.loc[[p for p in baselines if p in means.index], m].dropna()
                 best = (base.idxmin() if m in lower else base.idxmax()) if len(base) else ""
@@ -270,7 +274,11 @@ def table2(rows: pd.DataFrame, pairs: pd.DataFrame, vocab: Vocabulary) -> pd.Dat
                 row[f"diff_{m}_hi"] = r.get("hi", math.nan)
                 row[f"diff_{m}_note"] = r.get("note", "")
                 row[f"diff_{m}_wtl"] = f"{r['wins']}/{r['ties']}/{r['losses']}" if len(p) else ""
-            row["oracle_acc_completeness_pct"] = means["acc_completeness_pct"].get(ORACLE, math.nan)
+            for truth in vocab.with_kind(GROUND_TRUTH):  # the reference of the shares
+                for of in dict.fromkeys(vocab.shares().values()):
+                    row[f"{truth}_{of}"] = (
+                        means[of].get(truth, math.nan) if of in means else math.nan
+                    )
             out.append(row)
     t = pd.DataFrame(out)
     # the column name Table 2 has had since its first version

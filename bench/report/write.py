@@ -42,7 +42,7 @@ from bench.report.tables import (
     table1,
     table2,
     table_scenes,
-    with_oracle_share,
+    with_shares,
 )
 from bench.report.transfer import transfer_regimes
 from bench.results import read_runs
@@ -71,7 +71,7 @@ def write_report(
     the rendered results folders `rendered`; last, the folder's page."""
     results = Path(results)
     vocab = Vocabulary.load(results)
-    df = with_oracle_share(df)
+    df = with_shares(df, vocab)
     t1 = write_tables(df, results, vocab)
     if is_dataset_run(results):
         _write_transfer(df, vocab, results, rendered)

@@ -1,0 +1,82 @@
+"""One runner per kind of method (`bench.vocabulary.KINDS`): how a unit of the kind is
+predicted and stored (`bench.harness.predict`), how its stored prediction is read back for
+scoring (`bench.harness.evaluate`), and whether `bench select` can run it on photographs.
+Every dispatch on a method goes through its declared kind (`runner`): no module compares
+a method's name.
+
+The package's methods are declared by the modules of `DECLARED_IN` (imported here, so
+every entry point that runs methods has them); a method from outside is declared by a
+policy module or an entry point (`bench.frontend.plugins`). A package that brings a new
+kind of method declares it (`bench.vocabulary.declare_kind`) and registers its runner
+here (`register_kind`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from bench import BenchError
+from bench.backend import peers
+from bench.evaluation import oracle
+from bench.frontend import feedback, policies
+from bench.harness.evaluate import Shared, own_pipeline_shared, selection_shared
+from bench.harness.predict import (
+    Store,
+    oracle_selection,
+    policy_selection,
+    store_own_pipeline,
+    store_selection,
+)
+from bench.vocabulary import (
+    GROUND_TRUTH,
+    KINDS,
+    METHODS,
+    MULTI_VIEW,
+    OWN_PIPELINE,
+    PER_VIEW,
+    Vocabulary,
+)
+
+DECLARED_IN = (policies, feedback, peers, oracle)
+"""The modules that declare the package's methods."""
+
+
+@dataclass(frozen=True)
+class KindRunner:
+    """How the units of one kind of method run."""
+
+    store: Store
+    """Compute and store a unit's prediction (`bench.harness.predict.predict`)."""
+    read: Shared
+    """Read it back for scoring (`bench.harness.evaluate.evaluate`)."""
+    photos: bool = False
+    """Whether `bench select` runs it on photographs (it needs neither ground truth nor a
+    pipeline of its own)."""
+
+
+RUNNERS: dict[str, KindRunner] = {}
+
+
+def register_kind(kind: str, runner: KindRunner) -> None:
+    """The runner of a declared kind (one per kind)."""
+    if kind not in KINDS:
+        raise BenchError(f"kind {kind!r} is not declared (bench.vocabulary.declare_kind)")
+    if kind in RUNNERS:
+        raise BenchError(f"kind {kind!r} has a runner already")
+    RUNNERS[kind] = runner
+
+
+def declared() -> Vocabulary:
+    """The package's vocabulary: every method, task and metric it declares."""
+    return Vocabulary.current()
+
+
+def runner(method: str) -> KindRunner:
+    """The runner of a declared method's kind."""
+    return RUNNERS[METHODS[method].kind]
+
+
+register_kind(PER_VIEW, KindRunner(store_selection(policy_selection), selection_shared, True))
+register_kind(MULTI_VIEW, KindRunner(store_selection(policy_selection), selection_shared, True))
+register_kind(GROUND_TRUTH, KindRunner(store_selection(oracle_selection), selection_shared))
+register_kind(OWN_PIPELINE, KindRunner(store_own_pipeline, own_pipeline_shared))
