@@ -672,6 +672,31 @@ def test_a_rerun_that_does_nothing_keeps_the_manifest_timings(quick_results, ren
     assert inv["rows"] == inv["rows_now"] == ROWS and set(runs["invocation"]) == {inv["id"]}
 
 
+def test_the_manifest_names_whichever_distribution_provides_a_module(
+    quick_results, renders_dir, tmp_path, monkeypatch
+):
+    """OpenCV from another distribution, pycolmap from none: the run still ends well."""
+    from importlib.metadata import PackageNotFoundError, packages_distributions, version
+
+    provided = {**packages_distributions(), "cv2": ["opencv-python-headless"]}
+    del provided["pycolmap"]
+
+    def installed(name):
+        if name == "opencv-python-headless":
+            return "5.0.0.1"
+        if name in ("opencv-contrib-python-headless", "pycolmap"):
+            raise PackageNotFoundError(name)
+        return version(name)
+
+    monkeypatch.setattr(harness, "packages_distributions", lambda: provided, raising=False)
+    monkeypatch.setattr(harness, "version", installed)
+    shutil.copytree(quick_results, tmp_path / "r")
+    bench_run(SMALL, tmp_path / "r", renders_dir)
+    versions = json.loads((tmp_path / "r" / "manifest.json").read_text())["versions"]
+    assert versions["cv2"] == "opencv-python-headless 5.0.0.1"
+    assert versions["pycolmap"] == "unknown" and versions["numpy"] == version("numpy")
+
+
 def test_figures_state_nothing_impossible(quick_results, tmp_path, renders_dir, monkeypatch):
     runs = read_runs(quick_results / "runs.csv")
     t1 = pd.read_csv(quick_results / "table1.csv")
