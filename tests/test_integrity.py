@@ -85,13 +85,15 @@ def test_a_hand_edited_metric_is_refused_by_plot_publish_and_a_resumed_run(
     )
     where += "multiview): its values do not match its row_checksum"
     assert main(["plot", "--results", str(r), "--renders", str(renders_dir)]) == 2
-    assert where in _one_line(capsys)
+    said = _one_line(capsys)  # what is wrong and the remedy; plot publishes nothing anyway
+    assert where in said and "published" not in said
+    assert f"`bench run --reevaluate --results {r}` (with the grid it holds)" in said
     assert (r / "table1.csv").read_bytes() == before  # nothing rewritten from it
     assert main(["publish", "--results", str(r), "--to", str(tmp_path / "p")]) == 2
     assert where in _one_line(capsys) and not (tmp_path / "p" / "runs.csv").exists()
     with pytest.raises(BenchError, match="do not match its row_checksum") as e:
         bench_run(GRID, r, renders_dir)
-    assert "--reevaluate` scores altered rows again" in str(e.value)
+    assert f"--reevaluate --results {r}` (with the grid it holds) scores altered" in str(e.value)
     predicted = []
     real = execute.predict
     monkeypatch.setattr(execute, "predict", lambda *a: predicted.append(a) or real(*a))
