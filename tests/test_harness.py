@@ -471,6 +471,31 @@ def test_run_bad_input_is_one_clear_line(argv, message, tmp_path, capsys):
     assert not (tmp_path / "r").exists()
 
 
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["run", "--results", "{file}"],
+        ["run", "--results", "{file}/sub"],
+        ["run", "--renders", "{file}"],
+        ["plot", "--results", "{file}"],
+        ["publish", "--results", "{file}"],
+        ["publish", "--to", "{file}"],
+        ["upgrade", "--results", "{file}"],
+        ["export", "table", "--out", "{file}"],
+    ],
+)
+def test_a_file_where_a_folder_belongs_is_named(argv, tmp_path, capsys):
+    """`--results FILE` said only `File exists` (or that runs.csv was not found)."""
+    file = tmp_path / "notes.txt"
+    file.write_text("mine\n")
+    with pytest.raises(SystemExit) as e:
+        raise SystemExit(main([a.format(file=file) for a in argv]))
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 2 and len(err) == 1
+    assert f"{argv[-2]}: {file}" in err[0] and "is a file; give a folder" in err[0]
+    assert file.read_text() == "mine\n" and os.listdir(tmp_path) == ["notes.txt"]
+
+
 def test_version_names_the_distribution(capsys):
     with pytest.raises(SystemExit) as e:
         main(["--version"])

@@ -3,9 +3,15 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from bench.cli.common import LATEST, PUBLISHED, regime_arg, regime_folder, results_arg
+from bench.cli.common import (
+    LATEST,
+    PUBLISHED,
+    folder,
+    regime_arg,
+    regime_folder,
+    results_arg,
+)
 
 HELP = "copy a results folder's runs, tables and figures into the published snapshot"
 DESCRIPTION = (
@@ -22,7 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     results_arg(parser, None, f"results folder to publish (default: ./{LATEST}, or ./{dense[0]})")
     parser.add_argument(
         "--to",
-        type=Path,
+        type=folder,
         default=None,
         help=f"snapshot folder (default: ./{PUBLISHED}, or ./{dense[1]})",
     )
