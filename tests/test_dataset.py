@@ -365,7 +365,7 @@ def test_a_dataset_whose_contents_changed_is_computed_again(
     medium_entry, renders_dir, tmp_path, capsys
 ):
     """A dataset is keyed by its content: a facade export replacing a table export in the
-    same folder is computed again (the table's rows were reused: "0 to do")."""
+    same folder is computed again (the table's rows were reused: "0 to compute")."""
     ds = tmp_path / "D"
     export_dataset(medium_entry("table"), ds)
     argv = ["run", "--dataset", str(ds), "--methods", "texture", "--budget", "64", "--tasks"]

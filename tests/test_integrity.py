@@ -103,6 +103,20 @@ def test_a_hand_edited_metric_is_refused_by_plot_publish_and_a_resumed_run(
     assert fixed == pytest.approx(float(old)) and (r / "table1.csv").read_bytes() == before
 
 
+def test_reevaluate_says_it_scores_rows_again_not_that_it_does_them(
+    small_run, renders_dir, tmp_path, capsys
+):
+    """`--reevaluate` said "0 of 2 rows already in ...; 2 to do, 2 of them scored again"."""
+    r = tmp_path / "r"
+    shutil.copytree(small_run, r)
+    bench_run(GRID, r, renders_dir, reevaluate=True)
+    said = capsys.readouterr().err
+    line = f"0 of 2 rows already in {r / 'runs.csv'}; 2 rows to score again from their stored "
+    assert line + "predictions\n" in said and "to do" not in said
+    bench_run(dataclasses.replace(GRID, methods=("texture", "grid", "random")), r, renders_dir)
+    assert f"2 of 3 rows already in {r / 'runs.csv'}; 1 to compute\n" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("value", ["150", "-5"])
 @pytest.mark.parametrize("reseal", [False, True])
 def test_a_percentage_outside_0_to_100_is_refused(small_run, tmp_path, capsys, value, reseal):

@@ -297,10 +297,9 @@ def _run_in(
         0.0,
     )
     n_again = sum(len(w.jobs) for w in work.values() if w.rescore)
-    log(
-        f"{len(done)} of {len(done) + n_rows} rows already in {ws.runs_csv}; {n_rows} to do"
-        + (f", {n_again} of them scored again from stored predictions" if n_again else "")
-    )
+    todo = [f"{n_rows - n_again} to compute"] if n_rows > n_again or not n_rows else []
+    todo += [f"{n_again} rows to score again from their stored predictions"] if n_again else []
+    log(f"{len(done)} of {len(done) + n_rows} rows already in {ws.runs_csv}; " + ", ".join(todo))
     groups = sorted({u.group for u in work}, key=lambda g: (cfg.scenes.index(g[0]), g[1]))
     entries = {}
     with progress("render", len(groups)) as bar:
