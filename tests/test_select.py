@@ -71,6 +71,24 @@ def test_a_truncated_jpeg_is_refused_naming_the_file(tmp_path, capsys):
     assert not (tmp_path / "o" / "database.db").exists()
 
 
+@pytest.mark.parametrize(
+    "content, why",
+    [
+        (b"not an image", "its first bytes (b'not an i') are the signature of no PNG, JPEG"),
+        (b"", "the file is empty"),
+        ("cut", "its PNG header is followed by data that cannot be decoded"),
+    ],
+)
+def test_a_file_that_is_no_image_is_refused_saying_why(tmp_path, capsys, content, why):
+    """A fake `fake.png` was refused as `cannot read image .../fake.png`, with no reason."""
+    folder = photos(tmp_path / "im")
+    data = (folder / "p0.png").read_bytes()[:100] if content == "cut" else content
+    (folder / "fake.png").write_bytes(data)
+    assert select(folder, tmp_path / "o") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{folder / 'fake.png'} is not a readable image: {why}" in err
+
+
 def test_tiff_and_webp_are_read_and_the_skipped_files_named(tmp_path, capsys):
     folder = photos(tmp_path / "im", n=1)
     img = texture(120, 160, seed=1)
@@ -97,6 +115,22 @@ def test_a_guessed_focal_is_an_untrusted_prior_and_is_said(tmp_path, capsys):
         assert len(cams) == 1 and not cams[0].has_prior_focal_length
     finally:
         db.close()
+
+
+def test_a_budget_above_the_pools_is_counted_per_image(tmp_path, capsys):
+    """`--budget 1000000` said "2998469 short of 1000000 per image": a sum over images
+    against a per-image budget."""
+    folder = photos(tmp_path / "im")
+    assert select(folder, tmp_path / "o", "--budget", "1000000", "--policy", "texture") == 0
+    pools = [len(detect(v, DetectorConfig())) for v in load_image_folder(folder)]
+    err = capsys.readouterr().err
+    said = f"{sum(pools)} keypoints in 3 images, 1000000 per image (fewer in 3 of them: "
+    assert said + f"{min(pools)} to {max(pools)})" in err and "short of" not in err
+    assert "3 of 3 image(s) have fewer candidates than the budget 1000000 per image" in err
+    budget = sorted(pools)[1]  # the smallest pool alone falls short
+    assert select(folder, tmp_path / "o", "--budget", str(budget), "--policy", "texture") == 0
+    said = f"{min(pools) + 2 * budget} keypoints in 3 images, {budget} per image (fewer in 1 "
+    assert said + f"of them: {min(pools)})" in capsys.readouterr().err
 
 
 def test_the_focal_length_is_estimated_from_a_general_motion():

@@ -14,7 +14,8 @@ Three sources give the same list of `View`s:
 
 An image is read whole or refused: a file OpenCV cannot decode, and a JPEG that ends
 before its end-of-image marker (OpenCV would return its decoded part), are refused in one
-line naming the file.
+line naming the file and why (empty, not an image format's signature, or a header whose
+data cannot be decoded).
 
 This module is the front end's and back end's only way into the data; it never opens
 ground-truth files.
@@ -179,10 +180,35 @@ def read_image(path: Path) -> np.ndarray:
             f"cannot read image {path}: the JPEG is truncated (no end-of-image marker)"
         )
     flags = cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), flags) if data else None
+    level = cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    try:  # the reason is ours, in one line, not OpenCV's warning
+        img = cv2.imdecode(np.frombuffer(data, np.uint8), flags) if data else None
+    finally:
+        cv2.utils.logging.setLogLevel(level)
     if img is None:
-        raise BenchError(f"cannot read image {path}")
+        raise BenchError(f"{path} is not a readable image: {_undecodable(data)}")
     return img[..., ::-1].copy()
+
+
+SIGNATURES = {
+    "PNG": (b"\x89PNG\r\n\x1a\n",),
+    "JPEG": (b"\xff\xd8\xff",),
+    "TIFF": (b"II*\x00", b"MM\x00*"),
+    "WebP": (b"RIFF",),
+}
+"""The first bytes of each format OpenCV reads for a folder's views (`IMAGE_SUFFIXES`)."""
+
+
+def _undecodable(data: bytes) -> str:
+    """Why OpenCV could not decode an image file's bytes, in a few words."""
+    if not data:
+        return "the file is empty"
+    kind = next((k for k, sigs in SIGNATURES.items() if data.startswith(sigs)), None)
+    if kind is None:
+        *first, last = SIGNATURES
+        names = f"{', '.join(first)} or {last}"
+        return f"its first bytes ({data[:8]!r}) are the signature of no {names} file"
+    return f"its {kind} header is followed by data that cannot be decoded (damaged or cut short)"
 
 
 def exif_focal(path: Path, width: int, height: int) -> float | None:
