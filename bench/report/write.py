@@ -44,6 +44,7 @@ from bench.report.tables import (
     table_scenes,
     with_oracle_share,
 )
+from bench.report.transfer import said as transfer_said
 from bench.report.transfer import transfer_regimes
 from bench.results import read_runs
 from bench.summary import exclusions, failures
@@ -166,6 +167,8 @@ def _write_transfer(df: pd.DataFrame, vocab: Vocabulary, results: Path, rendered
     budget = headline_budget(summary)
     matched = summary["matched"], ranks["matched"]
     figure_transfer(ranks[matched[1]], summary[matched[0]], budget, results / "figure_transfer")
+    for line in transfer_said(summary, budget):
+        log(f"{results / 'transfer.csv'}: {line}")
 
 
 PUBLISHED_FILES = ("runs.csv", "config.json", VOCABULARY_FILE, "manifest.json", "scenes.png")
