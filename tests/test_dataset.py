@@ -17,6 +17,8 @@ import pytest
 from scipy.spatial import cKDTree
 
 from bench import BenchError
+from bench.backend.matching import BackendConfig
+from bench.backend.reconstruction import fixed_intrinsics_options
 from bench.cli import main
 from bench.evaluation.export import export_dataset
 from bench.frontend.colmap_model import read_model
@@ -201,8 +203,8 @@ def test_select_says_what_it_replaces_and_what_falls_short(dataset, tmp_path, ca
     select_to_database(SelectRequest(dataset / "images", "texture", pool), out)
     err = capsys.readouterr().err
     assert f"replacing {out / 'database.db'}" in err
-    assert "6 image(s) have fewer candidates than the budget 100000" in err
-    assert "short of 100000 per image" in err
+    assert "6 of 6 image(s) have fewer candidates than the budget 100000 per image" in err
+    assert "100000 per image (fewer in 6 of them: " in err
     assert not (out / "overlays").exists()  # the earlier run's overlays do not linger
     (tmp_path / "file").write_text("x")
     argv = ["select", "--images", str(dataset / "images"), "--out", str(tmp_path / "file")]
@@ -238,9 +240,26 @@ def test_select_with_matches_holds_verified_geometries_the_mapper_reads(dataset,
             assert tvg.inlier_matches[:, 1].max() < len(db.read_keypoints(j))
     finally:
         db.close()
-    opts = pycolmap.IncrementalPipelineOptions()
-    opts.num_threads = 1
-    pycolmap.incremental_mapping(db_path, dataset / "images", tmp_path / "m", opts)  # reads it
+    # COLMAP's mapper maps it: every view, on exactly the selected keypoints, with the
+    # model's intrinsics, near the true poses (thresholds for 200 keypoints of 320x240 views)
+    opts = fixed_intrinsics_options(BackendConfig(), "multiview")
+    opts.min_model_size = 3
+    opts.mapper.init_min_num_inliers = opts.mapper.abs_pose_min_num_inliers = 15
+    opts.mapper.init_min_tri_angle = 4
+    models = pycolmap.incremental_mapping(db_path, dataset / "images", tmp_path / "m", opts)
+    assert len(models) == 1
+    model = models[0]
+    truth = dict(read_model(dataset / "sparse"))
+    images = {i.name: i for i in model.images.values() if i.has_pose}
+    assert sorted(images) == sorted(truth) and model.num_points3D() > 0
+    assert all(len(i.points2D) == 200 for i in images.values())
+    (cam,) = model.cameras.values()
+    assert np.allclose(cam.params[:1], truth["view_00.png"].fx)
+    first = images["view_00.png"].cam_from_world().rotation.matrix()
+    for name, image in images.items():  # rotation relative to the first view, in degrees
+        rel = image.cam_from_world().rotation.matrix() @ first.T
+        true = truth[name].R @ truth["view_00.png"].R.T
+        assert np.degrees(np.arccos(np.clip((np.trace(rel.T @ true) - 1) / 2, -1, 1))) < 8
 
 
 def test_image_folders_of_several_sizes_and_a_bad_file(dataset, tmp_path, capsys):

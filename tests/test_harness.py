@@ -534,6 +534,21 @@ def test_cells_stock_colmap_cannot_map_are_marked_and_left_out_of_the_sfm_means(
     assert scenes.loc[("texture", 64), "sfm_maa"] == 0.5
 
 
+def test_a_reference_at_the_exclusion_boundary_maps():
+    """Stock COLMAP maps a cell when it registers every view with mAA of at least 0.5:
+    exactly 0.5 maps, just below does not, nor every view but one at mAA 1."""
+    from bench.results import mark_reference
+
+    cells = {0: (6, 0.5), 1: (6, 0.5 - 1e-9), 2: (5, 1.0), 3: (6, 1.0)}
+    rows = [
+        dict(scene="s", seed=seed, task="sfm", protocol="multiview", views=6, status="ok")
+        | dict(method="colmap", budget=0, registered_views=reg, maa=maa)
+        for seed, (reg, maa) in cells.items()
+    ]
+    table = mark_reference(pd.DataFrame(rows), vocabulary.Vocabulary.current())
+    assert table.set_index("seed")["reference_maps"].to_dict() == {0: 1, 1: 0, 2: 0, 3: 1}
+
+
 def test_kendall_tau_and_its_interval_on_hand_made_rankings():
     from bench.report.transfer import kendall_tau, tau_interval
 
