@@ -225,6 +225,32 @@ def test_dataset_runs_name_the_options_they_ignore_and_record_no_render(
     assert main([*argv, "--spp", "4"]) == 0  # other render options: named, not refused
 
 
+def test_select_with_a_model_of_more_images_uses_those_present(dataset, tmp_path, capsys):
+    """A model listing more images than the folder holds stopped `bench select` with
+    `cannot read image .../view_04.png`."""
+    folder = tmp_path / "four"
+    folder.mkdir()
+    for k in (0, 1, 3, 5):
+        shutil.copy(dataset / "images" / f"view_{k:02d}.png", folder)
+    cv2.imwrite(str(folder / "extra.png"), cv2.imread(str(folder / "view_00.png")))
+    argv = ["select", "--images", str(folder), "--cameras", str(dataset / "sparse")]
+    assert main([*argv, "--budget", "40", "--policy", "texture", "--out", str(tmp_path / "o")]) == 0
+    err = capsys.readouterr().err
+    said = f"the model in {dataset / 'sparse'} poses 2 image(s) besides the 4 in {folder} "
+    assert said + "(first: view_02.png); using those present" in err
+    assert f"{folder}: 1 image(s) the model in {dataset / 'sparse'} does not pose" in err
+    truth = dict(read_model(dataset / "sparse"))
+    db = pycolmap.Database.open(str(tmp_path / "o" / "database.db"))
+    try:
+        images = {i.name: i for i in db.read_all_images()}
+        assert sorted(images) == [f"view_{k:02d}.png" for k in (0, 1, 3, 5)]
+        assert db.num_keypoints() == 4 * 40
+        for name, image in images.items():  # the model's intrinsics
+            assert db.read_camera(image.camera_id).params[0] == pytest.approx(truth[name].fx)
+    finally:
+        db.close()
+
+
 def test_select_with_matches_holds_verified_geometries_the_mapper_reads(dataset, tmp_path):
     request = SelectRequest(
         dataset / "images", "adaptive", 200, cameras=dataset / "sparse", match=True

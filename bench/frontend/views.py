@@ -252,13 +252,37 @@ def image_files(folder: Path) -> list[str]:
     return folder_files(folder)[0]
 
 
+def _posed_views(folder: Path, model: Path) -> list[View]:
+    """The views of the folder's images that the model poses; the model's images that the
+    folder lacks, and the folder's images it does not pose, are counted in a line each."""
+    present = set(image_files(folder))
+    posed = read_model(model)
+    absent = [n for n, _ in posed if n not in present]
+    if absent:
+        log(
+            f"the model in {model} poses {len(absent)} image(s) besides the "
+            f"{len(posed) - len(absent)} in {folder} (first: {absent[0]}); using those present"
+        )
+    unposed = sorted(present - {n for n, _ in posed})
+    if unposed:
+        log(
+            f"{folder}: {len(unposed)} image(s) the model in {model} does not pose are left "
+            f"out (first: {unposed[0]})"
+        )
+    kept = [(n, cam) for n, cam in posed if n in present]
+    return [
+        View(i, name, ImageFile(folder / name, cam.width, cam.height), cam)
+        for i, (name, cam) in enumerate(kept)
+    ]
+
+
 def load_image_folder(folder: Path, model: Path | None = None) -> list[View]:
-    """Every image of a folder: posed from a COLMAP model when one is given (only its
-    images), else unposed with the focal-length prior; the files it skips are named. At
-    least two images."""
+    """Every image of a folder: posed from a COLMAP model when one is given (the images
+    both hold, `_posed_views`), else unposed with the focal-length prior; the files it
+    skips are named. At least two images."""
     folder = Path(folder)
     if model is not None:
-        views = load_views(Source(folder, Path(model)))
+        views = _posed_views(folder, Path(model))
     else:
         names, skipped = folder_files(folder)
         if skipped:
