@@ -270,7 +270,8 @@ def table2(rows: pd.DataFrame, pairs: pd.DataFrame, vocab: Vocabulary) -> pd.Dat
                 row[f"diff_{m}_hi"] = r.get("hi", math.nan)
                 row[f"diff_{m}_note"] = r.get("note", "")
                 row[f"diff_{m}_wtl"] = f"{r['wins']}/{r['ties']}/{r['losses']}" if len(p) else ""
-            row["oracle_acc_completeness_pct"] = means["acc_completeness_pct"].get(ORACLE, math.nan)
+            tri = means["acc_completeness_pct"] if "acc_completeness_pct" in means else {}
+            row["oracle_acc_completeness_pct"] = tri.get(ORACLE, math.nan)
             out.append(row)
     t = pd.DataFrame(out)
     # the column name Table 2 has had since its first version
