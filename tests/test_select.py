@@ -17,6 +17,7 @@ from bench.frontend.policies import PolicyConfig, PolicyInput
 from bench.frontend.selection import select_views
 from bench.frontend.stage import compute
 from bench.frontend.views import View, load_image_folder, read_image
+from tests.conftest import synthetic_rig
 
 PEEKING = """
 from bench.frontend.policies import policy
@@ -133,14 +134,10 @@ def test_a_budget_above_the_pools_is_counted_per_image(tmp_path, capsys):
     assert said + f"of them: {min(pools)})" in capsys.readouterr().err
 
 
-def test_the_focal_length_is_estimated_from_a_general_motion():
-    """Synthetic correspondences of four cameras whose optical axes do not meet: the
-    estimate is the true focal length, the guess is 1.2 x max(width, height)."""
-    rng = np.random.default_rng(0)
-    X = rng.uniform(-2, 2, (300, 3)) + [0, 0, 1]
-    eyes = [(-3, -8, 1.5), (-1, -8.5, 0.5), (1.5, -7.5, 2), (3, -8, 1)]
-    targets = [(0.8, 0, 1.3), (-0.6, 0.5, 0.7), (0.4, -0.7, 1.8), (-1, 0.3, 0.5)]
-    cams = [look_at(e, t, width=640, height=480, fov_x_deg=55) for e, t in zip(eyes, targets)]
+def _seen(cams, X, seed=0) -> tuple[list[View], list[Candidates]]:
+    """Views of the points X by the cameras (focal length guessed, 1.2 x 640) and their
+    pools: the projections, with 0.2 px of noise and one descriptor per point."""
+    rng = np.random.default_rng(seed)
     desc = rng.normal(size=(len(X), 128)).astype(np.float32)
     desc /= np.linalg.norm(desc, axis=1, keepdims=True)
     views, pools = [], []
@@ -154,9 +151,34 @@ def test_the_focal_length_is_estimated_from_a_general_motion():
         guess = look_at((0, 0, 0), (0, 1, 0), width=640, height=480)
         guess = type(guess)(640, 480, f, f, 320, 240, guess.R, guess.t)
         views.append(View(k, f"v{k}", np.zeros((480, 640, 3), np.uint8), guess, False, False))
-    factor, pairs = estimate_focal(views, pools, SignalConfig())
-    assert pairs == 6
-    assert factor * 640 == pytest.approx(cams[0].fx, rel=0.02)
+    return views, pools
+
+
+def test_the_focal_length_is_estimated_from_a_general_motion():
+    """Synthetic correspondences of four cameras whose optical axes do not meet: the
+    estimate is the true focal length, the guess is 1.2 x max(width, height)."""
+    X = np.random.default_rng(0).uniform(-2, 2, (300, 3)) + [0, 0, 1]
+    eyes = [(-3, -8, 1.5), (-1, -8.5, 0.5), (1.5, -7.5, 2), (3, -8, 1)]
+    targets = [(0.8, 0, 1.3), (-0.6, 0.5, 0.7), (0.4, -0.7, 1.8), (-1, 0.3, 0.5)]
+    cams = [look_at(e, t, width=640, height=480, fov_x_deg=55) for e, t in zip(eyes, targets)]
+    found = estimate_focal(*_seen(cams, X), SignalConfig())
+    assert found.pairs == 6 and found.why == ""
+    assert found.factor * 640 == pytest.approx(cams[0].fx, rel=0.02)
+    best, off = found.explained
+    assert best >= 1.5 * off
+
+
+def test_a_focal_length_the_views_do_not_determine_is_not_estimated():
+    """Four cameras looking at one point (their optical axes meet: a critical motion) gave
+    a focal length far off the truth; now the guess stays, and the line says why."""
+    cams, X = synthetic_rig()
+    found = estimate_focal(*_seen(cams, X), SignalConfig())
+    assert found.factor is None and found.pairs == 6
+    best, off = found.explained
+    assert best < 1.5 * off and found.why.startswith(f"their relative poses explain {best} ")
+    assert "views whose optical axes meet" in found.why
+    few = estimate_focal(*_seen(cams[:2], X), SignalConfig())
+    assert few.factor is None and few.why == "1 pair(s) of images share 15 matches, 2 needed"
 
 
 def test_out_file_is_refused_before_any_work(tmp_path, capsys):
