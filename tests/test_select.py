@@ -3,6 +3,8 @@ declared signals), images read whole or refused, and an honest focal length."""
 
 from __future__ import annotations
 
+import os
+
 import cv2
 import numpy as np
 import pycolmap
@@ -187,6 +189,39 @@ def test_out_file_is_refused_before_any_work(tmp_path, capsys):
     (tmp_path / "file").write_text("x")
     assert select(folder, tmp_path / "file") == 2
     assert "is a file; give a folder" in capsys.readouterr().err
+
+
+def test_sigterm_stops_select_in_one_line(tmp_path):
+    """SIGTERM (`timeout`, systemd) during `bench select` printed COLMAP's native stack
+    (glog's failure handler, installed when pycolmap is first imported, after ours)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    mark = tmp_path / "selecting"
+    module = tmp_path / "sleepy.py"
+    module.write_text(
+        "import pathlib, time\n"
+        "from bench.frontend.policies import policy\n\n"
+        "@policy('sleepy')\n"
+        "def sleepy(inp, budget, rng, cfg):\n"
+        f"    pathlib.Path({str(mark)!r}).touch()\n"
+        "    time.sleep(60)\n"
+    )
+    cmd = [sys.executable, "-m", "bench", "select", "--images", str(photos(tmp_path / "im"))]
+    cmd += ["--out", str(tmp_path / "o"), "--policy", "sleepy", "--policy-module", str(module)]
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 60
+    while not mark.exists() and time.monotonic() < deadline:
+        assert proc.poll() is None, proc.stderr.read()
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGTERM)
+    err = proc.communicate(timeout=60)[1]
+    lines = err.strip().splitlines()
+    assert proc.returncode == 143 and lines[-1] == "bench: terminated; finished work is kept"
+    assert all(line.startswith("bench: ") for line in lines), err
+    assert not (tmp_path / "o" / "database.db").exists()
 
 
 def test_an_undeclared_signal_is_refused_in_run_and_select(tmp_path, capsys):
