@@ -888,9 +888,11 @@ def test_the_readme_synopsis_names_every_option_of_every_command():
 def test_a_results_folder_that_cannot_be_written_is_one_line(tmp_path, capsys):
     (tmp_path / "file").write_text("not a folder")
     argv = ["run", "--quick", "--scenes", "table", "--results", str(tmp_path / "file" / "r")]
-    assert main(argv) == 2
+    with pytest.raises(SystemExit) as e:
+        main(argv)
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "cannot write to" in err[0]
+    assert e.value.code == 2 and len(err) == 1
+    assert f"{tmp_path / 'file'} in {tmp_path / 'file' / 'r'} is a file; give a folder" in err[0]
 
 
 def test_images_without_any_candidate_are_named_not_a_budget_of_0(tmp_path, capsys):
