@@ -9,8 +9,8 @@ Each row also carries its own integrity: every number lies in its declared range
 (`bench.vocabulary.Metric.range`), and `row_checksum` (last) is a hash of the row's values as
 written, so a value edited by hand is caught (against accidents, not an attacker with the
 code). A damaged file is one `BenchError` naming the file and the first bad row (line and
-key), and nothing is published from it. Recovery: `bench run --reevaluate` scores rows
-whose values were altered again; `bench run --set-aside-damaged` moves the damaged rows (as
+key) and the remedy, and no table, figure or snapshot is written from it. Recovery: `bench
+run --reevaluate` scores rows whose values were altered again; `bench run --set-aside-damaged` moves the damaged rows (as
 they were) to `runs.damaged.csv` beside it and computes them again. A file written before
 rows carried checksums is refused in one line; `bench run --reevaluate` scores its rows
 again and records them with checksums.
@@ -267,12 +267,19 @@ def read_runs(
     damaged = [b for b in bad if not (keep_altered and b[3])]
     if damaged:
         n, line, why, _ = damaged[0]
-        remedy = f"`bench run --set-aside-damaged` moves them to {DAMAGED} and computes them again"
+        folder = f"--results {path.parent}"
+        remedy = (
+            f"`bench run --set-aside-damaged {folder}` moves them to {DAMAGED} and computes "
+            "them again"
+        )
         if any(b[3] for b in damaged):
-            remedy = f"`bench run --reevaluate` scores altered rows again; {remedy}"
+            remedy = (
+                f"`bench run --reevaluate {folder}` (with the grid it holds) scores altered "
+                f"rows again from their stored predictions, or {remedy}"
+            )
         raise DamagedRuns(
             f"{path} is damaged: row at line {n}{_key_text(header, line)}: {why} "
-            f"({len(damaged)} damaged row(s)); nothing is published from it. {remedy}",
+            f"({len(damaged)} damaged row(s)); to recover, {remedy}",
             [b[0] for b in damaged],
         )
     altered = [(n, line) for n, line, _, _ in bad]

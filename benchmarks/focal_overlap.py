@@ -36,8 +36,8 @@ def main() -> None:
     found = estimate_focal(guessed, pools, sig)
     print(f"estimate_focal: {found} in {time.perf_counter() - t:.1f} s")
     runs = {"true": true, "guess": guessed}
-    if found:
-        runs["estimated"] = [with_focal(v, found[0]) for v in guessed]
+    if found.factor:
+        runs["estimated"] = [with_focal(v, found.factor) for v in guessed]
     n = len(true)
     for name, views in runs.items():
         c = views[0].camera

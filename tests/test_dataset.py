@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import math
 import shutil
 from dataclasses import replace
 from pathlib import Path
@@ -16,6 +17,8 @@ import pytest
 from scipy.spatial import cKDTree
 
 from bench import BenchError
+from bench.backend.matching import BackendConfig
+from bench.backend.reconstruction import fixed_intrinsics_options
 from bench.cli import main
 from bench.evaluation.export import export_dataset
 from bench.frontend.colmap_model import read_model
@@ -75,9 +78,61 @@ def test_dataset_run_gives_the_metrics_and_the_ranking_of_the_rendered_path(
     summary, ranks = transfer(data, Vocabulary.load(tmp_path / "d"), tmp_path / "r")
     assert set(summary["metric"]) == {"sfm_maa", "acc_completeness_pct", "pairs_auc_10"}
     assert (ranks["rank_shift"] == 0).all() and len(ranks) == 3 + 4 + 4
-    tau = summary["kendall_tau"].dropna()
-    assert len(tau) and np.allclose(tau, 1.0)
+    assert summary["kendall_tau"].isna().all()  # 3 or 4 methods: too few for a tau
+    assert summary["tau_note"].str.match(r"no tau: [34] methods, too few").all()
     assert (summary["winner_dataset"] == summary["winner_rendered"]).all()
+
+
+METHODS6 = [f"m{k}" for k in range(1, 7)]
+
+
+@pytest.mark.parametrize(
+    "dataset, lower_better, tau, winner, ranks",
+    [  # rendered: m1 best (highest) ... m6 worst
+        ([1, 2, 3, 4, 5, 6], False, -1.0, "m6", [6, 5, 4, 3, 2, 1]),  # reversed
+        ([6, 5, 4, 2, 3, 1], False, 13 / 15, "m1", [1, 2, 3, 5, 4, 6]),  # one pair swapped
+        ([6, 6, 4, 3, 2, 1], False, 14 / (14 * 15) ** 0.5, "m1=m2", [1.5, 1.5, 3, 4, 5, 6]),
+    ],
+)
+def test_transfer_ranks_best_first_and_tau_has_its_known_value(
+    dataset, lower_better, tau, winner, ranks
+):
+    """Hand-made means of six methods against a rendered ranking m1 > m2 > ... > m6."""
+    from bench.report.transfer import compare
+
+    rendered = pd.Series([6.0, 5, 4, 3, 2, 1], index=METHODS6)
+    row, rows = compare(pd.Series(dataset, index=METHODS6, dtype=float), rendered, lower_better)
+    assert row["kendall_tau"] == pytest.approx(tau) and row["tau_note"] == ""
+    assert row["tau_lo"] <= row["kendall_tau"] <= row["tau_hi"]
+    assert row["winner_dataset"] == winner and row["winner_rendered"] == "m1"
+    assert [r["rank_dataset"] for r in rows] == ranks
+    assert [r["rank_rendered"] for r in rows] == [1, 2, 3, 4, 5, 6]
+
+
+def test_transfer_of_a_lower_is_better_metric_ranks_the_smallest_first():
+    from bench.report.transfer import compare
+
+    errors = pd.Series([0.1, 0.2, 0.3, 0.4, 0.6, 0.5], index=METHODS6)
+    row, rows = compare(errors, errors * 10, lower_better=True)
+    assert row["winner_dataset"] == row["winner_rendered"] == "m1"
+    assert [r["rank_dataset"] for r in rows] == [1, 2, 3, 4, 6, 5] and row["kendall_tau"] == 1
+    row, rows = compare(errors, errors[::-1].set_axis(METHODS6), lower_better=True)
+    assert row["winner_rendered"] == "m6" and row["kendall_tau"] == pytest.approx(-11 / 15)
+
+
+def test_transfer_below_six_methods_gives_no_tau_and_says_why():
+    """Three methods gave tau -1 with a "95 %" interval [-1, -1] and no warning."""
+    from bench.report.transfer import compare
+
+    three = list("abc")
+    row, rows = compare(pd.Series([1.0, 2, 3], three), pd.Series([3.0, 2, 1], three), False)
+    assert math.isnan(row["kendall_tau"]) and math.isnan(row["tau_lo"]) and len(rows) == 3
+    assert row["tau_note"] == (
+        "no tau: 3 methods, too few to tell agreement from chance (at least 6)"
+    )
+    five = pd.Series([1.0, 2, 3, 4, 5], METHODS6[:5])
+    five, _ = compare(five, five, lower_better=False)
+    assert math.isnan(five["kendall_tau"]) and "5 methods" in five["tau_note"]
 
 
 def test_dataset_without_pixel_truth_scores_poses_and_leaves_the_rest_nan(
@@ -148,8 +203,8 @@ def test_select_says_what_it_replaces_and_what_falls_short(dataset, tmp_path, ca
     select_to_database(SelectRequest(dataset / "images", "texture", pool), out)
     err = capsys.readouterr().err
     assert f"replacing {out / 'database.db'}" in err
-    assert "6 image(s) have fewer candidates than the budget 100000" in err
-    assert "short of 100000 per image" in err
+    assert "6 of 6 image(s) have fewer candidates than the budget 100000 per image" in err
+    assert "100000 per image (fewer in 6 of them: " in err
     assert not (out / "overlays").exists()  # the earlier run's overlays do not linger
     (tmp_path / "file").write_text("x")
     argv = ["select", "--images", str(dataset / "images"), "--out", str(tmp_path / "file")]
@@ -170,6 +225,32 @@ def test_dataset_runs_name_the_options_they_ignore_and_record_no_render(
     assert main([*argv, "--spp", "4"]) == 0  # other render options: named, not refused
 
 
+def test_select_with_a_model_of_more_images_uses_those_present(dataset, tmp_path, capsys):
+    """A model listing more images than the folder holds stopped `bench select` with
+    `cannot read image .../view_04.png`."""
+    folder = tmp_path / "four"
+    folder.mkdir()
+    for k in (0, 1, 3, 5):
+        shutil.copy(dataset / "images" / f"view_{k:02d}.png", folder)
+    cv2.imwrite(str(folder / "extra.png"), cv2.imread(str(folder / "view_00.png")))
+    argv = ["select", "--images", str(folder), "--cameras", str(dataset / "sparse")]
+    assert main([*argv, "--budget", "40", "--policy", "texture", "--out", str(tmp_path / "o")]) == 0
+    err = capsys.readouterr().err
+    said = f"the model in {dataset / 'sparse'} poses 2 image(s) besides the 4 in {folder} "
+    assert said + "(first: view_02.png); using those present" in err
+    assert f"{folder}: 1 image(s) the model in {dataset / 'sparse'} does not pose" in err
+    truth = dict(read_model(dataset / "sparse"))
+    db = pycolmap.Database.open(str(tmp_path / "o" / "database.db"))
+    try:
+        images = {i.name: i for i in db.read_all_images()}
+        assert sorted(images) == [f"view_{k:02d}.png" for k in (0, 1, 3, 5)]
+        assert db.num_keypoints() == 4 * 40
+        for name, image in images.items():  # the model's intrinsics
+            assert db.read_camera(image.camera_id).params[0] == pytest.approx(truth[name].fx)
+    finally:
+        db.close()
+
+
 def test_select_with_matches_holds_verified_geometries_the_mapper_reads(dataset, tmp_path):
     request = SelectRequest(
         dataset / "images", "adaptive", 200, cameras=dataset / "sparse", match=True
@@ -185,9 +266,26 @@ def test_select_with_matches_holds_verified_geometries_the_mapper_reads(dataset,
             assert tvg.inlier_matches[:, 1].max() < len(db.read_keypoints(j))
     finally:
         db.close()
-    opts = pycolmap.IncrementalPipelineOptions()
-    opts.num_threads = 1
-    pycolmap.incremental_mapping(db_path, dataset / "images", tmp_path / "m", opts)  # reads it
+    # COLMAP's mapper maps it: every view, on exactly the selected keypoints, with the
+    # model's intrinsics, near the true poses (thresholds for 200 keypoints of 320x240 views)
+    opts = fixed_intrinsics_options(BackendConfig(), "multiview")
+    opts.min_model_size = 3
+    opts.mapper.init_min_num_inliers = opts.mapper.abs_pose_min_num_inliers = 15
+    opts.mapper.init_min_tri_angle = 4
+    models = pycolmap.incremental_mapping(db_path, dataset / "images", tmp_path / "m", opts)
+    assert len(models) == 1
+    model = models[0]
+    truth = dict(read_model(dataset / "sparse"))
+    images = {i.name: i for i in model.images.values() if i.has_pose}
+    assert sorted(images) == sorted(truth) and model.num_points3D() > 0
+    assert all(len(i.points2D) == 200 for i in images.values())
+    (cam,) = model.cameras.values()
+    assert np.allclose(cam.params[:1], truth["view_00.png"].fx)
+    first = images["view_00.png"].cam_from_world().rotation.matrix()
+    for name, image in images.items():  # rotation relative to the first view, in degrees
+        rel = image.cam_from_world().rotation.matrix() @ first.T
+        true = truth[name].R @ truth["view_00.png"].R.T
+        assert np.degrees(np.arccos(np.clip((np.trace(rel.T @ true) - 1) / 2, -1, 1))) < 8
 
 
 def test_image_folders_of_several_sizes_and_a_bad_file(dataset, tmp_path, capsys):
@@ -365,7 +463,7 @@ def test_a_dataset_whose_contents_changed_is_computed_again(
     medium_entry, renders_dir, tmp_path, capsys
 ):
     """A dataset is keyed by its content: a facade export replacing a table export in the
-    same folder is computed again (the table's rows were reused: "0 to do")."""
+    same folder is computed again (the table's rows were reused: "0 to compute")."""
     ds = tmp_path / "D"
     export_dataset(medium_entry("table"), ds)
     argv = ["run", "--dataset", str(ds), "--methods", "texture", "--budget", "64", "--tasks"]
@@ -383,7 +481,7 @@ def test_a_dataset_whose_contents_changed_is_computed_again(
 
 
 def test_several_datasets_run_at_once_with_tables_per_dataset_and_a_transfer_table(
-    medium_entry, renders_dir, tmp_path
+    medium_entry, renders_dir, tmp_path, capsys
 ):
     sets = tmp_path / "sets"
     export_dataset(medium_entry("table"), sets / "table-ds")
@@ -408,8 +506,13 @@ def test_several_datasets_run_at_once_with_tables_per_dataset_and_a_transfer_tab
         == 0
     )
     argv = ["run", "--dataset", str(sets), *grid, "--results", str(tmp_path / "d")]
+    capsys.readouterr()
     assert main([*argv, "--rendered", str(tmp_path / "r")]) == 0
     out = tmp_path / "d"
+    err = capsys.readouterr().err  # the terminal names transfer.csv and why it has no tau
+    for name in ("table-ds", "facade-ds"):
+        line = f"{out / 'transfer.csv'}: {name} against the 6-view regime at B = 64, Kendall's "
+        assert line + "tau: no tau: 3 methods, too few to tell agreement" in err
     assert set(pd.read_csv(out / "runs.csv")["scene"]) == {"table-ds", "facade-ds"}
     for name in ("table-ds", "facade-ds"):
         assert set(pd.read_csv(out / f"table1-{name}.csv")["method"]) == {
@@ -420,6 +523,7 @@ def test_several_datasets_run_at_once_with_tables_per_dataset_and_a_transfer_tab
     summary, ranks = pd.read_csv(out / "transfer.csv"), pd.read_csv(out / "transfer_ranks.csv")
     assert set(summary["dataset"]) == {"table-ds", "facade-ds"}
     assert set(summary["metric"]) == {"acc_completeness_pct"} and (summary["methods"] == 3).all()
+    assert summary["kendall_tau"].isna().all() and summary["tau_note"].str.contains("3 meth").all()
     assert (ranks.loc[ranks["dataset"] == "table-ds", "rank_shift"] == 0).all()
     assert (out / "figure_transfer.png").is_file()
 

@@ -471,6 +471,31 @@ def test_run_bad_input_is_one_clear_line(argv, message, tmp_path, capsys):
     assert not (tmp_path / "r").exists()
 
 
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["run", "--results", "{file}"],
+        ["run", "--results", "{file}/sub"],
+        ["run", "--renders", "{file}"],
+        ["plot", "--results", "{file}"],
+        ["publish", "--results", "{file}"],
+        ["publish", "--to", "{file}"],
+        ["upgrade", "--results", "{file}"],
+        ["export", "table", "--out", "{file}"],
+    ],
+)
+def test_a_file_where_a_folder_belongs_is_named(argv, tmp_path, capsys):
+    """`--results FILE` said only `File exists` (or that runs.csv was not found)."""
+    file = tmp_path / "notes.txt"
+    file.write_text("mine\n")
+    with pytest.raises(SystemExit) as e:
+        raise SystemExit(main([a.format(file=file) for a in argv]))
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 2 and len(err) == 1
+    assert f"{argv[-2]}: {file}" in err[0] and "is a file; give a folder" in err[0]
+    assert file.read_text() == "mine\n" and os.listdir(tmp_path) == ["notes.txt"]
+
+
 def test_version_names_the_distribution(capsys):
     with pytest.raises(SystemExit) as e:
         main(["--version"])
@@ -507,6 +532,21 @@ def test_cells_stock_colmap_cannot_map_are_marked_and_left_out_of_the_sfm_means(
     scenes = table_scenes(frame, vocab).set_index(["method", "budget"])
     assert scenes.loc[("texture", 64), "sfm_excluded_seeds"] == 2
     assert scenes.loc[("texture", 64), "sfm_maa"] == 0.5
+
+
+def test_a_reference_at_the_exclusion_boundary_maps():
+    """Stock COLMAP maps a cell when it registers every view with mAA of at least 0.5:
+    exactly 0.5 maps, just below does not, nor every view but one at mAA 1."""
+    from bench.results import mark_reference
+
+    cells = {0: (6, 0.5), 1: (6, 0.5 - 1e-9), 2: (5, 1.0), 3: (6, 1.0)}
+    rows = [
+        dict(scene="s", seed=seed, task="sfm", protocol="multiview", views=6, status="ok")
+        | dict(method="colmap", budget=0, registered_views=reg, maa=maa)
+        for seed, (reg, maa) in cells.items()
+    ]
+    table = mark_reference(pd.DataFrame(rows), vocabulary.Vocabulary.current())
+    assert table.set_index("seed")["reference_maps"].to_dict() == {0: 1, 1: 0, 2: 0, 3: 1}
 
 
 def test_kendall_tau_and_its_interval_on_hand_made_rankings():
@@ -672,6 +712,31 @@ def test_a_rerun_that_does_nothing_keeps_the_manifest_timings(quick_results, ren
     assert inv["rows"] == inv["rows_now"] == ROWS and set(runs["invocation"]) == {inv["id"]}
 
 
+def test_the_manifest_names_whichever_distribution_provides_a_module(
+    quick_results, renders_dir, tmp_path, monkeypatch
+):
+    """OpenCV from another distribution, pycolmap from none: the run still ends well."""
+    from importlib.metadata import PackageNotFoundError, packages_distributions, version
+
+    provided = {**packages_distributions(), "cv2": ["opencv-python-headless"]}
+    del provided["pycolmap"]
+
+    def installed(name):
+        if name == "opencv-python-headless":
+            return "5.0.0.1"
+        if name in ("opencv-contrib-python-headless", "pycolmap"):
+            raise PackageNotFoundError(name)
+        return version(name)
+
+    monkeypatch.setattr(harness, "packages_distributions", lambda: provided, raising=False)
+    monkeypatch.setattr(harness, "version", installed)
+    shutil.copytree(quick_results, tmp_path / "r")
+    bench_run(SMALL, tmp_path / "r", renders_dir)
+    versions = json.loads((tmp_path / "r" / "manifest.json").read_text())["versions"]
+    assert versions["cv2"] == "opencv-python-headless 5.0.0.1"
+    assert versions["pycolmap"] == "unknown" and versions["numpy"] == version("numpy")
+
+
 def test_figures_state_nothing_impossible(quick_results, tmp_path, renders_dir, monkeypatch):
     runs = read_runs(quick_results / "runs.csv")
     t1 = pd.read_csv(quick_results / "table1.csv")
@@ -768,8 +833,15 @@ def test_a_raising_policy_on_workers_is_one_line_without_retry_or_traceback(tmp_
     assert len(calls.read_text().splitlines()) == 1  # the first view raised; no retry
 
 
-def test_ctrl_c_with_workers_stops_in_a_few_lines(renders_dir, tmp_path):
-    """Ctrl-C reaches the whole process group, workers included, as a terminal sends it."""
+@pytest.mark.parametrize(
+    "sig, code, said", [("SIGINT", 130, "interrupted"), ("SIGTERM", 143, "terminated")]
+)
+def test_a_signal_to_the_process_group_with_workers_stops_in_a_few_lines(
+    renders_dir, tmp_path, sig, code, said
+):
+    """Ctrl-C (a terminal) and SIGTERM (`timeout`, systemd) reach the whole process group,
+    workers included. SIGTERM printed each worker's native stack (glog's failure handler,
+    which pycolmap installs: 62 lines, two dumps interleaved); now one line, as Ctrl-C."""
     import signal
     import subprocess
     import sys
@@ -782,10 +854,13 @@ def test_ctrl_c_with_workers_stops_in_a_few_lines(renders_dir, tmp_path):
     while not (tmp_path / "r" / "runs.csv").exists() and time.monotonic() < deadline:
         assert proc.poll() is None, proc.stderr.read()
         time.sleep(0.1)
-    os.killpg(proc.pid, signal.SIGINT)
+    os.killpg(proc.pid, getattr(signal, sig))
     err = proc.communicate(timeout=120)[1]
-    assert proc.returncode == 130, err
-    assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("bench: interrupted")
+    lines = err.strip().splitlines()
+    assert proc.returncode == code, err
+    assert lines[-1] == f"bench: {said}; finished work is kept", err
+    assert all(line.startswith("bench: ") for line in lines), err  # no stack, no warning
+    assert len(read_runs(tmp_path / "r" / "runs.csv")) >= 1  # the rows computed are kept
 
 
 def test_the_readme_synopsis_names_every_option_of_every_command():
@@ -813,9 +888,11 @@ def test_the_readme_synopsis_names_every_option_of_every_command():
 def test_a_results_folder_that_cannot_be_written_is_one_line(tmp_path, capsys):
     (tmp_path / "file").write_text("not a folder")
     argv = ["run", "--quick", "--scenes", "table", "--results", str(tmp_path / "file" / "r")]
-    assert main(argv) == 2
+    with pytest.raises(SystemExit) as e:
+        main(argv)
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "cannot write to" in err[0]
+    assert e.value.code == 2 and len(err) == 1
+    assert f"{tmp_path / 'file'} in {tmp_path / 'file' / 'r'} is a file; give a folder" in err[0]
 
 
 def test_images_without_any_candidate_are_named_not_a_budget_of_0(tmp_path, capsys):

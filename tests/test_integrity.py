@@ -8,6 +8,7 @@ import csv
 import dataclasses
 import io
 import json
+import math
 import shutil
 import subprocess
 import sys
@@ -22,6 +23,7 @@ from bench.harness import execute
 from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig
 from bench.results import read_runs
+from bench.vocabulary import Vocabulary
 from tests.conftest import MEDIUM, bench_run
 
 GRID = BenchConfig(
@@ -85,13 +87,15 @@ def test_a_hand_edited_metric_is_refused_by_plot_publish_and_a_resumed_run(
     )
     where += "multiview): its values do not match its row_checksum"
     assert main(["plot", "--results", str(r), "--renders", str(renders_dir)]) == 2
-    assert where in _one_line(capsys)
+    said = _one_line(capsys)  # what is wrong and the remedy; plot publishes nothing anyway
+    assert where in said and "published" not in said
+    assert f"`bench run --reevaluate --results {r}` (with the grid it holds)" in said
     assert (r / "table1.csv").read_bytes() == before  # nothing rewritten from it
     assert main(["publish", "--results", str(r), "--to", str(tmp_path / "p")]) == 2
     assert where in _one_line(capsys) and not (tmp_path / "p" / "runs.csv").exists()
     with pytest.raises(BenchError, match="do not match its row_checksum") as e:
         bench_run(GRID, r, renders_dir)
-    assert "--reevaluate` scores altered rows again" in str(e.value)
+    assert f"--reevaluate --results {r}` (with the grid it holds) scores altered" in str(e.value)
     predicted = []
     real = execute.predict
     monkeypatch.setattr(execute, "predict", lambda *a: predicted.append(a) or real(*a))
@@ -99,6 +103,20 @@ def test_a_hand_edited_metric_is_refused_by_plot_publish_and_a_resumed_run(
     assert predicted == []  # scored again from the stored prediction
     fixed = rows.set_index("method").loc["grid", "acc_completeness_pct"]
     assert fixed == pytest.approx(float(old)) and (r / "table1.csv").read_bytes() == before
+
+
+def test_reevaluate_says_it_scores_rows_again_not_that_it_does_them(
+    small_run, renders_dir, tmp_path, capsys
+):
+    """`--reevaluate` said "0 of 2 rows already in ...; 2 to do, 2 of them scored again"."""
+    r = tmp_path / "r"
+    shutil.copytree(small_run, r)
+    bench_run(GRID, r, renders_dir, reevaluate=True)
+    said = capsys.readouterr().err
+    line = f"0 of 2 rows already in {r / 'runs.csv'}; 2 rows to score again from their stored "
+    assert line + "predictions\n" in said and "to do" not in said
+    bench_run(dataclasses.replace(GRID, methods=("texture", "grid", "random")), r, renders_dir)
+    assert f"2 of 3 rows already in {r / 'runs.csv'}; 1 to compute\n" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("value", ["150", "-5"])
@@ -175,6 +193,59 @@ def test_publish_keeps_a_snapshot_of_other_settings_unless_replace(small_run, tm
     assert main([*argv, "--replace"]) == 0
     assert (snap / "runs.csv").read_bytes() == (small_run / "runs.csv").read_bytes()
     assert main(argv) == 0  # the same settings and grid again: no --replace needed
+
+
+def _errored(runs_csv: Path) -> None:
+    """Mark the grid row of `runs.csv` as one that could not be computed (resealed)."""
+    from bench.results import REFERENCE_MAPS, ROW_CHECKSUM, append_runs
+
+    runs = read_runs(runs_csv)
+    grid = runs["method"] == "grid"
+    runs.loc[grid, "status"], runs.loc[grid, "failure"] = "failed", "error: policy grid raised"
+    runs.loc[grid, ["acc_completeness_pct", "accuracy_pct", "rmse"]] = math.nan
+    runs_csv.unlink()
+    rows = runs.drop(columns=[ROW_CHECKSUM, REFERENCE_MAPS], errors="ignore").to_dict("records")
+    append_runs(runs_csv, rows, Vocabulary.current())
+
+
+@pytest.mark.parametrize(
+    "damage, options, message",
+    [
+        (_errored, [], "is not published: 1 row(s) could not be computed, of grid (1); the "),
+        (lambda r: (r.parent / "table1.csv").unlink(), [], "has no table1.csv: `bench plot"),
+        (lambda r: (r.parent / "README.md").unlink(), [], "has no README.md: `bench plot"),
+        (
+            lambda r: None,
+            ["--regime", "dense"],
+            "is not the dense regime's grid (scenes table, the regime's corridor, facade, "
+            "table, vegetation; seeds 0, the regime's 0, 1; views 6, the regime's 21; render "
+            "size 320x240, the regime's 640x480); publish a `bench run --regime dense` there",
+        ),
+    ],
+)
+def test_publish_refuses_what_it_should_not_publish_and_creates_nothing(
+    small_run, tmp_path, capsys, damage, options, message
+):
+    """Rows that failed with errors, a folder without tables and a 320x240 run as `--regime
+    dense` were published, and a refused publish left an empty folder behind."""
+    r = tmp_path / "r"
+    shutil.copytree(small_run, r)
+    damage(r / "runs.csv")
+    snap = tmp_path / "new" / "published"
+    assert main(["publish", "--results", str(r), "--to", str(snap), *options]) == 2
+    assert f"{r} {message}" in _one_line(capsys)
+    assert not (tmp_path / "new").exists()
+
+
+def test_publish_into_a_regimes_snapshot_checks_its_grid(small_run, tmp_path, capsys, monkeypatch):
+    shutil.copytree(small_run, tmp_path / "results" / "latest")
+    monkeypatch.chdir(tmp_path)
+    assert main(["publish"]) == 2  # results/latest -> results/published: the sparse regime
+    err = _one_line(capsys)
+    assert "results/latest is not the sparse regime's grid (scenes table, the regime's" in err
+    assert "seeds 0, the regime's 0, 1, 2, 3, 4; " in err and "views" not in err
+    assert not (tmp_path / "results" / "published").exists()
+    assert main(["publish", "--to", str(tmp_path / "mine")]) == 0  # a snapshot of its own
 
 
 def test_a_setting_added_since_the_snapshot_differs_only_off_its_default(

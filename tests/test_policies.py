@@ -16,6 +16,7 @@ from bench.frontend.policies import (
     POLICIES,
     SHIPPED_WEIGHTS,
     PolicyInput,
+    contract_violation,
     policy,
     select,
     tile_of,
@@ -97,6 +98,22 @@ def test_depth_prior_from_the_data_matches_the_rendered_depth(fe, medium_entry):
         col, row = (c.xy - 0.5).round().astype(int).T
         true = np.nanmedian(gt.z[row.clip(0, 239), col.clip(0, 319)])  # under the candidates
         assert 0.8 * true < d < 1.25 * true
+
+
+@pytest.mark.parametrize(
+    "idx, want, n, broken",
+    [
+        ([0, 1, 2], 3, 3, None),
+        ([2, 0, 1], 3, 4, None),
+        ([0, 1, 3], 3, 3, "valid range: indices must lie in [0, 3), got 0..3"),  # index n
+        ([-1, 0, 1], 3, 3, "valid range: indices must lie in [0, 3), got -1..1"),
+        ([0, 0, 1], 3, 3, "distinct indices: 1 repeated"),
+        ([0, 1], 3, 3, "exact budget: 2 indices returned, 3 expected"),
+        ([], 0, 0, None),
+    ],
+)
+def test_the_contract_rules_on_hand_made_selections(idx, want, n, broken):
+    assert contract_violation(np.array(idx, dtype=int), want, n) == broken
 
 
 def test_a_policy_module_registers_and_its_broken_rules_are_named(fe, tmp_path):

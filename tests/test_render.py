@@ -267,25 +267,12 @@ def test_cli_bad_input_is_one_clear_line(argv, message, tmp_path, capsys):
 def test_cli_unwritable_output_directory(tmp_path, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("")
-    assert (
-        main(
-            [
-                "render",
-                "table",
-                "--width",
-                "8",
-                "--height",
-                "8",
-                "--spp",
-                "1",
-                "--renders",
-                str(blocker / "r"),
-            ]
-        )
-        == 2
-    )
+    argv = ["render", "table", "--width", "8", "--height", "8", "--spp", "1"]
+    with pytest.raises(SystemExit) as e:
+        main([*argv, "--renders", str(blocker / "r")])
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].startswith("bench: error: cannot write to")
+    assert e.value.code == 2 and err[-1].startswith("bench: error: argument --renders: ")
+    assert f"{blocker} in {blocker / 'r'} is a file; give a folder" in err[-1]
 
 
 def test_scalar_fallback_renders_the_same_layout(tmp_path):

@@ -3,6 +3,8 @@ declared signals), images read whole or refused, and an honest focal length."""
 
 from __future__ import annotations
 
+import os
+
 import cv2
 import numpy as np
 import pycolmap
@@ -17,6 +19,7 @@ from bench.frontend.policies import PolicyConfig, PolicyInput
 from bench.frontend.selection import select_views
 from bench.frontend.stage import compute
 from bench.frontend.views import View, load_image_folder, read_image
+from tests.conftest import synthetic_rig
 
 PEEKING = """
 from bench.frontend.policies import policy
@@ -71,6 +74,24 @@ def test_a_truncated_jpeg_is_refused_naming_the_file(tmp_path, capsys):
     assert not (tmp_path / "o" / "database.db").exists()
 
 
+@pytest.mark.parametrize(
+    "content, why",
+    [
+        (b"not an image", "its first bytes (b'not an i') are the signature of no PNG, JPEG"),
+        (b"", "the file is empty"),
+        ("cut", "its PNG header is followed by data that cannot be decoded"),
+    ],
+)
+def test_a_file_that_is_no_image_is_refused_saying_why(tmp_path, capsys, content, why):
+    """A fake `fake.png` was refused as `cannot read image .../fake.png`, with no reason."""
+    folder = photos(tmp_path / "im")
+    data = (folder / "p0.png").read_bytes()[:100] if content == "cut" else content
+    (folder / "fake.png").write_bytes(data)
+    assert select(folder, tmp_path / "o") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{folder / 'fake.png'} is not a readable image: {why}" in err
+
+
 def test_tiff_and_webp_are_read_and_the_skipped_files_named(tmp_path, capsys):
     folder = photos(tmp_path / "im", n=1)
     img = texture(120, 160, seed=1)
@@ -99,14 +120,26 @@ def test_a_guessed_focal_is_an_untrusted_prior_and_is_said(tmp_path, capsys):
         db.close()
 
 
-def test_the_focal_length_is_estimated_from_a_general_motion():
-    """Synthetic correspondences of four cameras whose optical axes do not meet: the
-    estimate is the true focal length, the guess is 1.2 x max(width, height)."""
-    rng = np.random.default_rng(0)
-    X = rng.uniform(-2, 2, (300, 3)) + [0, 0, 1]
-    eyes = [(-3, -8, 1.5), (-1, -8.5, 0.5), (1.5, -7.5, 2), (3, -8, 1)]
-    targets = [(0.8, 0, 1.3), (-0.6, 0.5, 0.7), (0.4, -0.7, 1.8), (-1, 0.3, 0.5)]
-    cams = [look_at(e, t, width=640, height=480, fov_x_deg=55) for e, t in zip(eyes, targets)]
+def test_a_budget_above_the_pools_is_counted_per_image(tmp_path, capsys):
+    """`--budget 1000000` said "2998469 short of 1000000 per image": a sum over images
+    against a per-image budget."""
+    folder = photos(tmp_path / "im")
+    assert select(folder, tmp_path / "o", "--budget", "1000000", "--policy", "texture") == 0
+    pools = [len(detect(v, DetectorConfig())) for v in load_image_folder(folder)]
+    err = capsys.readouterr().err
+    said = f"{sum(pools)} keypoints in 3 images, 1000000 per image (fewer in 3 of them: "
+    assert said + f"{min(pools)} to {max(pools)})" in err and "short of" not in err
+    assert "3 of 3 image(s) have fewer candidates than the budget 1000000 per image" in err
+    budget = sorted(pools)[1]  # the smallest pool alone falls short
+    assert select(folder, tmp_path / "o", "--budget", str(budget), "--policy", "texture") == 0
+    said = f"{min(pools) + 2 * budget} keypoints in 3 images, {budget} per image (fewer in 1 "
+    assert said + f"of them: {min(pools)})" in capsys.readouterr().err
+
+
+def _seen(cams, X, seed=0) -> tuple[list[View], list[Candidates]]:
+    """Views of the points X by the cameras (focal length guessed, 1.2 x 640) and their
+    pools: the projections, with 0.2 px of noise and one descriptor per point."""
+    rng = np.random.default_rng(seed)
     desc = rng.normal(size=(len(X), 128)).astype(np.float32)
     desc /= np.linalg.norm(desc, axis=1, keepdims=True)
     views, pools = [], []
@@ -120,9 +153,34 @@ def test_the_focal_length_is_estimated_from_a_general_motion():
         guess = look_at((0, 0, 0), (0, 1, 0), width=640, height=480)
         guess = type(guess)(640, 480, f, f, 320, 240, guess.R, guess.t)
         views.append(View(k, f"v{k}", np.zeros((480, 640, 3), np.uint8), guess, False, False))
-    factor, pairs = estimate_focal(views, pools, SignalConfig())
-    assert pairs == 6
-    assert factor * 640 == pytest.approx(cams[0].fx, rel=0.02)
+    return views, pools
+
+
+def test_the_focal_length_is_estimated_from_a_general_motion():
+    """Synthetic correspondences of four cameras whose optical axes do not meet: the
+    estimate is the true focal length, the guess is 1.2 x max(width, height)."""
+    X = np.random.default_rng(0).uniform(-2, 2, (300, 3)) + [0, 0, 1]
+    eyes = [(-3, -8, 1.5), (-1, -8.5, 0.5), (1.5, -7.5, 2), (3, -8, 1)]
+    targets = [(0.8, 0, 1.3), (-0.6, 0.5, 0.7), (0.4, -0.7, 1.8), (-1, 0.3, 0.5)]
+    cams = [look_at(e, t, width=640, height=480, fov_x_deg=55) for e, t in zip(eyes, targets)]
+    found = estimate_focal(*_seen(cams, X), SignalConfig())
+    assert found.pairs == 6 and found.why == ""
+    assert found.factor * 640 == pytest.approx(cams[0].fx, rel=0.02)
+    best, off = found.explained
+    assert best >= 1.5 * off
+
+
+def test_a_focal_length_the_views_do_not_determine_is_not_estimated():
+    """Four cameras looking at one point (their optical axes meet: a critical motion) gave
+    a focal length far off the truth; now the guess stays, and the line says why."""
+    cams, X = synthetic_rig()
+    found = estimate_focal(*_seen(cams, X), SignalConfig())
+    assert found.factor is None and found.pairs == 6
+    best, off = found.explained
+    assert best < 1.5 * off and found.why.startswith(f"their relative poses explain {best} ")
+    assert "views whose optical axes meet" in found.why
+    few = estimate_focal(*_seen(cams[:2], X), SignalConfig())
+    assert few.factor is None and few.why == "1 pair(s) of images share 15 matches, 2 needed"
 
 
 def test_out_file_is_refused_before_any_work(tmp_path, capsys):
@@ -131,6 +189,39 @@ def test_out_file_is_refused_before_any_work(tmp_path, capsys):
     (tmp_path / "file").write_text("x")
     assert select(folder, tmp_path / "file") == 2
     assert "is a file; give a folder" in capsys.readouterr().err
+
+
+def test_sigterm_stops_select_in_one_line(tmp_path):
+    """SIGTERM (`timeout`, systemd) during `bench select` printed COLMAP's native stack
+    (glog's failure handler, installed when pycolmap is first imported, after ours)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    mark = tmp_path / "selecting"
+    module = tmp_path / "sleepy.py"
+    module.write_text(
+        "import pathlib, time\n"
+        "from bench.frontend.policies import policy\n\n"
+        "@policy('sleepy')\n"
+        "def sleepy(inp, budget, rng, cfg):\n"
+        f"    pathlib.Path({str(mark)!r}).touch()\n"
+        "    time.sleep(60)\n"
+    )
+    cmd = [sys.executable, "-m", "bench", "select", "--images", str(photos(tmp_path / "im"))]
+    cmd += ["--out", str(tmp_path / "o"), "--policy", "sleepy", "--policy-module", str(module)]
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 60
+    while not mark.exists() and time.monotonic() < deadline:
+        assert proc.poll() is None, proc.stderr.read()
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGTERM)
+    err = proc.communicate(timeout=60)[1]
+    lines = err.strip().splitlines()
+    assert proc.returncode == 143 and lines[-1] == "bench: terminated; finished work is kept"
+    assert all(line.startswith("bench: ") for line in lines), err
+    assert not (tmp_path / "o" / "database.db").exists()
 
 
 def test_an_undeclared_signal_is_refused_in_run_and_select(tmp_path, capsys):

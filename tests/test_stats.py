@@ -119,6 +119,24 @@ def test_wins_ties_and_losses_follow_the_metric_direction():
 # --- the sfm exclusion rule ----------------------------------------------------------
 
 
+def test_table2_of_a_grid_without_the_tri_task():
+    """A pairs-only run crashed in Table 2 (KeyError 'acc_completeness_pct') after its rows
+    were written, so it had no tables."""
+    from bench.report.tables import table2
+
+    rows = []
+    for seed in (0, 1):
+        cell = dict(scene="s", seed=seed, budget=64, task="pairs", protocol="multiview")
+        for method, auc in (("texture", 0.3), ("adaptive", 0.5)):
+            rows.append(cell | dict(method=method, auc_10=auc + 0.1 * seed, status="ok"))
+    vocab = Vocabulary.current()
+    frame = headline_frame(pd.DataFrame(rows), vocab)
+    t2 = table2(frame, paired(frame, vocab), vocab).set_index("scene")
+    assert t2.loc["all scenes", "diff_pairs_auc_10"] == pytest.approx(0.2)
+    assert t2.loc["s", "best_baseline_pairs_auc_10_policy"] == "texture"
+    assert math.isnan(t2.loc["s", "oracle_acc_completeness_pct"])
+
+
 def _sfm_rows(reference_cells) -> pd.DataFrame:
     """Two seeds of one scene in the sfm task; stock COLMAP maps seed 0, not seed 1, and
     runs in `reference_cells` only."""

@@ -31,6 +31,11 @@ COMMANDS = (
 )
 
 
+NATIVE = ("run", "upgrade", "train-weights", "select", "export")
+"""The commands that load COLMAP, whose import installs glog's failure signal handler (a
+native stack dump on SIGTERM): it is imported before ours replaces that handler."""
+
+
 def command_module(name: str):
     return importlib.import_module(f"bench.cli.{name.replace('-', '_')}")
 
@@ -79,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     # our handler, not the one COLMAP's logging library installs (it aborts the process,
     # leaving lock files and half-written entries behind); the caller's again on return
+    if args.command in NATIVE:
+        import pycolmap  # noqa: F401
     previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         args.func(args)

@@ -254,14 +254,26 @@ def settings_arg(parser: argparse.ArgumentParser, help: str) -> None:
     )
 
 
+def folder(text: str) -> Path:
+    """A folder option's value, refused where a file stands in its place or in its path's."""
+    path = Path(text)
+    for p in (path, *path.parents):
+        if p.exists():
+            if not p.is_dir():
+                where = "" if p == path else f" in {path}"
+                raise argparse.ArgumentTypeError(f"{p}{where} is a file; give a folder")
+            break
+    return path
+
+
 def renders_arg(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--renders",
-        type=Path,
+        type=folder,
         default=ROOT / "renders",
         help=f"render cache directory (default: {ROOT / 'renders'})",
     )
 
 
 def results_arg(parser: argparse.ArgumentParser, default: Path | None, what: str) -> None:
-    parser.add_argument("--results", type=Path, default=default, help=what)
+    parser.add_argument("--results", type=folder, default=default, help=what)

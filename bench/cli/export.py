@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from bench.cli.common import add_config_args, config_from_args, renders_arg
+from bench.cli.common import add_config_args, config_from_args, folder, renders_arg
 from bench.render.config import VARIANTS, RenderConfig
 
 HELP = "write a rendered scene as a dataset in the COLMAP layout (for `bench run --dataset`)"
@@ -19,7 +18,7 @@ DESCRIPTION = (
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scene", metavar="SCENE", help="scene type (see `bench scenes`)")
     parser.add_argument("--seed", type=int, default=0, help="scene seed (default: %(default)s)")
-    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="dataset folder")
+    parser.add_argument("--out", type=folder, required=True, metavar="DIR", help="dataset folder")
     add_config_args(parser, RenderConfig, choices={"variant": VARIANTS})
     renders_arg(parser)
 

@@ -3,17 +3,28 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from bench.cli.common import LATEST, PUBLISHED, regime_arg, regime_folder, results_arg
+from bench.cli.common import (
+    LATEST,
+    PUBLISHED,
+    REGIMES,
+    folder,
+    parse_list,
+    regime_arg,
+    regime_folder,
+    results_arg,
+)
 
 HELP = "copy a results folder's runs, tables and figures into the published snapshot"
 DESCRIPTION = (
-    "Check RESULTS/runs.csv row by row, then copy it with config.json, vocabulary.json, "
-    "manifest.json, the tables and the figures into TO (the snapshot the repository "
-    "tracks), removing report files there that RESULTS does not have. A snapshot of other "
+    "Check RESULTS/runs.csv row by row (no damaged row, none that could not be computed) "
+    "and that `bench plot` wrote its tables, then copy it with config.json, "
+    "vocabulary.json, manifest.json, the tables and the figures into TO (the snapshot the "
+    "repository tracks), removing report files there that RESULTS does not have. With "
+    "--regime, or into the regime's snapshot (no --to), RESULTS must hold the regime's "
+    "grid: every scene, its seeds and views, the default render size. A snapshot of other "
     "settings (config.json) or another grid (scenes, seeds, methods, budgets, tasks, "
-    "protocols) is replaced only with --replace."
+    "protocols) is replaced only with --replace. A refused publish creates nothing."
 )
 
 
@@ -22,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     results_arg(parser, None, f"results folder to publish (default: ./{LATEST}, or ./{dense[0]})")
     parser.add_argument(
         "--to",
-        type=Path,
+        type=folder,
         default=None,
         help=f"snapshot folder (default: ./{PUBLISHED}, or ./{dense[1]})",
     )
@@ -41,15 +52,37 @@ def _defaults() -> dict:
     return RunConfig().as_dict()
 
 
+def regime_grid(name: str) -> dict:
+    """What a regime's results folder holds: every scene, the regime's seeds and views, and
+    the default render size."""
+    from bench.render.config import RenderConfig
+    from bench.scenes.spec import scene_names
+
+    views, seeds = REGIMES[name]
+    render = RenderConfig()
+    return {
+        "name": name,
+        "scenes": scene_names(),
+        "seeds": list(parse_list("--seeds", seeds, int)),
+        "views": views,
+        "width": render.width,
+        "height": render.height,
+    }
+
+
 def run(args: argparse.Namespace) -> None:
     from bench import BenchError
-    from bench.report.write import publish
+    from bench.report.write import check_publishable, publish
     from bench.results import holding, runs_file, snapshot_differences
 
     regime = args.regime or "sparse"
+    # named, or its snapshot the target: the folder must hold that regime's grid
+    grid = regime_grid(regime) if args.regime or args.to is None else None
     args.results = args.results or regime_folder(LATEST, regime)
     args.to = args.to or regime_folder(PUBLISHED, regime)
     runs_file(args.results / "runs.csv")
+    with holding(args.results, reading=True):
+        check_publishable(args.results, grid)  # before anything is created
     try:
         args.to.mkdir(parents=True, exist_ok=True)
     except OSError as e:

@@ -143,14 +143,13 @@ def _estimate_focal(views, work, pools, sig):
     guessed = [v for v in views if not v.focal_known]
     what = f"{len(guessed)} image(s) have no known focal length (no EXIF, no camera model)"
     found = estimate_focal([v for v, _, _ in work], pools, sig)
-    if found is None:
+    if found.factor is None:
         log(
-            f"{what}: it is guessed, 1.2 x max(width, height), and the images do not determine "
-            "it (too few pairs, or views whose optical axes meet); the geometry of the "
-            "signals may be poor: give --cameras"
+            f"{what}: it is guessed, 1.2 x max(width, height), because the images do not "
+            f"determine it: {found.why}; the geometry of the signals may be poor: give --cameras"
         )
         return views, work
-    factor, pairs = found
+    factor, pairs = found.factor, found.pairs
     c = guessed[0].camera
     log(
         f"{what}: guessed, then estimated from {pairs} pairs of images: {factor:.3f} x "

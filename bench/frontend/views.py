@@ -14,7 +14,8 @@ Three sources give the same list of `View`s:
 
 An image is read whole or refused: a file OpenCV cannot decode, and a JPEG that ends
 before its end-of-image marker (OpenCV would return its decoded part), are refused in one
-line naming the file.
+line naming the file and why (empty, not an image format's signature, or a header whose
+data cannot be decoded).
 
 This module is the front end's and back end's only way into the data; it never opens
 ground-truth files.
@@ -179,10 +180,35 @@ def read_image(path: Path) -> np.ndarray:
             f"cannot read image {path}: the JPEG is truncated (no end-of-image marker)"
         )
     flags = cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), flags) if data else None
+    level = cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    try:  # the reason is ours, in one line, not OpenCV's warning
+        img = cv2.imdecode(np.frombuffer(data, np.uint8), flags) if data else None
+    finally:
+        cv2.utils.logging.setLogLevel(level)
     if img is None:
-        raise BenchError(f"cannot read image {path}")
+        raise BenchError(f"{path} is not a readable image: {_undecodable(data)}")
     return img[..., ::-1].copy()
+
+
+SIGNATURES = {
+    "PNG": (b"\x89PNG\r\n\x1a\n",),
+    "JPEG": (b"\xff\xd8\xff",),
+    "TIFF": (b"II*\x00", b"MM\x00*"),
+    "WebP": (b"RIFF",),
+}
+"""The first bytes of each format OpenCV reads for a folder's views (`IMAGE_SUFFIXES`)."""
+
+
+def _undecodable(data: bytes) -> str:
+    """Why OpenCV could not decode an image file's bytes, in a few words."""
+    if not data:
+        return "the file is empty"
+    kind = next((k for k, sigs in SIGNATURES.items() if data.startswith(sigs)), None)
+    if kind is None:
+        *first, last = SIGNATURES
+        names = f"{', '.join(first)} or {last}"
+        return f"its first bytes ({data[:8]!r}) are the signature of no {names} file"
+    return f"its {kind} header is followed by data that cannot be decoded (damaged or cut short)"
 
 
 def exif_focal(path: Path, width: int, height: int) -> float | None:
@@ -226,13 +252,37 @@ def image_files(folder: Path) -> list[str]:
     return folder_files(folder)[0]
 
 
+def _posed_views(folder: Path, model: Path) -> list[View]:
+    """The views of the folder's images that the model poses; the model's images that the
+    folder lacks, and the folder's images it does not pose, are counted in a line each."""
+    present = set(image_files(folder))
+    posed = read_model(model)
+    absent = [n for n, _ in posed if n not in present]
+    if absent:
+        log(
+            f"the model in {model} poses {len(absent)} image(s) besides the "
+            f"{len(posed) - len(absent)} in {folder} (first: {absent[0]}); using those present"
+        )
+    unposed = sorted(present - {n for n, _ in posed})
+    if unposed:
+        log(
+            f"{folder}: {len(unposed)} image(s) the model in {model} does not pose are left "
+            f"out (first: {unposed[0]})"
+        )
+    kept = [(n, cam) for n, cam in posed if n in present]
+    return [
+        View(i, name, ImageFile(folder / name, cam.width, cam.height), cam)
+        for i, (name, cam) in enumerate(kept)
+    ]
+
+
 def load_image_folder(folder: Path, model: Path | None = None) -> list[View]:
-    """Every image of a folder: posed from a COLMAP model when one is given (only its
-    images), else unposed with the focal-length prior; the files it skips are named. At
-    least two images."""
+    """Every image of a folder: posed from a COLMAP model when one is given (the images
+    both hold, `_posed_views`), else unposed with the focal-length prior; the files it
+    skips are named. At least two images."""
     folder = Path(folder)
     if model is not None:
-        views = load_views(Source(folder, Path(model)))
+        views = _posed_views(folder, Path(model))
     else:
         names, skipped = folder_files(folder)
         if skipped:

@@ -13,8 +13,9 @@ unit's rows are recorded as failed, saying what and where, and the grid goes on.
 whose worker dies is retried once, then recorded the same way. The failure of such a row
 starts with `ERROR` (a task's outcome, such as a mapper that registered no view, does not).
 A `BenchError` (bad input, deterministic) comes back as a value, is not retried, and stops
-the run as it does in process. The workers of a local cluster ignore Ctrl-C, which the main process handles by
-stopping them. With a cluster given by address, the workers must see the same `renders/`
+the run as it does in process. The workers of a local cluster ignore Ctrl-C and SIGTERM
+(sent to the whole process group by a terminal, `timeout` or systemd), which the main
+process handles by stopping them. With a cluster given by address, the workers must see the same `renders/`
 and results folder (a shared file system).
 
 Every unit computes the same numbers wherever it runs: its inputs are files and
@@ -222,6 +223,22 @@ def _local_cluster(workers: int):
         signal.signal(signal.SIGINT, previous)
 
 
+def _term_ignored():
+    """A worker plugin: SIGTERM ignored in the worker process, as Ctrl-C is, so that a
+    signal to the whole process group (`timeout`, systemd) reaches this process alone,
+    which stops the workers. Set after importing pycolmap, whose import installs glog's
+    failure signal handler (SIGTERM included: it printed each worker's native stack)."""
+    from distributed import WorkerPlugin
+
+    class TermIgnored(WorkerPlugin):
+        def setup(self, worker):
+            import pycolmap  # noqa: F401
+
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+    return TermIgnored()
+
+
 def check_scheduler(address: str) -> None:
     """Refuse, in one line and within seconds, a Dask scheduler that cannot be reached.
 
@@ -261,6 +278,8 @@ def _on_dask(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, on_sce
     local = _local_cluster(cluster.workers) if cluster.scheduler is None else None
     client = Client(cluster.scheduler or local, timeout="10s")
     try:
+        if local is not None:
+            client.register_plugin(_term_ignored(), name="bench-term-ignored")
         shared = client.scatter(plan, broadcast=True)  # sent once, not with every unit
         fronts = {
             client.submit(

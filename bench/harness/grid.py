@@ -22,7 +22,7 @@ import subprocess
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from importlib.metadata import version
+from importlib.metadata import packages_distributions, version
 from pathlib import Path
 
 import numpy as np
@@ -297,10 +297,9 @@ def _run_in(
         0.0,
     )
     n_again = sum(len(w.jobs) for w in work.values() if w.rescore)
-    log(
-        f"{len(done)} of {len(done) + n_rows} rows already in {ws.runs_csv}; {n_rows} to do"
-        + (f", {n_again} of them scored again from stored predictions" if n_again else "")
-    )
+    todo = [f"{n_rows - n_again} to compute"] if n_rows > n_again or not n_rows else []
+    todo += [f"{n_again} rows to score again from their stored predictions"] if n_again else []
+    log(f"{len(done)} of {len(done) + n_rows} rows already in {ws.runs_csv}; " + ", ".join(todo))
     groups = sorted({u.group for u in work}, key=lambda g: (cfg.scenes.index(g[0]), g[1]))
     entries = {}
     with progress("render", len(groups)) as bar:
@@ -396,6 +395,25 @@ def _git_commit() -> str:
         return "unknown"
 
 
+MODULES = ("mitsuba", "drjit", "numpy", "cv2", "pycolmap", "pandas", "matplotlib", "scipy")
+"""The modules whose versions the manifest records."""
+
+
+def module_versions(modules: tuple[str, ...]) -> dict[str, str]:
+    """Per module, the version of the distribution that provides it, named where its name
+    differs (`cv2`: `opencv-contrib-python-headless 5.0.0.93`, or whichever OpenCV build is
+    installed), and `unknown` where no installed distribution provides it."""
+    provided = packages_distributions()
+    out = {}
+    for module in modules:
+        names = sorted(provided.get(module, []))
+        out[module] = (
+            ", ".join(f"{n} {version(n)}" if n != module else version(n) for n in names)
+            or "unknown"
+        )
+    return out
+
+
 def write_manifest(ws: Workspace, cfg: BenchConfig, invocation: dict, rows: pd.DataFrame) -> None:
     """Versions, variant, host, settings and the invocations that computed the rows of
     `runs.csv`: each with its commit and seconds per stage, kept while it owns a row (a rerun
@@ -419,18 +437,8 @@ def write_manifest(ws: Workspace, cfg: BenchConfig, invocation: dict, rows: pd.D
     metas = [
         json.loads((e / "meta.json").read_text()) for e in entries if Source.kind(e) == "render"
     ]
-    packages = [
-        "mitsuba",
-        "drjit",
-        "numpy",
-        "opencv-contrib-python-headless",
-        "pycolmap",
-        "pandas",
-        "matplotlib",
-        "scipy",
-    ]
     manifest = {
-        "versions": {"python": platform.python_version(), **{p: version(p) for p in packages}},
+        "versions": {"python": platform.python_version(), **module_versions(MODULES)},
         "variant": sorted({m["variant"] for m in metas}),
         "host": {"node": platform.node(), "platform": platform.platform(), "cpus": os.cpu_count()},
         "settings": cfg.run.as_dict(),

@@ -117,16 +117,18 @@ def select_to_database(request: SelectRequest, out: Path, seconds: dict | None =
     if METHODS[policy].whole_pool:
         summary = f"{kept} keypoints in {n} images: the whole pool (--budget does not apply)"
     else:
-        short = {v.name: len(c) for v, c in zip(views, pools) if len(c) < budget}
+        short = {v.name: len(s) for v, s in zip(views, sel) if len(s) < budget}
         if short:
             log(
-                f"{len(short)} image(s) have fewer candidates than the budget {budget} and "
-                f"hold all of them: {', '.join(f'{k} ({m})' for k, m in list(short.items())[:5])}"
+                f"{len(short)} of {n} image(s) have fewer candidates than the budget {budget} "
+                "per image and hold all of them: "
+                + ", ".join(f"{k} ({m})" for k, m in list(short.items())[:5])
+                + (", ..." if len(short) > 5 else "")
             )
-        missing = sum(max(budget - len(s), 0) for s in sel)
-        summary = f"{kept} keypoints in {n} images" + (
-            f", {missing} short of {budget} per image" if missing else f", {budget} per image"
-        )
+        summary = f"{kept} keypoints in {n} images, {budget} per image"
+        if short:
+            lo, hi = min(short.values()), max(short.values())
+            summary += f" (fewer in {len(short)} of them: {lo}" + (f" to {hi})" if hi > lo else ")")
     log(f"{policy}: {summary} ({seconds}){', matched' if request.match else ''}")
     return db
 

@@ -285,8 +285,12 @@ def figure_transfer(ranks: pd.DataFrame, summary: pd.DataFrame, budget: int, out
         ax.set(
             xlabel="rank on the rendered benchmark",
             ylabel=f"rank on {s['dataset']}",
-            title=f"{s['metric']}, B = {budget}\ntau {s['kendall_tau']:.2f} "
-            f"[{s['tau_lo']:.2f}, {s['tau_hi']:.2f}]",
+            title=f"{s['metric']}, B = {budget}\n"
+            + (
+                f"tau {s['kendall_tau']:.2f} [{s['tau_lo']:.2f}, {s['tau_hi']:.2f}]"
+                if not s["tau_note"]
+                else f"no tau: {n} methods"
+            ),
         )
         ax.invert_xaxis()
         ax.invert_yaxis()

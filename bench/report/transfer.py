@@ -12,7 +12,10 @@ where that rule holds, `bench.summary.exclusion_rule`; a dataset's cells are nev
 out); tied means share their mean rank. `transfer.csv` has Kendall's tau-b between the
 two rankings with a 95% percentile bootstrap interval (the methods resampled with
 replacement, `DRAWS` draws, seed 0), the winner on each side and the methods whose rank
-moves most; `transfer_ranks.csv` has every method's values and ranks.
+moves most; `transfer_ranks.csv` has every method's values and ranks. Below `MIN_METHODS`
+methods there is no tau: `tau_note` says why instead (with five methods, an exact
+permutation test at 5 % tells only a perfect agreement or reversal from chance, with four
+or three not even that; with six, one discordant pair too).
 
 Against several rendered folders (one per rig regime, `bench.cli.common.REGIMES`), the rows
 of each carry its views per scene (`rendered_views`), and `matched` marks, per dataset, the
@@ -35,6 +38,8 @@ from bench.vocabulary import Vocabulary
 
 DRAWS = 2000
 MOVERS = 2
+MIN_METHODS = 6
+"""The fewest methods whose rankings get a Kendall's tau (module docstring)."""
 
 
 def kendall_tau(x: np.ndarray, y: np.ndarray) -> float:
@@ -68,6 +73,54 @@ def _means(frame: pd.DataFrame, metric: str, vocab: Vocabulary) -> pd.DataFrame:
     return rows.groupby(["budget", "method"])[metric].mean().unstack("method")
 
 
+def compare(dataset: pd.Series, rendered: pd.Series, lower_better: bool) -> tuple[dict, list]:
+    """One ranking comparison: the methods' means on a dataset and on the rendered
+    benchmark (indexed by method, the same methods) -> (the fields of its `transfer.csv`
+    row from `methods` on, its `transfer_ranks.csv` rows from `method` on); rank 1 is the
+    best by the metric's direction."""
+    methods = list(dataset.index)
+    x, y = dataset[methods].to_numpy(float), rendered[methods].to_numpy(float)
+    sign = 1 if lower_better else -1
+    rank_x = pd.Series(sign * x, index=methods).rank(method="average")
+    rank_y = pd.Series(sign * y, index=methods).rank(method="average")
+    shift = rank_x - rank_y
+    movers = shift.abs().sort_values(ascending=False, kind="stable").index[:MOVERS]
+    if len(methods) >= MIN_METHODS:
+        tau, (lo, hi), note = kendall_tau(x, y), tau_interval(x, y), ""
+        if math.isnan(tau):
+            note = "no tau: every method has the same mean on one side"
+    else:
+        tau, lo, hi = math.nan, math.nan, math.nan
+        note = (
+            f"no tau: {len(methods)} methods, too few to tell agreement from chance "
+            f"(at least {MIN_METHODS})"
+        )
+    row = {
+        "methods": len(methods),
+        "kendall_tau": tau,
+        "tau_lo": lo,
+        "tau_hi": hi,
+        "tau_note": note,
+        "winner_dataset": _winner(rank_x),
+        "winner_rendered": _winner(rank_y),
+        "biggest_movers": "; ".join(
+            f"{m} {rank_y[m]:g} -> {rank_x[m]:g}" for m in movers if shift[m]
+        ),
+    }
+    ranks = [
+        {
+            "method": m,
+            "value_dataset": dataset[m],
+            "value_rendered": rendered[m],
+            "rank_dataset": rank_x[m],
+            "rank_rendered": rank_y[m],
+            "rank_shift": shift[m],
+        }
+        for m in methods
+    ]
+    return row, ranks
+
+
 def transfer(
     dataset_rows: pd.DataFrame, vocab: Vocabulary, rendered: Path
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -77,7 +130,6 @@ def transfer(
     theirs = headline_frame(read_runs(Path(rendered) / "runs.csv"), Vocabulary.load(rendered))
     views = json.loads((Path(rendered) / "config.json").read_text())["settings"]["render"]["views"]
     summary, ranks = [], []
-    sign = {m: 1 if m in vocab.lower_better() else -1 for m in vocab.first_headline()}
     for dataset, rows in mine.groupby("scene", sort=False):
         for metric in vocab.first_headline():
             if metric not in rows or metric not in theirs:
@@ -88,44 +140,11 @@ def transfer(
                 methods = [m for m in a.index if m in b.index]
                 if len(methods) < 3:
                     continue
-                x, y = a[methods].to_numpy(), b[methods].to_numpy()
-                rank_x = pd.Series(sign[metric] * x, index=methods).rank(method="average")
-                rank_y = pd.Series(sign[metric] * y, index=methods).rank(method="average")
-                shift = rank_x - rank_y
-                movers = shift.abs().sort_values(ascending=False, kind="stable").index[:MOVERS]
-                lo, hi = tau_interval(x, y)
-                summary.append(
-                    {
-                        "dataset": dataset,
-                        "rendered_views": views,
-                        "metric": metric,
-                        "budget": int(budget),
-                        "methods": len(methods),
-                        "kendall_tau": kendall_tau(x, y),
-                        "tau_lo": lo,
-                        "tau_hi": hi,
-                        "winner_dataset": _winner(rank_x),
-                        "winner_rendered": _winner(rank_y),
-                        "biggest_movers": "; ".join(
-                            f"{m} {rank_y[m]:g} -> {rank_x[m]:g}" for m in movers if shift[m]
-                        ),
-                    }
-                )
-                for m in methods:
-                    ranks.append(
-                        {
-                            "dataset": dataset,
-                            "rendered_views": views,
-                            "metric": metric,
-                            "budget": int(budget),
-                            "method": m,
-                            "value_dataset": a[m],
-                            "value_rendered": b[m],
-                            "rank_dataset": rank_x[m],
-                            "rank_rendered": rank_y[m],
-                            "rank_shift": shift[m],
-                        }
-                    )
+                row, rows_ranked = compare(a[methods], b[methods], metric in vocab.lower_better())
+                key = {"dataset": dataset, "rendered_views": views, "metric": metric}
+                key["budget"] = int(budget)
+                summary.append(key | row)
+                ranks += [key | r for r in rows_ranked]
     return pd.DataFrame(summary), pd.DataFrame(ranks)
 
 
@@ -144,6 +163,24 @@ def transfer_regimes(
     for frame in (summary, ranks):
         frame.insert(2, "matched", frame["rendered_views"] == frame["dataset"].map(nearest))
     return summary, ranks
+
+
+def said(summary: pd.DataFrame, budget: int) -> list[str]:
+    """Per dataset, one line of its matched regime's taus at `budget` (or why there are none)."""
+    lines = []
+    rows = summary[summary["matched"] & (summary["budget"] == budget)]
+    for dataset, group in rows.groupby("dataset", sort=False):
+        notes = set(group["tau_note"])
+        taus = [
+            f"{r.metric} " + (r.tau_note or f"{r.kendall_tau:.2f} [{r.tau_lo:.2f}, {r.tau_hi:.2f}]")
+            for r in group.itertuples()
+        ]
+        views = group["rendered_views"].iloc[0]
+        lines.append(
+            f"{dataset} against the {views}-view regime at B = {budget}, Kendall's tau: "
+            + (notes.pop() if len(notes) == 1 and "" not in notes else "; ".join(taus))
+        )
+    return lines
 
 
 def _winner(rank: pd.Series) -> str:

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from bench import BenchError
 from bench.console import log
 from bench.files import atomic_path, write_text_atomic
 from bench.report.figures import (
@@ -44,9 +45,10 @@ from bench.report.tables import (
     table_scenes,
     with_shares,
 )
+from bench.report.transfer import said as transfer_said
 from bench.report.transfer import transfer_regimes
 from bench.results import read_runs
-from bench.summary import exclusions, failures
+from bench.summary import errors, exclusions, failures
 from bench.vocabulary import VOCABULARY_FILE, Vocabulary
 
 
@@ -166,6 +168,8 @@ def _write_transfer(df: pd.DataFrame, vocab: Vocabulary, results: Path, rendered
     budget = headline_budget(summary)
     matched = summary["matched"], ranks["matched"]
     figure_transfer(ranks[matched[1]], summary[matched[0]], budget, results / "figure_transfer")
+    for line in transfer_said(summary, budget):
+        log(f"{results / 'transfer.csv'}: {line}")
 
 
 PUBLISHED_FILES = ("runs.csv", "config.json", VOCABULARY_FILE, "manifest.json", "scenes.png")
@@ -182,12 +186,58 @@ REPORT_FILES = (
 FIGURES = ("figure2.png", "figure3.png", "figure3.pdf", "figure_budget.png")
 
 
-def publish(results: Path, to: Path) -> int:
+def check_publishable(results: Path, regime: dict | None = None) -> None:
+    """Refuse in one line a results folder unfit to publish: damaged rows (`read_runs`),
+    rows that could not be computed (`error: `), no Table 1 or page (`bench plot` writes
+    them) and, given a `regime` (its `name`, `scenes`, `seeds`, `views`, `width` and
+    `height`), a grid or render size that is not that regime's."""
+    results = Path(results)
+    rows = read_runs(results / "runs.csv")
+    if errors(rows):
+        raise BenchError(
+            f"{results} is not published: {errors(rows)}; the same `bench run` again computes them"
+        )
+    missing = [n for n in ("table1.csv", PAGE) if not (results / n).is_file()]
+    if missing:
+        raise BenchError(
+            f"{results} has no {' or '.join(missing)}: `bench plot --results {results}` "
+            "writes its tables and page (Table 1 from the rows of the multiview protocol)"
+        )
+    if regime is None:
+        return
+    render = json.loads((results / "config.json").read_text())["settings"]["render"]
+    if render is None:
+        differ = ["a dataset run, not a render"]
+    else:
+        here = {
+            "scenes": sorted(set(rows["scene"])),
+            "seeds": sorted(int(s) for s in set(rows["seed"])),
+            "views": render["views"],
+            "render size": f"{render['width']}x{render['height']}",
+        }
+        wanted = {k: regime[k] for k in ("scenes", "seeds", "views")}
+        wanted["render size"] = f"{regime['width']}x{regime['height']}"
+        show = lambda v: ", ".join(map(str, v)) if isinstance(v, list) else v  # noqa: E731
+        differ = [
+            f"{k} {show(here[k])}, the regime's {show(v)}"
+            for k, v in wanted.items()
+            if here[k] != v
+        ]
+    if differ:
+        raise BenchError(
+            f"{results} is not the {regime['name']} regime's grid ({'; '.join(differ)}); "
+            f"publish a `bench run --regime {regime['name']}` there, or this folder "
+            "elsewhere with --to DIR and no --regime"
+        )
+
+
+def publish(results: Path, to: Path, regime: dict | None = None) -> int:
     """Copy a results folder's rows, settings, manifest, tables and figures into the
-    snapshot `to`, after checking every row; report files `results` lacks are removed
-    from `to`, so the snapshot never mixes runs; its page is written from what it holds
-    (under its own name). How many files were copied or written."""
-    read_runs(Path(results) / "runs.csv")  # a damaged file is refused, nothing is copied
+    snapshot `to`, after checking it (`check_publishable`: nothing is created where it is
+    refused); report files `results` lacks are removed from `to`, so the snapshot never
+    mixes runs; its page is written from what it holds (under its own name). How many
+    files were copied or written."""
+    check_publishable(results, regime)
     to.mkdir(parents=True, exist_ok=True)
     copied = 0
     for name in (n for n in (*PUBLISHED_FILES, *REPORT_FILES, *FIGURES) if n != PAGE):
