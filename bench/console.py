@@ -1,14 +1,20 @@
-"""What the harness tells a person while it works: log lines and tqdm progress bars.
+"""What the harness tells a person while it works: log lines and progress.
 
 Log lines go to stderr through tqdm, so they appear above an active bar instead of being
-glued onto it; bars are shown only when stderr is a terminal.
+glued onto it. Progress is a tqdm bar (done / total, rate, time left) on one line that
+updates when stderr is a terminal; in a log (stderr redirected), a line every
+`LOG_STEP_PCT` percent of the work and at its end, with the same numbers.
 """
 
 from __future__ import annotations
 
 import sys
+import time
 
 from tqdm import tqdm
+
+LOG_STEP_PCT = 5
+"""In a log, one progress line each time the work done crosses a multiple of this."""
 
 
 def log(msg: str) -> None:
@@ -16,14 +22,46 @@ def log(msg: str) -> None:
     tqdm.write(f"bench: {msg}", file=sys.stderr)
 
 
-def progress(stage: str, total: int) -> tqdm:
-    """A progress bar for one stage (ETA included); silent when stderr is not a terminal."""
+class LogProgress:
+    """Progress as log lines (`progress` in a log): tqdm's interface, the lines it prints."""
+
+    def __init__(self, stage: str, total: int, unit: str):
+        self.stage, self.total, self.unit = stage, total, unit
+        self.n, self.step, self.start, self.postfix = 0, 0, time.perf_counter(), ""
+
+    def __enter__(self) -> LogProgress:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
+
+    def set_postfix_str(self, text: str) -> None:
+        self.postfix = text
+
+    def update(self, n: int = 1) -> None:
+        self.n += n
+        pct = 100 * self.n // max(self.total, 1)
+        if pct // LOG_STEP_PCT > self.step or self.n >= self.total:
+            self.step = pct // LOG_STEP_PCT
+            elapsed = time.perf_counter() - self.start
+            rate = self.n / elapsed if elapsed > 0 else 0.0
+            left = (self.total - self.n) / rate if rate else 0.0
+            log(
+                f"{self.stage}: {self.n}/{self.total} {self.unit} ({pct} %), "
+                f"{rate:.2f} {self.unit}/s, {tqdm.format_interval(left)} left"
+                + (f" ({self.postfix})" if self.postfix else "")
+            )
+
+
+def progress(stage: str, total: int, unit: str = "unit") -> tqdm | LogProgress:
+    """The progress of one stage: a bar on a terminal, else log lines (module docstring)."""
+    if not sys.stderr.isatty():
+        return LogProgress(stage, total, unit)
     return tqdm(
         total=total,
         desc=f"{stage:>8}",
-        unit="unit",
+        unit=unit,
         file=sys.stderr,
-        disable=not sys.stderr.isatty(),
         dynamic_ncols=True,
         leave=True,
     )

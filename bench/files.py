@@ -24,6 +24,10 @@ from pathlib import Path
 
 from bench import BenchError
 
+META = "meta.json"
+"""A cache entry's record, written last (`write_meta`): its own fields and each file's size
+and checksum."""
+
 
 def content_key(obj, n: int = 12) -> str:
     """Short stable hash of a JSON-serialisable description."""
@@ -93,17 +97,17 @@ def entry_problem(entry: Path) -> str | None:
     are computed once per process: again only when the meta or a file's size, modification
     time or inode changes."""
     try:
-        text = (entry / "meta.json").read_text()
+        text = (entry / META).read_text()
         files = json.loads(text)["files"]
     except FileNotFoundError:
-        return "meta.json missing"
+        return f"{META} missing"
     except (OSError, ValueError, KeyError, TypeError) as e:
-        return f"meta.json unreadable ({type(e).__name__})"
+        return f"{META} unreadable ({type(e).__name__})"
     stats, crcs = [], {}
     for name, rec in files.items():
         p = entry / name
         if not isinstance(rec, dict) or not {"bytes", "crc32"} <= rec.keys():
-            return f"meta.json unreadable (no size and checksum for {name})"
+            return f"{META} unreadable (no size and checksum for {name})"
         size, crcs[name] = rec["bytes"], rec["crc32"]
         if not p.is_file():
             return f"{name} missing"
@@ -121,14 +125,19 @@ def entry_problem(entry: Path) -> str | None:
     return None
 
 
+def read_meta(entry: Path) -> dict:
+    """A cache entry's record (`META`)."""
+    return json.loads((Path(entry) / META).read_text())
+
+
 def write_meta(directory: Path, meta: dict) -> None:
     """Write `meta.json` last, listing the size and checksum of every other file."""
     files = {
         p.name: {"bytes": p.stat().st_size, "crc32": checksum(p)}
         for p in sorted(directory.iterdir())
-        if p.name != "meta.json"
+        if p.name != META
     }
-    write_text_atomic(directory / "meta.json", json.dumps({**meta, "files": files}, indent=1))
+    write_text_atomic(directory / META, json.dumps({**meta, "files": files}, indent=1))
 
 
 @contextmanager

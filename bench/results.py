@@ -57,7 +57,6 @@ from bench.vocabulary import (
     REFERENCE_MAPS,
     REFERENCE_MIN_MAA,
     REFERENCE_PEER,
-    VOCABULARY_FILE,
     Job,
     Unit,
     Vocabulary,
@@ -68,13 +67,61 @@ HASHES = ("prediction_hash", "evaluation_hash")
 ROW_CHECKSUM = "row_checksum"
 """The last column: a hash of the row's other values as written (`row_checksum`)."""
 TEXT_COLUMNS = ("scene", "method", "task", "protocol", "render_key", *HASHES, "status")
-TEXT_COLUMNS += ("failure", "invocation", "ground_truth", ROW_CHECKSUM)
+TEXT_COLUMNS += ("failure", "invocation", "ground_truth", "pairs_rule", ROW_CHECKSUM)
 REQUIRED = (*KEY, "render_key", *HASHES, "status", "failure", "invocation", "wall_ms")
-DAMAGED = "runs.damaged.csv"
 OLD_METHOD = "policy"
 """The `method` column's name before 0.3.0 (`bench upgrade` renames it)."""
+
+# The results folder's layout: every file a run and its report write, named here alone
+# (tests/test_layout.py fails where another module spells one).
+RUNS = "runs.csv"
+DAMAGED = "runs.damaged.csv"
+"""Damaged rows set aside (`set_aside_damaged`)."""
+CONFIG = "config.json"
+"""The settings the folder is bound to (`bind_results_dir`)."""
+VOCABULARY = "vocabulary.json"
+"""The methods, tasks and metrics its rows were computed under (`read_vocabulary`)."""
+MANIFEST = "manifest.json"
+"""Versions, machine, settings and the invocations that computed the rows."""
+PAGE = "README.md"
+"""The results page (`bench.report.page`)."""
+GALLERY = "scenes.png"
+"""The contact sheet of the scenes (`bench gallery`)."""
+LOCK = ".bench-run.lock"
+MODELS = "models"
+"""One folder per unit (`Workspace.unit_dir`): its prediction and models."""
 PREDICTION = "prediction"
-"""A unit's stored prediction: `prediction.json` (written last) and `prediction.npz`."""
+"""A unit's stored prediction: `prediction.json` (written last) and `prediction-<grant>.npz`
+(`bench.harness.predict`)."""
+LOOP = "loop.json"
+"""Beside the model of a multi-view policy: its rounds."""
+POINT_ERRORS = "point_errors.csv"
+"""Beside a tri model: each point's distance to the ground-truth surface (Figure 2)."""
+TABLES = (
+    "table1.csv",
+    "table1_twoview.csv",
+    "table2.csv",
+    "paired.csv",
+    "paired_sfm.csv",
+    "table_scenes.csv",
+    "frontend_cost.csv",
+)
+"""The report's tables (`bench.report.tables`)."""
+TABLE1, TABLE1_TWOVIEW, TABLE2, PAIRED, PAIRED_SFM, TABLE_SCENES, FRONTEND_COST = TABLES
+FIGURES = ("figure2", "figure3", "figure_budget")
+"""The report's figures, without their suffix (`.png`; Figure 3 also `.pdf`)."""
+FIGURE2, FIGURE3, FIGURE_BUDGET = FIGURES
+TRANSFER, TRANSFER_RANKS, FIGURE_TRANSFER = "transfer.csv", "transfer_ranks.csv", "figure_transfer"
+"""A dataset folder's ranking against rendered folders (`bench.report.transfer`)."""
+
+
+def png(figure: str) -> str:
+    return f"{figure}.png"
+
+
+def table1_of(scene: str) -> str:
+    """A dataset folder's Table 1 of one of its datasets."""
+    return f"table1-{scene}.csv"
 
 
 @dataclass(frozen=True)
@@ -86,12 +133,12 @@ class Workspace:
 
     @property
     def runs_csv(self) -> Path:
-        return self.results / "runs.csv"
+        return self.results / RUNS
 
     def unit_dir(self, unit: Unit) -> Path:
         """A unit's folder: its prediction, and the headline job's model at the top."""
         return (
-            self.results / "models" / f"{unit.scene}-s{unit.seed}" / f"{unit.method}-b{unit.budget}"
+            self.results / MODELS / f"{unit.scene}-s{unit.seed}" / f"{unit.method}-b{unit.budget}"
         )
 
     def model_dir(self, unit: Unit, job: Job) -> Path:
@@ -113,6 +160,33 @@ class DamagedRuns(BenchError):
         self.lines = lines
 
 
+def read_vocabulary(results: Path) -> Vocabulary:
+    """The vocabulary recorded in a results folder (`VOCABULARY`); one recorded by an older
+    bench (`older_fields`) is refused, with `bench upgrade` as the remedy."""
+    path = Path(results) / VOCABULARY
+    try:
+        text = path.read_text()
+        older = older_fields(json.loads(text))
+        if older:
+            raise BenchError(
+                f"{path} was written by an older bench (it lacks {', '.join(older)}); "
+                f"`bench upgrade --results {results}` brings the folder up to date"
+            )
+        return Vocabulary.from_json(text)
+    except FileNotFoundError:
+        raise BenchError(
+            f"{path} not found: these results were not written by this version of "
+            "`bench run`; run it into the folder again"
+        ) from None
+    except (ValueError, KeyError, TypeError) as e:
+        raise BenchError(f"{path} is unreadable ({type(e).__name__}: {e})") from None
+
+
+def read_settings(results: Path) -> dict:
+    """The settings a results folder is bound to (`CONFIG`'s `settings`)."""
+    return json.loads((Path(results) / CONFIG).read_text())["settings"]
+
+
 def runs_file(path: Path) -> Path:
     """`path` (a `runs.csv`), or one line saying that there is none."""
     path = Path(path)
@@ -128,7 +202,7 @@ def holding(folder: Path, reading: bool = False):
     folder = Path(folder)
     if reading and folder.is_dir() and not os.access(folder, os.W_OK):
         return nullcontext()
-    return exclusive(folder / ".bench-run.lock", f"results folder {folder}")
+    return exclusive(folder / LOCK, f"results folder {folder}")
 
 
 def row_checksum(fields: dict[str, str]) -> str:
@@ -226,7 +300,7 @@ def check_runs(
     missing = [c for c in REQUIRED if c not in header]
     if missing:
         raise DamagedRuns(f"{path} is damaged: its header lacks {', '.join(missing)}", [1])
-    vocab = vocab or Vocabulary.load(Path(path).parent)
+    vocab = vocab or read_vocabulary(Path(path).parent)
     good, bad, seen = [], [], {}
     for n, line in enumerate(lines[1:], start=2):
         try:
@@ -288,7 +362,7 @@ def read_runs(
     df = _frame(header, good + altered)
     if keep_altered:
         df["altered"] = [False] * len(good) + [True] * len(altered)
-    df = mark_reference(df, vocab or Vocabulary.load(path.parent))
+    df = mark_reference(df, vocab or read_vocabulary(path.parent))
     return df.sort_values(list(KEY), kind="stable", ignore_index=True)
 
 
@@ -460,7 +534,7 @@ def check_results_dir(
     settings may change: its rows alone are computed again; a setting the folder does not
     have yet may be at its value in `defaults`). Writes nothing."""
     settings = _shared(json.loads(json.dumps(settings)))  # tuples as lists, as stored
-    stored_path = results / "config.json"
+    stored_path = results / CONFIG
     if stored_path.exists() and not overwrite:
         stored = _settings(stored_path, "use --overwrite to start again")
         now = _flatten(_shared(settings))
@@ -492,7 +566,7 @@ def snapshot_differences(
     its value in `defaults()`, called only then) and its grid (the values of each key
     column of `runs.csv`), one phrase each; none when `to` holds no snapshot."""
     differ = []
-    there, here = Path(to) / "config.json", Path(results) / "config.json"
+    there, here = Path(to) / CONFIG, Path(results) / CONFIG
     if there.is_file() and here.is_file():
         remedy = "use --replace to replace the snapshot"
         old, new = _settings(there, remedy), _settings(here, remedy)
@@ -501,8 +575,8 @@ def snapshot_differences(
             same = _new_at_default(old, new, default) | _new_at_default(new, old, default)
             old, new = ({k: v for k, v in d.items() if k not in same} for d in (old, new))
         differ += _differing(old, new, "here")
-    if (Path(to) / "runs.csv").is_file():
-        old, new = _grid(Path(to) / "runs.csv"), _grid(Path(results) / "runs.csv")
+    if (Path(to) / RUNS).is_file():
+        old, new = _grid(Path(to) / RUNS), _grid(Path(results) / RUNS)
         for k in KEY:
             gone, added = sorted(old[k] - new[k]), sorted(new[k] - old[k])
             parts = [
@@ -521,7 +595,7 @@ def models_replaced(results: Path, overwrite: bool) -> Iterator[dict]:
     folder to the new settings (`state["bound"]`), else put back in place of whatever the
     refused run wrote: a run refused before its first rows loses nothing."""
     state = {"bound": False}
-    models, aside = results / "models", results / f".models-replaced-{os.getpid()}"
+    models, aside = results / MODELS, results / f".models-replaced-{os.getpid()}"
     if not (overwrite and models.is_dir()):
         yield state
         return
@@ -543,19 +617,19 @@ def bind_results_dir(results: Path, settings: dict, vocab: Vocabulary, overwrite
     of earlier runs for names it does not declare); with `overwrite`, the rows and
     vocabulary of other settings go first (their models went aside, `models_replaced`)."""
     if overwrite:
-        for name in ("runs.csv", DAMAGED, VOCABULARY_FILE):
+        for name in (RUNS, DAMAGED, VOCABULARY):
             (results / name).unlink(missing_ok=True)
     settings = json.loads(json.dumps(settings))
     try:
-        earlier = json.loads((results / "config.json").read_text())["settings"][OWN_SETTINGS]
+        earlier = json.loads((results / CONFIG).read_text())["settings"][OWN_SETTINGS]
     except (OSError, ValueError, KeyError, TypeError):
         earlier = {}
     if OWN_SETTINGS in settings and not overwrite:
         settings[OWN_SETTINGS] = earlier | settings[OWN_SETTINGS]
-    write_text_atomic(results / "config.json", json.dumps({"settings": settings}, indent=1))
-    if (results / VOCABULARY_FILE).is_file():
-        vocab = vocab.merged(Vocabulary.load(results))
-    write_text_atomic(results / VOCABULARY_FILE, vocab.to_json())
+    write_text_atomic(results / CONFIG, json.dumps({"settings": settings}, indent=1))
+    if (results / VOCABULARY).is_file():
+        vocab = vocab.merged(read_vocabulary(results))
+    write_text_atomic(results / VOCABULARY, vocab.to_json())
 
 
 def upgrade(results: Path, current: Vocabulary) -> list[str]:
@@ -565,11 +639,11 @@ def upgrade(results: Path, current: Vocabulary) -> list[str]:
     package's declarations of its methods and tasks, by name, and of every metric. What it
     changed, one item each (empty: the folder was up to date)."""
     results = Path(results)
-    path = results / VOCABULARY_FILE
+    path = results / VOCABULARY
     if not path.is_file():
         raise BenchError(f"{path} not found: not a results folder of `bench run`")
     data = json.loads(path.read_text())
-    changed = [c for name in ("runs.csv", DAMAGED) for c in _rename_method(results / name)]
+    changed = [c for name in (RUNS, DAMAGED) for c in _rename_method(results / name)]
     older = older_fields(data)
     if older:
         recorded = [*data["methods"], *data["tasks"]]
@@ -582,7 +656,7 @@ def upgrade(results: Path, current: Vocabulary) -> list[str]:
         methods = {n: current.methods[n] for n in data["methods"]}
         tasks = {n: current.tasks[n] for n in data["tasks"]}
         write_text_atomic(path, Vocabulary(methods, tasks, current.metrics).to_json())
-        changed.append(f"{VOCABULARY_FILE}: declared as this bench does ({', '.join(older)})")
+        changed.append(f"{VOCABULARY}: declared as this bench does ({', '.join(older)})")
     return changed
 
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict, dataclass, field, fields
-from pathlib import Path
 from typing import NamedTuple
 
 from bench import BenchError
@@ -263,9 +262,9 @@ class Vocabulary:
         """The declarations of this process (the compute stages imported)."""
         return cls(dict(METHODS), dict(TASKS), dict(METRICS))
 
-    def label(self, policy: str) -> str:
-        m = self.methods.get(policy)
-        return m.label if m else policy
+    def label(self, method: str) -> str:
+        m = self.methods.get(method)
+        return m.label if m else method
 
     def column(self, task: str, metric: str) -> str:
         """A task's metric as the report's tables name it: bare for the headline task,
@@ -340,12 +339,12 @@ class Vocabulary:
     def with_kind(self, *kinds: str) -> list[str]:
         return [n for n, m in self.methods.items() if m.kind in kinds]
 
-    def order(self, policy: str) -> tuple[int, int]:
+    def order(self, method: str) -> tuple[int, int]:
         """Display order: baselines, contenders, references, peers; then declaration."""
         names = list(self.methods)
-        if policy not in self.methods:
+        if method not in self.methods:
             return len(ROLES), 0
-        return ROLES.index(self.methods[policy].role), names.index(policy)
+        return ROLES.index(self.methods[method].role), names.index(method)
 
     def range_of(self, column: str) -> tuple[float, float | None] | None:
         """The declared range of a number column of `runs.csv` (None: undeclared); any
@@ -384,31 +383,6 @@ class Vocabulary:
             n: Metric(**{**m, "range": tuple(m["range"])}) for n, m in data["metrics"].items()
         }
         return cls(methods, tasks, metrics)
-
-    @classmethod
-    def load(cls, results: Path) -> Vocabulary:
-        """The vocabulary recorded in a results folder (`vocabulary.json`); one recorded
-        by an older bench (`older_fields`) is refused, with `bench upgrade` as the remedy."""
-        path = Path(results) / VOCABULARY_FILE
-        try:
-            text = path.read_text()
-            older = older_fields(json.loads(text))
-            if older:
-                raise BenchError(
-                    f"{path} was written by an older bench (it lacks {', '.join(older)}); "
-                    f"`bench upgrade --results {results}` brings the folder up to date"
-                )
-            return cls.from_json(text)
-        except FileNotFoundError:
-            raise BenchError(
-                f"{path} not found: these results were not written by this version of "
-                "`bench run`; run it into the folder again"
-            ) from None
-        except (ValueError, KeyError, TypeError) as e:
-            raise BenchError(f"{path} is unreadable ({type(e).__name__}: {e})") from None
-
-
-VOCABULARY_FILE = "vocabulary.json"
 
 
 def older_fields(data: dict) -> list[str]:

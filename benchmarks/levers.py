@@ -37,7 +37,7 @@ import pandas as pd
 from bench.report.stats import paired_difference
 from bench.report.tables import headline_frame, solvable
 from bench.report.transfer import kendall_tau, tau_interval
-from bench.results import read_runs
+from bench.results import read_runs, read_vocabulary
 from bench.vocabulary import Vocabulary
 
 PEER = "colmap-b"
@@ -82,7 +82,7 @@ def _values(frame: pd.DataFrame, metric: str, vocab: Vocabulary, budget: int) ->
 
 
 def setting_row(folder: Path, datasets: list[pd.DataFrame]) -> dict:
-    vocab = Vocabulary.load(folder)
+    vocab = read_vocabulary(folder)
     frame = headline_frame(read_runs(folder / "runs.csv"), vocab)
     row: dict = {"setting": folder.name}
     policies = budgeted(frame, vocab)
@@ -113,7 +113,7 @@ def setting_row(folder: Path, datasets: list[pd.DataFrame]) -> dict:
 
 def dataset_means(folder: Path) -> list[pd.DataFrame]:
     """Per dataset of a results folder, the mean of each ranking metric per method."""
-    vocab = Vocabulary.load(folder)
+    vocab = read_vocabulary(folder)
     frame = headline_frame(read_runs(folder / "runs.csv"), vocab, dataset=True)
     out = []
     for name, rows in frame.groupby("scene"):

@@ -77,3 +77,59 @@ def bench_run(cfg, results, renders, workers=1, scheduler=None, **options):
 
     options = RunOptions(cluster=Cluster(workers, scheduler), **options)
     return run_benchmark(cfg, Workspace(results, renders), options, report=write_report)
+
+
+# --- a small grid of every task, shared by the harness tests -------------------------
+
+
+def spy(monkeypatch, calls: list, what=lambda unit: (unit.method, unit.budget)):
+    """Record `what` of every unit that is predicted (selected, matched, mapped)."""
+    from bench.harness import execute
+
+    real = execute.predict
+    monkeypatch.setattr(
+        execute,
+        "predict",
+        lambda scene, unit, *a: calls.append(what(unit)) or real(scene, unit, *a),
+    )
+
+
+def small_grid():
+    """Two scenes, one seed, the paper's four policies, the references and two peers."""
+    from bench.harness.config import RunConfig
+    from bench.harness.grid import BenchConfig
+
+    return BenchConfig(
+        scenes=("table", "facade"),
+        seeds=(0,),
+        methods=("random", "texture", "grid", "adaptive", "all", "oracle", "colmap", "colmap-b"),
+        budgets=(64,),
+        run=RunConfig(render=MEDIUM),
+    )
+
+
+TIMING = [
+    "render_s_per_view",
+    "detect_ms",
+    "signals_ms",
+    "select_ms",
+    "match_ms",
+    "verify_ms",
+    "task_ms",
+    "evaluate_matches_ms",
+    "evaluate_ms",
+    "wall_ms",
+    "invocation",
+    "row_checksum",
+]
+POLICIES = ["random", "texture", "grid", "adaptive", "oracle", "colmap-b", "all", "colmap"]
+ROWS = 2 * (6 * 3 * 2 + 2 * 2 * 2)  # scenes x (selections x 3 tasks + peers x 2) x protocols
+
+
+@pytest.fixture(scope="session")
+def quick_results(renders_dir, tmp_path_factory):
+    """The small grid run once for the session, as `bench run` runs it (read-only: a test
+    that writes copies it)."""
+    results = tmp_path_factory.mktemp("results")
+    bench_run(small_grid(), results, renders_dir)
+    return results

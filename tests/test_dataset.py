@@ -30,7 +30,8 @@ from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig
 from bench.harness.select import SelectRequest, select_to_database
 from bench.report.transfer import transfer
-from bench.vocabulary import KEY, Vocabulary
+from bench.results import read_vocabulary
+from bench.vocabulary import KEY
 from tests.conftest import MEDIUM, bench_run
 
 GRID = dict(seeds=(0,), methods=("texture", "adaptive", "oracle", "colmap-b"), budgets=(64,))
@@ -75,7 +76,7 @@ def test_dataset_run_gives_the_metrics_and_the_ranking_of_the_rendered_path(
     pd.testing.assert_frame_equal(a, b, check_exact=False, rtol=1e-6, check_dtype=False)
     assert a["acc_completeness_pct"].notna().any() and a["maa"].notna().any()
     # the export of a render ranks the methods as the render does
-    summary, ranks = transfer(data, Vocabulary.load(tmp_path / "d"), tmp_path / "r")
+    summary, ranks = transfer(data, read_vocabulary(tmp_path / "d"), tmp_path / "r")
     assert set(summary["metric"]) == {"sfm_maa", "acc_completeness_pct", "pairs_auc_10"}
     assert (ranks["rank_shift"] == 0).all() and len(ranks) == 3 + 4 + 4
     assert summary["kendall_tau"].isna().all()  # 3 or 4 methods: too few for a tau

@@ -43,13 +43,19 @@ def test_point_error_rmse_median_and_completeness_on_five_points():
     np.testing.assert_allclose(e, [0, 0, 0, 0, 0.3], atol=1e-12)
     assert rmse(e) == pytest.approx(math.sqrt(0.09 / 5))
     assert np.median(e) == 0
-    assert completeness_pct(e, 5, 0.10) == pytest.approx(80.0)
-    assert completeness_pct(e, 5, 0.20) == pytest.approx(80.0)
-    assert completeness_pct(e, 8, 0.50) == pytest.approx(62.5)  # 5 of 8 reconstructable
-    X[4, 2] = 1.15
-    assert completeness_pct(point_error(X, surface), 5, 0.20) == pytest.approx(100.0)
-    assert completeness_pct(point_error(X, surface), 5, 0.02) == pytest.approx(80.0)
-    assert math.isnan(rmse(np.zeros(0))) and math.isnan(completeness_pct(e, 0, 0.1))
+    tracks = (TRUE, np.full(5, 0.05))  # each true point a reconstructable track
+    assert completeness_pct(X, e, tracks, 0.10) == pytest.approx(80.0)
+    assert completeness_pct(X, e, tracks, 0.50) == pytest.approx(80.0)  # accurate, not its own
+    far = (np.r_[TRUE, TRUE[:3] + 10], np.full(8, 0.05))
+    assert completeness_pct(X, e, far, 0.10) == pytest.approx(50.0)  # 4 of 8 reconstructable
+    X[4, 2] = 1.03  # within its track's radius and 0.03 off the surface
+    e = point_error(X, surface)
+    assert completeness_pct(X, e, tracks, 0.05) == pytest.approx(100.0)
+    assert completeness_pct(X, e, tracks, 0.02) == pytest.approx(80.0)
+    twice = np.r_[X, X + 0.01]  # every track reconstructed twice counts once: at most 100
+    assert completeness_pct(twice, point_error(twice, surface), tracks, 0.05) == 100.0
+    empty = (np.zeros((0, 3)), np.zeros(0))
+    assert math.isnan(rmse(np.zeros(0))) and math.isnan(completeness_pct(X, e, empty, 0.1))
 
 
 def test_coverage_of_a_known_layout():
@@ -126,16 +132,20 @@ def test_reconstructable_points_per_track_protocol():
     pools = [_cands(a.project(P)[0]), _cands(b.project(P)[0]), _cands(c.project(P[:2])[0])]
     truth = SceneTruth.build([a, b, c], [_plane_truth(v) for v in (a, b, c)], pools)
     assert truth.reconstructable(2) == 3 and truth.reconstructable(3) == 2
+    points, radius = truth.track_points(3)  # the two tracks of three views, at their points
+    np.testing.assert_allclose(points[np.argsort(points[:, 0])], P[:2], atol=0.05)
+    assert (radius > 0).all() and (radius < 0.5).all()  # 3 px at 6 units
 
 
 def test_accuracy_is_the_share_of_points_within_tau():
     surface = Surface(TRUE)
     X = TRUE.copy()
     X[4, 2] += 0.3
-    row = point_metrics(X, surface, reconstructable=10)
+    tracks = (np.r_[TRUE, TRUE + 10], np.full(10, 0.05))
+    row = point_metrics(X, surface, tracks)
     assert row["accuracy_pct"] == pytest.approx(80.0) and row["accuracy_pct_0.20"] == 80.0
     assert row["acc_completeness_pct"] == pytest.approx(40.0)  # 4 accurate of 10
-    assert math.isnan(point_metrics(np.zeros((0, 3)), surface, 10)["accuracy_pct"])
+    assert math.isnan(point_metrics(np.zeros((0, 3)), surface, tracks)["accuracy_pct"])
 
 
 # --- the oracle -------------------------------------------------------------------------

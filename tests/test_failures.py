@@ -14,13 +14,13 @@ import pytest
 from bench.camera import look_at
 from bench.cli import main
 from bench.cli.common import parse_list
+from bench.failures import exclusions, failures
 from bench.frontend.features import Candidates
 from bench.frontend.policies import POLICIES, PolicyFailed, PolicyInput, policy, select
 from bench.frontend.signals import SIGNALS, Signals
 from bench.frontend.views import View
 from bench.report import figures
 from bench.results import read_runs
-from bench.summary import exclusions, failures
 from bench.vocabulary import METHODS, REFERENCE_MAPS, Vocabulary
 
 LATE = """\
@@ -64,6 +64,7 @@ def test_a_raising_plugin_fails_its_rows_saying_where_and_the_grid_finishes(
         err = capsys.readouterr().err.strip().splitlines()
         assert err[-1].startswith("bench: error: 1 row(s) could not be computed, of late-fail (1)")
         assert f"{module}:{RAISE_LINE}" in err[-1] and "Traceback" not in "\n".join(err)
+        assert any(line.startswith("bench: runs: 2/2 rows (100 %), ") for line in err)
         summary = [line for line in err if "of the grid's 2 rows, " in line]
         assert summary and "1 tri: error of late-fail" in summary[0]
         assert not any("figure2.png not drawn" in line for line in err)  # nobody asked for it
@@ -196,3 +197,75 @@ def test_the_summary_says_what_failed_by_reason_and_which_cells_sfm_leaves_out()
         "sfm means leave out 2 of 3 (scene, seed): corridor seed 1, table seed 0 "
         "(colmap with all features does not map them)"
     )
+
+
+BOOM = """\
+from bench.frontend.policies import policy
+
+CALLS = []
+
+
+@policy("crash-late", role="baseline")
+def crash_late(inp, budget, rng, cfg):
+    CALLS.append(inp.view.index)
+    if len(CALLS) > 12:  # its first unit (six views under each geometry), then it raises
+        raise RuntimeError("crashed")
+    return list(range(budget))
+"""
+
+
+def test_a_method_that_crashes_never_ranks_on_the_runs_it_finished(renders_dir, tmp_path):
+    """A policy that raises after its first unit: its failed runs enter its means at the
+    failure value (AUC 0), a metric without one (rmse) has no mean (incomplete, never the
+    best baseline), and Table 1 counts the runs that could not be computed."""
+    module = tmp_path / "crash.py"
+    module.write_text(BOOM)
+    argv = ["run", "--scenes", "table,facade", "--seeds", "0", "--budget", "128", "--workers", "1"]
+    argv += ["--width", "320", "--height", "240", "--spp", "4", "--max-depth", "2"]
+    argv += ["--methods", "texture,crash-late", "--tasks", "tri,pairs", "--protocols", "multiview"]
+    argv += ["--policy-module", str(module), "--results", str(tmp_path / "r")]
+    try:
+        assert main([*argv, "--renders", str(renders_dir)]) == 2
+    finally:
+        POLICIES.pop("crash-late", None), METHODS.pop("crash-late", None)
+    runs = read_runs(tmp_path / "r" / "runs.csv")
+    crash = runs[(runs["method"] == "crash-late") & (runs["task"] == "pairs")].set_index("scene")
+    assert crash.loc["facade", "failure"].startswith("error: ")  # the second scene's unit
+    t1 = pd.read_csv(tmp_path / "r" / "table1.csv").set_index("method")
+    assert t1.loc["crash-late", "pairs_auc_10"] == pytest.approx(
+        crash.loc["table", "auc_10"] / 2, 1e-5
+    )
+    assert (t1.loc["crash-late", "error_runs"], t1.loc["crash-late", "pairs_error_runs"]) == (1, 1)
+    assert (
+        np.isnan(t1.loc["crash-late", "rmse"])
+        and "incomplete: 1 of 2 runs" in t1.loc["crash-late", "note"]
+    )
+    assert t1.loc["texture", "error_runs"] == 0 and not np.isnan(t1.loc["texture", "rmse"])
+    t2 = pd.read_csv(tmp_path / "r" / "table2.csv").set_index("scene")
+    assert t2.loc["all scenes", "best_baseline_rmse_policy"] == "texture"
+
+
+def test_progress_in_a_log_is_a_line_every_few_percent(capsys):
+    from bench.console import LOG_STEP_PCT, LogProgress
+
+    with LogProgress("runs", 40, "rows") as bar:
+        for _ in range(40):
+            bar.update()
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 100 // LOG_STEP_PCT  # 2/40 is 5 %, ..., 40/40 is 100 %
+    assert lines[0].startswith("bench: runs: 2/40 rows (5 %), ") and lines[0].endswith(" left")
+    assert lines[-1].startswith("bench: runs: 40/40 rows (100 %), ")
+
+
+@pytest.mark.parametrize("name", sorted(POLICIES))
+def test_every_policy_selects_nothing_from_an_empty_pool(name):
+    """A view without a candidate (a tiny or flat image): an empty selection, no crash
+    (quadtree raised IndexError)."""
+    from dataclasses import replace
+
+    inp = _input()
+    c = inp.candidates
+    empty = Candidates(c.xy[:0], c.size[:0], c.angle[:0], c.response[:0], c.descriptors[:0])
+    inp = replace(inp, candidates=empty, signals=Signals(**{s: np.zeros(0) for s in SIGNALS}))
+    budget = 0 if METHODS[name].whole_pool else 8
+    assert select(name, inp, budget, np.random.default_rng(0)).size == 0

@@ -9,7 +9,9 @@ import dataclasses
 import io
 import json
 import math
+import os
 import shutil
+import stat
 import subprocess
 import sys
 from pathlib import Path
@@ -18,13 +20,27 @@ import pandas as pd
 import pytest
 
 from bench import ROOT, BenchError
-from bench.cli import main
+from bench.backend.reconstruction import known_pose_model
+from bench.cli import build_parser, common, main
+from bench.cli.common import LATEST, QUICK, REGIMES, parse_list, regime_folder
 from bench.harness import execute
+from bench.harness import grid as harness
 from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig
+from bench.harness.predict import export_model
+from bench.render import entry as render
+from bench.report import figures
+from bench.report.write import publish, write_report
 from bench.results import read_runs
-from bench.vocabulary import Vocabulary
-from tests.conftest import MEDIUM, bench_run
+from bench.vocabulary import KEY, Vocabulary
+from tests.conftest import (
+    MEDIUM,
+    ROWS,
+    TINY,
+    bench_run,
+    small_grid,
+    synthetic_rig,
+)
 
 GRID = BenchConfig(
     scenes=("table",),
@@ -385,3 +401,167 @@ def test_a_folder_with_the_old_policy_column_is_refused_and_upgraded(small_run, 
     assert [row[ROW_CHECKSUM] == row_checksum(row) for row in new] == [True, False]
     with pytest.raises(BenchError, match="line 3 .*do not match its row_checksum"):
         read_runs(r / "runs.csv")
+
+
+SMALL = small_grid()
+
+
+# --- the harness cannot publish wrong numbers ----------------------------------------
+
+
+def _cut(path: Path, row: int) -> str:
+    """Cut `runs.csv` in the middle of data row `row`; return the cut line."""
+    lines = path.read_text().splitlines()
+    cut = lines[row][: len(lines[row]) // 2]
+    path.write_text("\n".join([*lines[:row], cut]) + "\n")
+    return cut
+
+
+def test_a_damaged_runs_csv_is_refused_naming_the_row_and_set_aside_on_request(
+    quick_results, renders_dir, tmp_path, capsys
+):
+    r = tmp_path / "r"
+    shutil.copytree(quick_results, r)
+    before = (r / "table1.csv").read_bytes()
+    cut = _cut(r / "runs.csv", 30)
+    medium = ["--width", "320", "--height", "240", "--spp", "16", "--max-depth", "2"]
+    grid = ["run", "--scenes", "table,facade", "--seeds", "0", "--budget", "64", *medium]
+    for argv in (["plot"], grid):
+        assert main([*argv, "--results", str(r), "--renders", str(renders_dir)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert f"{r / 'runs.csv'} is damaged: row at line 31" in err[-1]
+    assert (r / "table1.csv").read_bytes() == before  # nothing published from it
+    bench_run(SMALL, r, renders_dir, set_aside=True)
+    assert cut in (r / "runs.damaged.csv").read_text()
+    runs = read_runs(r / "runs.csv")
+    assert len(runs) == ROWS and not runs.duplicated(list(KEY)).any()  # recomputed
+    # a column removed: refused in one line, no traceback
+    df = pd.read_csv(r / "runs.csv").drop(columns=["rmse", "status"])
+    df.to_csv(r / "runs.csv", index=False)
+    assert main(["plot", "--results", str(r), "--renders", str(renders_dir)]) == 2
+    assert "its header lacks status" in capsys.readouterr().err
+
+
+def test_repeated_list_items_run_once(capsys):
+    assert parse_list("--seeds", "0,1,0,1-2", int) == (0, 1, 2)
+    assert parse_list("--methods", "texture,texture", str) == ("texture",)
+    assert "--seeds repeats 0, 1; each runs once" in capsys.readouterr().err
+
+
+def test_runs_never_write_the_published_snapshot():
+    for argv in (["run"], ["publish"]):  # resolved by the regime: results/latest(-dense)
+        assert build_parser().parse_args(argv).results is None
+    for argv in (["plot"], ["gallery"]):
+        args = build_parser().parse_args(argv)
+        target = args.out if argv == ["gallery"] else args.results
+        assert common.PUBLISHED not in target.parents and target != common.PUBLISHED
+    for regime in REGIMES:
+        published = regime_folder(common.PUBLISHED, regime)
+        assert published not in {regime_folder(f, r) for f in (LATEST, QUICK) for r in REGIMES}
+
+
+def test_a_regime_sets_the_views_seeds_and_folders_that_are_not_given(tmp_path, monkeypatch):
+    """`--regime dense`: 21 views on each path, seeds 0,1, results/latest-dense, published
+    to results/published-dense; an option given wins over the regime."""
+    from bench.cli import publish
+    from bench.cli.run import run_config
+
+    parse = build_parser().parse_args
+    assert run_config(parse(["run", "--regime", "dense"])).render.views == 21
+    assert run_config(parse(["run"])).render.views == REGIMES["sparse"][0] == 6
+    assert run_config(parse(["run", "--regime", "dense", "--views", "11"])).render.views == 11
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(BenchError, match="results/latest-dense/runs.csv not found"):
+        publish.run(parse(["publish", "--regime", "dense"]))
+    assert not (tmp_path / "results").exists()
+
+
+def test_publish_copies_a_checked_folder_and_removes_stale_files(quick_results, tmp_path):
+    snap = tmp_path / "published"
+    snap.mkdir()
+    (snap / "figure_budget.png").write_bytes(b"stale")  # quick_results has one budget
+    assert publish(quick_results, snap) >= 8
+    assert (snap / "table1.csv").read_bytes() == (quick_results / "table1.csv").read_bytes()
+    assert not (snap / "figure_budget.png").exists()
+
+
+def test_bad_input_leaves_no_lock_or_temporary_file(tmp_path, capsys):
+    renders = tmp_path / "renders"
+    assert main(["render", "table", "--seed", "-1", "--renders", str(renders)]) == 2
+    assert "seed must be a non-negative integer" in capsys.readouterr().err
+    assert not renders.exists() or not any(renders.iterdir())
+    results = tmp_path / "results"
+    assert main(["run", "--seeds", "-2", "--results", str(results)]) == 2
+    assert not results.exists()
+
+
+def test_a_rerun_that_does_nothing_keeps_the_manifest_timings(quick_results, renders_dir, tmp_path):
+    shutil.copytree(quick_results, tmp_path / "r")
+    first = json.loads((tmp_path / "r" / "manifest.json").read_text())
+    bench_run(SMALL, tmp_path / "r", renders_dir)  # every row done
+    again = json.loads((tmp_path / "r" / "manifest.json").read_text())
+    assert again["seconds"] == first["seconds"] and again["seconds"]["total"] > 0
+    (inv,) = again["invocations"]
+    runs = pd.read_csv(tmp_path / "r" / "runs.csv")
+    assert inv["rows"] == inv["rows_now"] == ROWS and set(runs["invocation"]) == {inv["id"]}
+
+
+def test_the_manifest_names_whichever_distribution_provides_a_module(
+    quick_results, renders_dir, tmp_path, monkeypatch
+):
+    """OpenCV from another distribution, pycolmap from none: the run still ends well."""
+    from importlib.metadata import PackageNotFoundError, packages_distributions, version
+
+    provided = {**packages_distributions(), "cv2": ["opencv-python-headless"]}
+    del provided["pycolmap"]
+
+    def installed(name):
+        if name == "opencv-python-headless":
+            return "5.0.0.1"
+        if name in ("opencv-contrib-python-headless", "pycolmap"):
+            raise PackageNotFoundError(name)
+        return version(name)
+
+    monkeypatch.setattr(harness, "packages_distributions", lambda: provided, raising=False)
+    monkeypatch.setattr(harness, "version", installed)
+    shutil.copytree(quick_results, tmp_path / "r")
+    bench_run(SMALL, tmp_path / "r", renders_dir)
+    versions = json.loads((tmp_path / "r" / "manifest.json").read_text())["versions"]
+    assert versions["cv2"] == "opencv-python-headless 5.0.0.1"
+    assert versions["pycolmap"] == "unknown" and versions["numpy"] == version("numpy")
+
+
+def test_figures_state_nothing_impossible(quick_results, tmp_path, renders_dir, monkeypatch):
+    runs = read_runs(quick_results / "runs.csv")
+    t1 = pd.read_csv(quick_results / "table1.csv")
+    for m in ("acc_completeness_pct", "accuracy_pct", "coverage_pct", "inlier_pct"):
+        assert (t1[f"{m}_lo"].dropna() >= 0).all() and (t1[f"{m}_hi"].dropna() <= 100).all()
+    drawn = {}
+    monkeypatch.setattr(figures, "save", lambda fig, out, fmts: drawn.__setitem__(out.name, fig))
+    (tmp_path / "figure2.png").write_bytes(b"an older figure")
+    shutil.copy(quick_results / "vocabulary.json", tmp_path)
+    budgeted = runs[runs["budget"] > 0]
+    write_report(pd.concat([runs, budgeted.assign(budget=128)]), tmp_path, renders_dir)
+    assert not (tmp_path / "figure2.png").exists()  # not drawable here: removed, not stale
+    ticks = [t.get_text() for t in drawn["figure_budget"].axes[0].get_xticklabels()]
+    assert ticks == ["64", "128"]
+    texts = [t.get_text() for ax in drawn["figure3"].axes for t in ax.texts]
+    assert "n/a" in texts  # the peers have no known-pose metrics: drawn as missing
+
+
+def test_written_files_respect_the_umask(tmp_path):
+    old = os.umask(0o022)
+    try:
+        entry = render.render_scene("table", 3, TINY, tmp_path)
+        cams, X = synthetic_rig()
+        export_model(
+            known_pose_model(
+                cams, [f"v{k}.png" for k in range(4)], [c.project(X)[0] for c in cams]
+            ),
+            tmp_path / "m",
+        )
+    finally:
+        os.umask(old)
+    for p in (entry, tmp_path / "m"):
+        assert stat.S_IMODE(p.stat().st_mode) == 0o755, p
+    assert stat.S_IMODE((entry / "meta.json").stat().st_mode) == 0o644

@@ -119,7 +119,7 @@ def test_the_firewall_check_catches_a_planted_breach(planted):
 
 
 REPORT_MAY_IMPORT = ("bench.report", "bench.vocabulary", "bench.results", "bench.files")
-REPORT_MAY_IMPORT += ("bench.console", "bench.summary")
+REPORT_MAY_IMPORT += ("bench.console", "bench.failures")
 
 
 @pytest.mark.parametrize(
@@ -150,7 +150,68 @@ def test_no_function_takes_more_than_seven_parameters():
 
 
 def test_render_entry_or_dataset_is_told_apart_in_one_place():
-    """Whether a folder is a render entry is `Source.kind`'s to say (by its `meta.json`)."""
-    tests = re.compile(r"meta(\.json\"\))?\.is_file\(\)")
+    """Whether a folder is a render entry is `Source.kind`'s to say (by its record, META)."""
+    tests = re.compile(r"META\)\.is_file\(\)")
     deciders = [name for name, path in MODULES.items() if tests.search(path.read_text())]
     assert deciders == ["bench.frontend.views"]
+
+
+def _strings(tree: ast.AST) -> list[str]:
+    """A module's string constants and f-string parts, docstrings left out."""
+    docs = {
+        id(n.value)
+        for n in ast.walk(tree)
+        if isinstance(n, ast.Expr) and isinstance(n.value, ast.Constant)
+    }
+    return [
+        n.value
+        for n in ast.walk(tree)
+        if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in docs
+    ]
+
+
+def owned_names() -> dict[str, str]:
+    """Every file name of a results folder (`bench.results`) and of a cache entry's record
+    (`bench.files`), with the module that owns it."""
+    from bench import files, results
+
+    names = [results.RUNS, results.DAMAGED, results.CONFIG, results.VOCABULARY]
+    names += [results.MANIFEST, results.PAGE, results.GALLERY, results.LOCK, results.LOOP]
+    names += [results.POINT_ERRORS, *results.TABLES, results.TRANSFER, results.TRANSFER_RANKS]
+    names += [results.png(f) for f in (*results.FIGURES, results.FIGURE_TRANSFER)]
+    return {**dict.fromkeys(names, "bench.results"), files.META: "bench.files"}
+
+
+def test_every_file_name_has_one_owner():
+    """A results folder's files are named in `bench.results` (`Workspace`'s module) alone,
+    a cache entry's record in `bench.files` alone (a render entry's is read through
+    `bench.render.entry.entry_meta`): another module whose code spells one (a string that
+    is the name, not prose that mentions it) fails here."""
+    owned = owned_names()
+    spelled = [
+        f"{name}: {text}"
+        for name, path in MODULES.items()
+        for text in _strings(ast.parse(path.read_text()))
+        if text in owned and owned[text] != name
+    ]
+    assert spelled == []
+
+
+def test_the_package_map_of_the_docs_names_every_module():
+    """docs/extending.md's map of `bench/` lists every module where it is, and no other."""
+    text = (PACKAGE.parent / "docs" / "extending.md").read_text()
+    block = text.split("```\nbench/\n", 1)[1].split("```", 1)[0]
+    listed, package = set(), ""
+    for line in block.splitlines():
+        head = line[2:].split(" ", 1)[0]
+        if line.startswith("  ") and head.endswith("/"):
+            package = head
+        elif not line.startswith("    ") or line.startswith("               "):
+            package = package if line.startswith("               ") else ""
+        listed |= {package + w for w in re.findall(r"\b[\w]+\.py\b", line)}
+    on_disk = {
+        str(p.relative_to(PACKAGE))
+        for p in PACKAGE.rglob("*.py")
+        if p.name not in ("__init__.py", "__main__.py") or p.parent.name == "cli"
+    }
+    assert listed == on_disk

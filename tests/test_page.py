@@ -2,16 +2,17 @@
 
 from __future__ import annotations
 
+import itertools
 import shutil
 from pathlib import Path
 
 import pandas as pd
 import pytest
 
-from bench.report.page import PAGE, results_page
+from bench.report.page import results_page
 from bench.report.tables import with_shares
 from bench.report.write import write_tables
-from bench.results import read_runs
+from bench.results import PAGE, read_runs, read_vocabulary
 from bench.vocabulary import Vocabulary
 
 PUBLISHED = Path(__file__).resolve().parents[1] / "results" / "published"
@@ -25,7 +26,7 @@ def test_the_published_page_is_what_its_runs_csv_gives(tmp_path, regime):
     snapshot, folder = PUBLISHED.with_name(regime), tmp_path / regime
     shutil.copytree(snapshot, folder, ignore=shutil.ignore_patterns("*.csv", PAGE))
     shutil.copyfile(snapshot / "runs.csv", folder / "runs.csv")
-    vocab = Vocabulary.load(folder)
+    vocab = read_vocabulary(folder)
     df = with_shares(read_runs(folder / "runs.csv"), vocab)
     write_tables(df, folder, vocab)
     assert results_page(folder) == (snapshot / PAGE).read_text()
@@ -50,3 +51,77 @@ def test_the_page_shows_each_interval_and_no_interval_where_a_table_has_none(tmp
     assert "| Texture-only | 256 | 5 | 0.5 [0.25, 0.75] |" in page
     assert "| Random budget | 256 | 1 | 0.125 |" in page  # one run: the mean alone
     assert "figure3.png" not in page  # no figure drawn, none shown
+
+
+@pytest.fixture(scope="module")
+def every_task(renders_dir, tmp_path_factory):
+    """A tiny grid of every task under both protocols, run as `bench run` runs it."""
+    from bench.harness.config import RunConfig
+    from bench.harness.grid import BenchConfig
+    from tests.conftest import MEDIUM, bench_run
+
+    grid = BenchConfig(
+        scenes=("facade",),
+        seeds=(0,),
+        methods=("texture", "adaptive", "colmap"),
+        budgets=(64,),
+        run=RunConfig(render=MEDIUM),
+    )
+    results = tmp_path_factory.mktemp("every-task")
+    bench_run(grid, results, renders_dir)
+    return results
+
+
+def test_the_page_bench_run_writes_is_complete(every_task):
+    page = (every_task / PAGE).read_text()
+    run = page.split("## Grid")[0]
+    assert "n/a" not in run, run  # the run's commit, variant, machine and versions
+    assert "Seconds per stage" in run and "runs_wall" in run
+
+
+TASKS, PROTOCOLS = ("tri", "sfm", "pairs"), ("multiview", "twoview")
+SUBSETS = [
+    (tasks, protocols)
+    for n in (1, 2, 3)
+    for tasks in itertools.combinations(TASKS, n)
+    for protocols in (("multiview",), ("twoview",), PROTOCOLS)
+]
+
+
+@pytest.mark.parametrize("tasks, protocols", SUBSETS, ids=lambda x: "+".join(x))
+def test_every_task_and_protocol_subset_writes_its_tables_figures_and_page(
+    every_task, tmp_path, tasks, protocols
+):
+    """A grid of any non-empty set of tasks and protocols (the rows of a larger one) gets
+    its Table 1, its figures and its page from `bench plot`."""
+    from bench.cli import main
+
+    folder = tmp_path / "r"
+    shutil.copytree(every_task, folder, ignore=shutil.ignore_patterns("*.csv", "*.png", PAGE))
+    runs = pd.read_csv(every_task / "runs.csv", dtype=str, keep_default_na=False)
+    keep = runs["task"].isin(tasks) & runs["protocol"].isin(protocols)
+    runs[keep].to_csv(folder / "runs.csv", index=False)  # whole rows: their checksums hold
+    assert main(["plot", "--results", str(folder)]) == 0
+    table = "table1.csv" if "multiview" in protocols else "table1_twoview.csv"
+    t1 = pd.read_csv(folder / table)
+    for task in tasks:
+        assert any(c == "acc_completeness_pct" or c.startswith(f"{task}_") for c in t1) or (
+            task == "tri"
+        )
+    assert (folder / "figure3.png").is_file() and (folder / PAGE).is_file()
+
+
+def test_a_task_table_counts_its_own_runs_and_gives_its_own_columns_reasons():
+    """The sfm table's runs leave out the cells the exclusion rule leaves out, and say how
+    many could not be computed; the reasons for a missing interval are those of the
+    columns shown (published sparse page, texture at 256: 'n/a (no spread); n/a (1 seed)'
+    came from columns the tri table does not show)."""
+    from bench.report.page import _runs, _why
+
+    vocab = Vocabulary.current()
+    row = pd.Series({"runs": 20, "sfm_excluded_runs": 5, "sfm_error_runs": 2, "error_runs": 0.0})
+    assert _runs(row, vocab, "sfm") == "15 (2 could not be computed)"
+    assert _runs(row, vocab, "tri") == "20"
+    note = "n/a (no spread): runtime_matching, pairs_task_ms; n/a (1 seed): acc_completeness_pct"
+    assert _why(note, ["acc_completeness_pct", "accuracy_pct", "rmse"]) == "n/a (1 seed)"
+    assert _why(note, ["sfm_maa"]) == ""

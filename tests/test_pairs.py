@@ -25,6 +25,7 @@ from bench.frontend.views import load_views
 from bench.harness.config import RunConfig
 from bench.harness.evaluate import evaluate
 from bench.harness.execute import Work, compute_unit
+from bench.harness.methods import runner
 from bench.harness.predict import LoadedScene
 from bench.results import Workspace
 from bench.vocabulary import Job, Unit, Vocabulary
@@ -115,10 +116,38 @@ def test_the_ground_truth_alone_decides_which_pairs_are_scored():
     # a non-finite estimate is no estimate
     bad = evaluate_pairs(truth, {(0, 1): np.full((3, 4), np.nan)})
     assert bad["pairs_estimated"] == 0 and bad["auc_20"] == 0.0
-    # without per-pixel truth, every pair of views
-    posed_only = SceneTruth(None, CAMS, None, None, [np.zeros((0, 2))] * 3, None, None, "poses")
-    assert posed_only.shared_pairs(15) is None
-    assert evaluate_pairs(posed_only, poses)["pairs_scored"] == 3
+    assert row["pairs_rule"] == "ground-truth tracks >= 15"
+
+
+def _posed(cams, seen=None) -> SceneTruth:
+    """A dataset's truth with poses alone (and the points its model observes)."""
+    empty = [np.zeros((0, 2))] * len(cams)
+    return SceneTruth(None, cams, None, None, empty, None, None, "poses", seen)
+
+
+def test_a_dataset_scores_its_covisible_pairs_only():
+    """Without per-pixel truth: the pairs whose model points are shared (15 at least), or,
+    without model points, whose viewing directions are within 60 degrees and whose
+    frustums overlap: on a ring of eight views around an object, each view's neighbours
+    (45 degrees apart), not the views across the ring (the pairs of a 47-view ring that
+    share no surface pinned every method at 180 degrees)."""
+    ring = [
+        look_at((6 * math.cos(a), 6 * math.sin(a), 1.0), (0, 0, 1.0), width=640, height=480)
+        for a in np.radians(np.arange(0, 360, 45))
+    ]
+    pairs, rule = _posed(ring).covisible_pairs(15)
+    assert rule.startswith("viewing directions within 60 deg")
+    assert pairs == sorted({tuple(sorted((i, (i + 1) % 8))) for i in range(8)})
+    path = [look_at((x, -6.0, 1.0), (x, 0.0, 1.0), width=640, height=480) for x in (0, 1, 2)]
+    assert _posed(path).covisible_pairs(15)[0] == [(0, 1), (0, 2), (1, 2)]  # parallel axes
+    apart = [look_at((0, -6, 1.0), (0, 0, 1.0)), look_at((30, -6, 1.0), (40, 0, 1.0))]
+    assert _posed(apart).covisible_pairs(15)[0] == []  # 40 degrees apart, nothing shared
+    seen = [np.arange(20), np.arange(5, 40), np.arange(30, 44)]  # 15 and 10 shared
+    pairs, rule = _posed(ring[:3], seen).covisible_pairs(15)
+    assert (pairs, rule) == ([(0, 1)], "model tracks >= 15")
+    poses = {(0, 1): np.c_[np.eye(3), [1.0, 0, 0]], (1, 2): np.c_[np.eye(3), [1.0, 0, 0]]}
+    row = evaluate_pairs(_posed(ring[:3], seen), poses)
+    assert (row["pairs_scored"], row["pairs_estimated"]) == (1, 1)
 
 
 def test_the_task_is_declared_for_the_report():
@@ -152,6 +181,6 @@ def test_one_unit_end_to_end_and_scored_again_from_its_prediction(
         assert 0 <= row[m] <= 1, m
     assert row["auc_5"] <= row["auc_10"] <= row["auc_20"] and row["auc_20"] > 0
     assert not ws.model_dir(unit, jobs[0]).exists()  # nothing reconstructed, nothing exported
-    (again,) = evaluate(scene, unit, jobs, cfg, ws)
+    (again,) = evaluate(scene, unit, jobs, cfg, ws, runner(method).read)
     for m in ("auc_5", "auc_10", "auc_20", "maa_pairs", "median_pose_err_deg", "pairs_estimated"):
         assert again[m] == row[m], m

@@ -18,7 +18,14 @@ from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig, with_reference
 from bench.report.stats import paired_difference, stratified_interval
 from bench.report.tables import headline_frame, paired, paired_sfm, table1, with_shares
-from bench.results import ROW_CHECKSUM, append_runs, mark_reference, read_runs
+from bench.results import (
+    ROW_CHECKSUM,
+    VOCABULARY,
+    append_runs,
+    mark_reference,
+    read_runs,
+    read_vocabulary,
+)
 from bench.vocabulary import REFERENCE_MAPS, Vocabulary
 from tests.conftest import MEDIUM, bench_run
 
@@ -52,7 +59,7 @@ def test_a_one_seed_table_shows_no_interval_and_says_why():
         assert r["note"] == "n/a (1 seed)"
     t1 = table1(frame, vocab).set_index("method")
     assert math.isnan(t1.loc["adaptive", "acc_completeness_pct_lo"])
-    assert t1.loc["adaptive", "note"] == "n/a (1 seed)"
+    assert t1.loc["adaptive", "note"].startswith("n/a (1 seed): ")
     # with two seeds every scene has a spread: an interval, and no note
     pairs = paired(headline_frame(_tri_rows(seeds=[0, 1]), vocab), vocab)
     pooled = pairs[(pairs["scene"] == "all scenes") & (pairs["baseline"] == "texture")].iloc[0]
@@ -294,7 +301,7 @@ def test_a_task_and_a_metric_declared_once_are_in_every_table_figure_and_the_pag
     from bench.report import figures
     from bench.report.page import results_page
     from bench.report.write import write_tables
-    from bench.vocabulary import METRICS, TASKS, VOCABULARY_FILE, Metric, Task, declare_metric
+    from bench.vocabulary import METRICS, TASKS, Metric, Task, declare_metric
 
     declare_metric(Metric("score", (0.0, 1.0), lower_better=True, title="Toy score"))
     toy = Task("toy", "images", needs=("score",), metrics=("score",), headline=("score",))
@@ -316,10 +323,10 @@ def test_a_task_and_a_metric_declared_once_are_in_every_table_figure_and_the_pag
             tri = dict(acc_completeness_pct=completeness + seed, accuracy_pct=80.0 + seed)
             rows.append(cell | dict(method=policy, task="tri", **tri))
             rows.append(cell | dict(method=policy, task="toy", score=score + 0.01 * seed))
-    (tmp_path / VOCABULARY_FILE).write_text(vocab.to_json())
-    assert Vocabulary.load(tmp_path).tasks["toy"] == toy  # recorded as declared
+    (tmp_path / VOCABULARY).write_text(vocab.to_json())
+    assert read_vocabulary(tmp_path).tasks["toy"] == toy  # recorded as declared
     df = with_shares(pd.DataFrame(rows), vocab)
-    t1 = write_tables(df, tmp_path, vocab).set_index("method")
+    t1 = write_tables(df, tmp_path, vocab)[0].set_index("method")
     assert t1.loc["adaptive", "toy_score"] == pytest.approx(0.11)
     pairs = pd.read_csv(tmp_path / "paired.csv").set_index(["scene", "baseline", "metric"])
     # adaptive's score is the lowest in every unit: a win, lower being better
@@ -346,18 +353,17 @@ def test_a_folder_recorded_by_an_older_bench_is_refused_and_upgraded(
     """A `vocabulary.json` that lacks a field the report reads (a task's headline, a
     method's kind, the metrics) would give wrong tables: refused in one line naming
     `bench upgrade`, which records the package's declarations of the same names."""
-    from bench.vocabulary import VOCABULARY_FILE
 
     data = json.loads(Vocabulary.current().to_json())
     for entry in data[section].values() if section else [data]:
         entry.pop(field)
-    (tmp_path / VOCABULARY_FILE).write_text(json.dumps(data))
+    (tmp_path / VOCABULARY).write_text(json.dumps(data))
     with pytest.raises(BenchError, match=f"lacks .*{field}.*`bench upgrade --results {tmp_path}`"):
-        Vocabulary.load(tmp_path)
+        read_vocabulary(tmp_path)
     assert main(["upgrade", "--results", str(tmp_path)]) == 0
     assert f"declared as this bench does ({section + ' field ' if section else ''}{field}" in (
         capsys.readouterr().out
     )
-    assert Vocabulary.load(tmp_path) == Vocabulary.current()
+    assert read_vocabulary(tmp_path) == Vocabulary.current()
     assert main(["upgrade", "--results", str(tmp_path)]) == 0
     assert "up to date" in capsys.readouterr().out

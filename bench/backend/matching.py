@@ -24,7 +24,7 @@ from bench import BenchError
 from bench.camera import Camera
 from bench.frontend import learned
 from bench.frontend.features import Candidates, tentative_matches
-from bench.frontend.geometry import configuration, two_view_geometry, verification_options
+from bench.twoview import configuration, two_view_geometry, verification_options
 
 MATCHERS = ("ratio", "lightglue")
 

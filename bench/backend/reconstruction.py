@@ -41,7 +41,7 @@ import pycolmap
 
 from bench.backend.matching import BackendConfig, PairMatches
 from bench.camera import Camera
-from bench.frontend.geometry import colmap_camera
+from bench.twoview import colmap_camera
 from bench.vocabulary import PROTOCOLS
 
 

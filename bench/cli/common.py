@@ -46,10 +46,12 @@ def regime_arg(parser: argparse.ArgumentParser, what: str) -> None:
 def published_snapshots() -> list[Path]:
     """The package's published snapshot of each regime that has one (what a dataset run
     compares its ranking with by default)."""
+    from bench.results import RUNS
+
     return [
         ROOT / regime_folder(PUBLISHED, r)
         for r in REGIMES
-        if (ROOT / regime_folder(PUBLISHED, r) / "runs.csv").is_file()
+        if (ROOT / regime_folder(PUBLISHED, r) / RUNS).is_file()
     ]
 
 

@@ -15,14 +15,16 @@ DESCRIPTION = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from bench.results import GALLERY
+
     parser.add_argument("--seed", type=int, default=0, help="scene seed (default: %(default)s)")
     add_config_args(parser, RenderConfig, choices={"variant": VARIANTS})
     renders_arg(parser)
     parser.add_argument(
         "--out",
         type=Path,
-        default=LATEST / "scenes.png",
-        help=f"output image (default: ./{LATEST}/scenes.png; `bench publish` copies it)",
+        default=LATEST / GALLERY,
+        help=f"output image (default: ./{LATEST}/{GALLERY}; `bench publish` copies it)",
     )
 
 

@@ -73,14 +73,14 @@ def regime_grid(name: str) -> dict:
 def run(args: argparse.Namespace) -> None:
     from bench import BenchError
     from bench.report.write import check_publishable, publish
-    from bench.results import holding, runs_file, snapshot_differences
+    from bench.results import RUNS, holding, runs_file, snapshot_differences
 
     regime = args.regime or "sparse"
     # named, or its snapshot the target: the folder must hold that regime's grid
     grid = regime_grid(regime) if args.regime or args.to is None else None
     args.results = args.results or regime_folder(LATEST, regime)
     args.to = args.to or regime_folder(PUBLISHED, regime)
-    runs_file(args.results / "runs.csv")
+    runs_file(args.results / RUNS)
     with holding(args.results, reading=True):
         check_publishable(args.results, grid)  # before anything is created
     try:

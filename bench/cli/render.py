@@ -7,10 +7,11 @@ import argparse
 from bench.cli.common import add_config_args, config_from_args, renders_arg
 from bench.render.config import VARIANTS, RenderConfig
 
-HELP = "render one scene (six views + ground truth) into the render cache"
+HELP = f"render one scene ({RenderConfig.views} views by default + ground truth) into the cache"
 DESCRIPTION = (
-    "Path-trace the six views of SCENE with their ground-truth layers into "
-    "renders/<scene>-s<seed>-<key>/. A complete cached entry is reused unless --force."
+    "Path-trace the --views views of SCENE on its camera path with their ground-truth layers "
+    "into renders/<scene>-s<seed>-<key>/ (each view also cached on its own, by its path "
+    "position). A complete cached entry is reused unless --force."
 )
 
 

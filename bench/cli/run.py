@@ -320,14 +320,14 @@ def has_pixel_truth(dataset: Path) -> bool:
 
 
 def run(args: argparse.Namespace) -> None:
+    from bench.failures import errors
     from bench.harness.execute import Cluster, default_workers
     from bench.harness.grid import BenchConfig, RunOptions, in_grid, run_benchmark, with_reference
     from bench.report.tables import headline_frame, table1, with_shares
     from bench.report.write import write_report
-    from bench.results import Workspace
+    from bench.results import Workspace, read_vocabulary
     from bench.scenes.spec import scene_names
-    from bench.summary import errors
-    from bench.vocabulary import GROUND_TRUTH, HEADLINE, METHODS, Vocabulary
+    from bench.vocabulary import GROUND_TRUTH, HEADLINE, METHODS
 
     if args.scheduler is not None and args.workers is not None:
         raise BenchError("--workers does not apply with --scheduler: the cluster has its workers")
@@ -383,7 +383,7 @@ def run(args: argparse.Namespace) -> None:
     report = partial(write_report, rendered=args.rendered or published_snapshots())
     df = run_benchmark(cfg, Workspace(results, args.renders), options, report=report)
     protocol = "multiview" if "multiview" in cfg.protocols else cfg.protocols[0]
-    vocab = Vocabulary.load(results)
+    vocab = read_vocabulary(results)
     t = table1(headline_frame(with_shares(df, vocab), vocab, protocol, bool(datasets)), vocab)
     print(f"Table 1 ({protocol} protocol; {', '.join(cfg.tasks)}):")
     cols = ["strategy", "budget", "runs"]  # each task's headline and summary metrics

@@ -21,11 +21,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> None:
-    from bench.harness.methods import declared
+    from bench.harness.declared import package_vocabulary
     from bench.results import holding, upgrade
 
     with holding(args.results):
-        changed = upgrade(args.results, declared())
+        changed = upgrade(args.results, package_vocabulary())
     print(
         "\n".join(f"{args.results}: {c}" for c in changed)
         or f"{args.results} is up to date; nothing changed"

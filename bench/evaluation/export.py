@@ -27,6 +27,7 @@ from bench.evaluation.layers import (
 )
 from bench.files import atomic_dir, locked
 from bench.frontend.colmap_model import read_model
+from bench.render.entry import entry_meta
 
 
 def export_dataset(entry: Path, out: Path) -> Path:
@@ -56,7 +57,7 @@ def export_dataset(entry: Path, out: Path) -> Path:
             "# no points: the poses are the ground truth\n"
         )
         write_ply_points(tmp / TRUTH_DIR / CLOUD, surface_samples(gts))
-        meta = json.loads((entry / "meta.json").read_text())
+        meta = entry_meta(entry)
         info = {"exported_from": entry.name, "scene": meta.get("scene"), "seed": meta.get("seed")}
         (tmp / "dataset.json").write_text(json.dumps(info, indent=1) + "\n")
     return out

@@ -14,7 +14,6 @@ A dataset (`DIR/images/`, `DIR/sparse/`) may hold, besides the poses of its mode
 
 from __future__ import annotations
 
-import json
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,6 +22,7 @@ import numpy as np
 
 from bench import BenchError
 from bench.camera import Camera
+from bench.render.entry import entry_meta, truth_name
 
 
 @dataclass(frozen=True)
@@ -46,10 +46,10 @@ def read_layers(entry: Path) -> list[TruthLayers]:
     """The ground-truth layers of every view of a render entry."""
     entry = Path(entry)
     try:
-        n = len(json.loads((entry / "meta.json").read_text())["cameras"])
+        n = len(entry_meta(entry)["cameras"])
         out = []
         for v in range(n):
-            with np.load(entry / f"gt_{v:02d}.npz") as z:
+            with np.load(entry / truth_name(v)) as z:
                 out.append(
                     TruthLayers(
                         *(z[k] for k in ("range", "z", "position", "normal", "shape_index"))

@@ -6,12 +6,7 @@ ground-truth tracks, completeness); a metric whose truth is missing is NaN.
 
 Track protocol (`bench.backend.reconstruction`): the headline scores points whose tracks
 span at least three views (`multiview`, COLMAP's default point triangulation); keeping
-two-view tracks (`twoview`) is reported in its own table only. Why: on the published
-default run of version 0.1 (two-view tracks kept), 310 of the 312 adaptive points and
-1,744 of the 1,759 points of all policies with an error above 1 scene unit came from
-two-view tracks; over tracks of three or more views the RMSE was 0.15 (adaptive), 0.42
-(texture), 1.06 (grid) and 0.45 (all), against 3.9 to 5.2 for every policy with two-view
-tracks kept, so the RMSE measured unverifiable two-view outliers, not the policies.
+two-view tracks (`twoview`) is reported in its own table only (why: CHANGELOG, 0.1).
 
 Metrics, for one run (scene, seed, method, budget, task, protocol):
 
@@ -28,8 +23,11 @@ Metrics, for one run (scene, seed, method, budget, task, protocol):
   each other view). The reconstructable points of a track protocol are the tracks that
   span at least as many views as the protocol asks of a point (three for `multiview`, two
   for `twoview`). The same for every policy.
-* acc_completeness_pct@tau = 100 * #{X : e(X) < tau} / reconstructable points, for tau in
-  0.02, 0.05, 0.10 (the headline) and 0.20 scene units.
+* acc_completeness_pct@tau = 100 * #{reconstructable tracks T : some X with e(X) < tau
+  lies within T's radius of T's point} / #reconstructable tracks, for tau in 0.02, 0.05,
+  0.10 (the headline) and 0.20 scene units: each ground-truth point reconstructed counts
+  once, so it is at most 100 (a track's point: the mean ground-truth point of its
+  candidates; its radius: 3 px at its depth; an accurate X counts for its nearest track).
 * accuracy_pct@tau = 100 * #{X : e(X) < tau} / #{X}: the share of the reconstructed points
   within tau (ETH3D's accuracy beside its completeness), for the same four tau.
 * inlier_pct = 100 * verified matches / tentative matches, summed over all pairs.
@@ -53,6 +51,7 @@ import math
 from itertools import combinations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from bench.backend.matching import PairMatches, expected_ransac_iterations
 from bench.camera import Camera
@@ -102,12 +101,10 @@ for _suffix, _tau in zip(SUFFIXES, THRESHOLDS):
             title=f"Accuracy % (points with e < {_tau:.2f})" if not _suffix else "",
         )
     )
-    # accurate points per reconstructable point: above 100 where a model has more accurate
-    # points than there are reconstructable ones (the sfm rows count them against the
-    # multiview protocol's, two-view points included)
     declare_metric(
         Metric(
             f"acc_completeness_pct{_suffix}",
+            PERCENT,
             failure=0.0,
             title=f"Acc. completeness % (e < {_tau:.2f})" if not _suffix else "",
         )
@@ -123,8 +120,20 @@ def rmse(errors: np.ndarray) -> float:
     return float(np.sqrt(np.mean(errors**2))) if len(errors) else math.nan
 
 
-def completeness_pct(errors: np.ndarray, reconstructable: int, tau: float) -> float:
-    return 100.0 * float(np.sum(errors < tau)) / reconstructable if reconstructable else math.nan
+def completeness_pct(
+    X: np.ndarray, errors: np.ndarray, tracks: tuple[np.ndarray, np.ndarray], tau: float
+) -> float:
+    """100 x the reconstructable tracks (their points and radii, `SceneTruth.track_points`)
+    that an accurate point (error below `tau`) lies within the radius of, each counted once
+    (by its nearest track), / the reconstructable tracks: at most 100 by construction."""
+    points, radius = tracks
+    if not len(points):
+        return math.nan
+    accurate = np.asarray(X, np.float64).reshape(-1, 3)[np.asarray(errors) < tau]
+    if not len(accurate):
+        return 0.0
+    d, nearest = cKDTree(points).query(accurate)
+    return 100.0 * len(np.unique(nearest[d <= radius[nearest]])) / len(points)
 
 
 def coverage_pct(xy_per_view: list[np.ndarray], cams: list[Camera], grid=COVERAGE_GRID) -> float:
@@ -192,11 +201,11 @@ def match_metrics(
 
 
 def point_metrics(
-    X: np.ndarray, surface: Surface | None, reconstructable: int | None
+    X: np.ndarray, surface: Surface | None, tracks: tuple[np.ndarray, np.ndarray] | None
 ) -> dict[str, float]:
     """Accuracy of reconstructed points X (N, 3): rmse, median error, accuracy within each
-    tau and, given the reconstructable points, completeness within each tau (NaN where the
-    surface or the reconstructable points are unknown)."""
+    tau and, given the reconstructable tracks (`SceneTruth.track_points`), completeness
+    within each tau (NaN where the surface or the tracks are unknown)."""
     if surface is None:
         row = {"points": len(X), "rmse": math.nan, "median_error": math.nan}
         for tau in THRESHOLDS:
@@ -210,11 +219,7 @@ def point_metrics(
         suffix = "" if tau == 0.10 else f"_{tau:.2f}"
         row[f"accuracy_pct{suffix}"] = 100.0 * float(np.mean(e < tau)) if len(e) else math.nan
         row[f"acc_completeness_pct{suffix}"] = (
-            math.nan
-            if reconstructable is None
-            else completeness_pct(e, reconstructable, tau)
-            if len(e)
-            else (0.0 if reconstructable else math.nan)
+            math.nan if tracks is None else completeness_pct(X, e, tracks, tau)
         )
     return row
 
@@ -247,9 +252,9 @@ def model_points(model) -> np.ndarray:
 def evaluate_known_pose(truth: SceneTruth, model, min_views: int) -> dict[str, float]:
     """The point metrics of a known-pose model, against the reconstructable points of its
     track protocol (tracks spanning at least `min_views` views)."""
-    n = truth.reconstructable(min_views)
+    tracks = truth.track_points(min_views)
     return (
-        {"reconstructable": math.nan if n is None else n}
-        | point_metrics(model_points(model), truth.surface, n)
+        {"reconstructable": math.nan if tracks is None else len(tracks[0])}
+        | point_metrics(model_points(model), truth.surface, tracks)
         | track_metrics(model)
     )

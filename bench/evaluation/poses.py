@@ -134,7 +134,7 @@ def evaluate_mapping(truth: SceneTruth, model, view_of_name: dict[str, int]) -> 
     else:
         s, R, t = sim
         X = s * X @ R.T + t
-    row |= point_metrics(X, truth.surface, truth.reconstructable(3))
+    row |= point_metrics(X, truth.surface, truth.track_points(3))
     row["points"] = 0 if model is None else model.num_points3D()
     row |= track_metrics(model)
     row["mean_reproj_px"] = (

@@ -2,9 +2,12 @@
 matches give, against the rig (the render entry's ground-truth poses).
 
 Which pairs are scored is decided by the ground truth alone, the same for every method of
-a scene and seed: the pairs of views that share at least `MIN_SHARED` ground-truth points
-(tracks, `SceneTruth.shared_pairs`); without per-pixel truth (a dataset with poses or a
-point cloud only), every pair of views.
+a scene and seed: the covisible pairs (`SceneTruth.covisible_pairs`), those that share at
+least `MIN_SHARED` ground-truth points (tracks); on a dataset without per-pixel truth,
+those whose model observes at least as many common points, and where the model has no
+points, those whose viewing directions are within 60 degrees and whose frustums overlap
+(the Image Matching Benchmark scores covisible pairs only: a pair that shares no surface
+cannot have a relative pose from matches). `pairs_rule` says which rule a row used.
 
 The estimate of pair (i, j) is cam_j_from_cam_i = (R, t) as COLMAP's calibrated two-view
 geometry estimated it from the pair's verified matches with the known intrinsics (the
@@ -110,14 +113,11 @@ def pair_metrics(errors, estimated: int) -> dict[str, float]:
 def evaluate_pairs(truth: SceneTruth, poses: RelativePoses) -> dict[str, float]:
     """Every metric of the pairs task from a unit's stored relative poses."""
     poses = {p: e for p, e in poses.items() if np.isfinite(e).all()}
-    n = len(truth.cams)
-    pairs = truth.shared_pairs(MIN_SHARED)
-    if pairs is None:
-        pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+    pairs, rule = truth.covisible_pairs(MIN_SHARED)
     errors = [
         relative_pose_error(poses[p], truth.cams[p[0]], truth.cams[p[1]])
         if p in poses
         else MISSING_DEG
         for p in pairs
     ]
-    return pair_metrics(errors, sum(p in poses for p in pairs))
+    return pair_metrics(errors, sum(p in poses for p in pairs)) | {"pairs_rule": rule}

@@ -21,11 +21,17 @@ from bench.evaluation.layers import (
     read_layers,
     surface_samples,
 )
+from bench.frontend.colmap_model import points_seen
 from bench.frontend.features import Candidates
 from bench.frontend.views import Source
 
 CORRESPONDENCE_PX = 3.0
 """Ground-truth correspondence: reprojection within this many pixels."""
+COVISIBLE_DEG = 60.0
+"""Without tracks to count, two views are covisible when their viewing directions are at
+most this far apart (SIFT's matching repeatability falls below a fifth past about 60
+degrees of viewpoint change: Mikolajczyk et al., IJCV 2005) and their view frustums
+overlap."""
 BLOCK = 16384
 """Surface samples per block of `Surface`."""
 
@@ -121,6 +127,8 @@ class SceneTruth:
     """Per track: the number of distinct views it spans."""
     kind: str = "rendered"
     """What truth there is: rendered, per-pixel (a dataset's), point cloud or poses."""
+    seen: list[np.ndarray] | None = None
+    """Per view, the ids of the 3D points a dataset's model observes there (None: none)."""
 
     @property
     def per_pixel(self) -> bool:
@@ -156,6 +164,28 @@ class SceneTruth:
         truth)."""
         return None if self.track_views is None else int(np.sum(self.track_views >= min_views))
 
+    def track_points(self, min_views: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The reconstructable tracks (spanning at least `min_views` views) as 3D points: each
+        track's mean ground-truth point over its candidates, and the distance in which a
+        reconstructed point is that track's (`CORRESPONDENCE_PX` at the track's depth in
+        its views); None without per-pixel truth."""
+        if self.track is None:
+            return None
+        label = np.concatenate(self.track)
+        P = np.concatenate(self.points)
+        px = np.concatenate(
+            [
+                CORRESPONDENCE_PX * cam.to_camera(np.nan_to_num(p))[:, 2] / cam.fx
+                for cam, p in zip(self.cams, self.points)
+            ]
+        )
+        keep = (self.track_views[label] >= min_views) & np.isfinite(P).all(1)
+        tracks, member = np.unique(label[keep], return_inverse=True)
+        count = np.bincount(member, minlength=len(tracks))[:, None]
+        mean = np.stack([np.bincount(member, P[keep][:, k], len(tracks)) for k in range(3)], 1)
+        radius = np.bincount(member, px[keep], len(tracks)) / count[:, 0]
+        return mean / count, radius
+
     def shared_pairs(self, min_shared: int) -> list[tuple[int, int]] | None:
         """The pairs of views (i < j) whose candidates share at least `min_shared`
         ground-truth tracks (ground-truth points seen by both; None without per-pixel
@@ -169,6 +199,27 @@ class SceneTruth:
             if len(np.intersect1d(seen[i], seen[j], assume_unique=True)) >= min_shared
         ]
 
+    def covisible_pairs(self, min_shared: int) -> tuple[list[tuple[int, int]], str]:
+        """The pairs of views (i < j) that see the same surface, and by which rule: sharing
+        at least `min_shared` ground-truth tracks (per-pixel truth), else at least as many
+        of a dataset model's points, else viewing directions within `COVISIBLE_DEG` with
+        overlapping frustums (poses alone)."""
+        if self.track is not None:
+            return self.shared_pairs(min_shared), f"ground-truth tracks >= {min_shared}"
+        if self.seen is not None and any(len(s) for s in self.seen):
+            pairs = [
+                (i, j)
+                for i, j in combinations(range(len(self.seen)), 2)
+                if len(np.intersect1d(self.seen[i], self.seen[j])) >= min_shared
+            ]
+            return pairs, f"model tracks >= {min_shared}"
+        pairs = [
+            (i, j)
+            for i, j in combinations(range(len(self.cams)), 2)
+            if _facing(self.cams[i], self.cams[j])
+        ]
+        return pairs, f"viewing directions within {COVISIBLE_DEG:g} deg, frustums overlap"
+
     def correspondences(self, i: int, j: int, ki: np.ndarray, kj: np.ndarray) -> np.ndarray:
         """Whether candidate ki[m] of view i and kj[m] of view j correspond (ground truth)."""
 
@@ -180,14 +231,40 @@ class SceneTruth:
 
 
 def scene_truth(source: Path, cams: list[Camera], names: list[str], pools) -> SceneTruth:
-    """The truth of a render entry, or whatever truth a dataset folder holds."""
+    """The truth of a render entry, or whatever truth a dataset folder holds (with the
+    points its model observes in each view)."""
     if Source.kind(source) == "render":
         return SceneTruth.build(cams, read_layers(source), pools)
     cloud, gts = read_dataset_layers(source, names, cams)
     truth = SceneTruth.build(cams, gts, pools, cloud)
+    seen = points_seen(Source.of(source).model)
+    truth.seen = [seen.get(n, np.zeros(0, np.int64)) for n in names]
     if gts is not None:
         truth.kind = "per-pixel"
     return truth
+
+
+def _facing(a: Camera, b: Camera) -> bool:
+    """Viewing directions within `COVISIBLE_DEG`, and frustums that overlap: the point
+    where the two optical axes pass closest lies in front of both cameras and inside both
+    images (axes nearly parallel: each camera in front of the other's image plane or
+    beside it, as on a path)."""
+    da, db = a.R[2], b.R[2]  # optical axes (world)
+    if np.degrees(np.arccos(np.clip(da @ db, -1, 1))) > COVISIBLE_DEG:
+        return False
+    w = a.center - b.center
+    cross = np.cross(da, db)
+    if np.linalg.norm(cross) < 1e-3:  # parallel axes: the same view direction
+        return True
+    # closest points of the two axes: a.center + s da and b.center + u db
+    m = np.array([[da @ da, -(da @ db)], [da @ db, -(db @ db)]])
+    s, u = np.linalg.solve(m, [-(w @ da), -(w @ db)])
+    P = (a.center + s * da + b.center + u * db) / 2
+    for cam in (a, b):
+        uv, z = cam.project(P[None])
+        if not (z[0] > 0 and 0 <= uv[0, 0] < cam.width and 0 <= uv[0, 1] < cam.height):
+            return False
+    return True
 
 
 def _tracks(cams, gts, points, pool_xy) -> tuple[list[np.ndarray], np.ndarray]:

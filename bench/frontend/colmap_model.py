@@ -231,6 +231,18 @@ def read_model(folder: Path) -> list[tuple[str, Camera]]:
     return sorted(out, key=lambda nc: nc[0])
 
 
+def points_seen(folder: Path) -> dict[str, np.ndarray]:
+    """The ids of the model's 3D points each image observes, by image name (empty arrays
+    for a model without points)."""
+    rec = _reconstruction(Path(folder), model_format(Path(folder)))
+    return {
+        image.name: np.array(
+            [p.point3D_id for p in image.points2D if p.has_point3D()], dtype=np.int64
+        )
+        for image in rec.images.values()
+    }
+
+
 def check_images(names: list[str], images: list[str], model: Path, folder: Path) -> None:
     """The model's images are the folder's images: none missing, none left over."""
     missing = sorted(set(names) - set(images))

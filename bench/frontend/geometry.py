@@ -1,61 +1,14 @@
-"""The geometry between views that the signals read: from the calibration's poses, or
-estimated from the images alone.
-
-Which one a selection may use is what its task grants (`Task.grant`, `bench.harness.tasks`):
-the `tri` task grants the rig's poses; the `sfm` task (and `bench select` without a pose
-model) grants the images and intrinsics only, and its views reach the front end without
-their poses (`View.without_pose`), so nothing downstream can read them. `view_geometry`
-takes the rig's geometry when every view is posed, else estimates it.
-
-A `Geometry` gives, per view i: the views that overlap it, ambiguity's nearest views (two
-at most), and for each overlapping pair a two-camera frame (`pair_frame`: both cameras in
-one coordinate system) from which the epipolar geometry and the parallax are computed.
-
-**From the poses** (`rig_geometry`), as the signals have always had it: the depth prior
-D_i (the median depth of points triangulated from mutual epipolar matches of the 150
-strongest candidates, see `depth_priors`); views i and j overlap when one sees the point
-at the other's depth prior on its optical axis; the nearest views are those with the
-closest camera centres; parallax looks at every other view at D_i.
-
-**From the images** (`image_geometry`): a first pass matches the `SignalConfig.first_pass`
-strongest candidates (by response) of every pair of views (mutual nearest neighbours with
-the ratio test) and verifies them with COLMAP's calibrated two-view geometry (the known
-intrinsics, or the focal prior of photographs; RANSAC seeded, so deterministic; a 1 px
-threshold), which estimates their relative pose: the rotation and the direction of the
-translation, placing the two cameras in a frame whose unit is their baseline. The pair
-overlaps when the pose explains at least `MIN_SUPPORT` of the matches (within 1 px of its
-epipolar lines, and triangulated in front of both cameras), whatever configuration COLMAP
-names: a near-planar facade is UNCALIBRATED to COLMAP (a fundamental matrix explains a few
-more matches) with rotations right to 0.2 degrees, while wrong geometries of wide pairs
-explain none. From it:
-
-* the nearest views of i: the two overlapping views whose poses explain the most matches;
-* F = K_j^-T [t]x R K_i^-1 of the pair frame (none for a pure rotation);
-* parallax: the rig's formula in the pair frame, at the pair's working distance d_ij (the
-  median depth in view i of the matches the pose explains, in baselines; with fewer than
-  10, the distance at which the baseline subtends the saturation angle).
-
-**The focal length of photographs without one** (no EXIF, no model: COLMAP's guess of
-1.2 x max(width, height), `View.focal_known` False) is estimated before the first pass
-uses it (`estimate_focal`): for the true intrinsics, the essential matrix E = K_j^T F K_i
-of each pair has two equal singular values (Mendonca and Cipolla, 1999). F is COLMAP's
-fundamental matrix of the first pass's tentative matches (LO-RANSAC, seeded, 1 px);
-over the pairs of guessed views it explains `MIN_SUPPORT` matches of, the focal factor
-(focal / max(width, height)) of `FOCAL_FACTORS` that minimises the mean of
-(s1 - s2) / (s1 + s2), weighted by the matches F explains, is taken, one for all the
-guessed views (one camera; principal point at the image centre, square pixels); then it
-is refined in steps of 5% and 2% while the pairs' calibrated relative poses (as the first
-pass estimates them) explain more matches (on Herz-Jesu the overlap graph is sensitive
-to the focal length: 10% off loses a third of the pairs). The guess stays, and
-`FocalEstimate.why` says why, with fewer than `FOCAL_MIN_PAIRS` such pairs, without a
-minimum inside the range, or where the estimate is not determined: its relative poses
-explain fewer than `FOCAL_PEAK` times the matches they explain at focal lengths
-`FOCAL_OFF` times larger and smaller (critical motions, e.g. optical axes that meet in one
-point, as on the Middlebury rings and the rendered camera paths, explain as many matches
-at any focal length: four templeSparseRing images gave 0.37 where the truth is 2.38).
-
-A pair whose geometry cannot be estimated does not overlap (a value, never an error); a
-view that overlaps nothing gets zero parallax and epipolar signals, and a log line says so.
+"""The geometry between views that the signals read: from the calibration's poses
+(`rig_geometry`), or estimated from the images alone (`image_geometry`), whichever the
+task grants (`Task.grant`): `view_geometry` takes the rig's when every view is posed. A
+`Geometry` gives, per view, the views that overlap it, ambiguity's nearest views and, for
+each overlapping pair, a two-camera frame (`pair_frame`) from which the epipolar geometry
+and the parallax are computed. From the images, a first pass matches the strongest
+candidates of every pair and COLMAP's calibrated two-view geometry estimates their
+relative pose (`bench.twoview`); a photograph's unknown focal length is estimated first
+where the images determine it (`estimate_focal`). A pair whose geometry cannot be
+estimated does not overlap (a value, never an error). The details, and what they measure,
+are in docs/protocol.md ("The geometry the signals read").
 """
 
 from __future__ import annotations
@@ -76,6 +29,7 @@ from bench.frontend.features import (
     tentative_matches,
 )
 from bench.frontend.views import View
+from bench.twoview import two_view_geometry, verification_options
 
 RIG, IMAGES = "rig", "images"
 """The two sources of geometry: the calibration's poses, or the images alone."""
@@ -119,57 +73,6 @@ class SignalConfig:
     first_pass: int = 512
     """Geometry from the images: the strongest candidates per view (by detector response)
     matched and verified between every pair of views."""
-
-
-def colmap_camera(cam: Camera, camera_id: int = 1) -> pycolmap.Camera:
-    c = pycolmap.Camera(
-        model="PINHOLE",
-        width=cam.width,
-        height=cam.height,
-        params=[cam.fx, cam.fy, cam.cx, cam.cy],
-        camera_id=camera_id,
-    )
-    c.has_prior_focal_length = True  # otherwise COLMAP does not estimate a calibrated geometry
-    return c
-
-
-def verification_options(
-    max_error: float, seed: int, max_trials: int | None = None
-) -> pycolmap.TwoViewGeometryOptions:
-    """COLMAP's two-view verification: its RANSAC threshold (px), seed and trial limit,
-    with the relative pose computed."""
-    opts = pycolmap.TwoViewGeometryOptions()
-    opts.ransac.max_error = max_error
-    opts.ransac.random_seed = seed
-    if max_trials is not None:
-        opts.ransac.max_num_trials = max_trials
-    opts.compute_relative_pose = True
-    return opts
-
-
-def two_view_geometry(
-    cam_a: Camera,
-    xy_a: np.ndarray,
-    cam_b: Camera,
-    xy_b: np.ndarray,
-    matches: np.ndarray,
-    opts: pycolmap.TwoViewGeometryOptions,
-) -> pycolmap.TwoViewGeometry:
-    """COLMAP's calibrated two-view geometry of tentative matches (intrinsics only), with
-    the relative pose `cam2_from_cam1` (b from a) where it can be estimated."""
-    return pycolmap.estimate_calibrated_two_view_geometry(
-        colmap_camera(cam_a),
-        xy_a.astype(np.float64),
-        colmap_camera(cam_b),
-        xy_b.astype(np.float64),
-        matches.astype(np.uint32),
-        opts,
-    )
-
-
-def configuration(tvg: pycolmap.TwoViewGeometry) -> str:
-    """COLMAP's name of a two-view configuration (e.g. CALIBRATED, PLANAR, DEGENERATE)."""
-    return pycolmap.TwoViewGeometryConfiguration(int(tvg.config)).name
 
 
 def fundamental(a: Camera, b: Camera) -> np.ndarray:

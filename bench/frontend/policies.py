@@ -487,7 +487,7 @@ def quadtree_policy(inp, budget, rng, cfg):
     xy, resp = inp.candidates.xy, inp.candidates.response
     want = min(budget, len(xy))
     cam = inp.view.camera
-    cells = [(0.0, 0.0, float(cam.width), float(cam.height), np.arange(len(xy)))]
+    cells = [(0.0, 0.0, float(cam.width), float(cam.height), np.arange(len(xy)))] if len(xy) else []
     while len(cells) < want:
         splittable = [k for k, c in enumerate(cells) if len(c[4]) > 1 and c[2] - c[0] > 1]
         if not splittable:

@@ -33,7 +33,7 @@ import numpy as np
 from bench import BenchError
 from bench.camera import Camera
 from bench.console import log
-from bench.files import checksum, content_key, entry_problem
+from bench.files import META, checksum, content_key, entry_problem
 from bench.frontend.colmap_model import check_images, find_model, read_model
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".webp")
@@ -117,9 +117,9 @@ class Source:
 
     @staticmethod
     def kind(path: Path) -> str:
-        """'render' for a render entry (it has a `meta.json`), else 'dataset': the one place
-        that tells them apart."""
-        return "render" if (Path(path) / "meta.json").is_file() else "dataset"
+        """'render' for a render entry (a cache entry: it has a record, `files.META`), else
+        'dataset': the one place that tells them apart."""
+        return "render" if (Path(path) / META).is_file() else "dataset"
 
     @staticmethod
     def of(path: Path) -> Source:

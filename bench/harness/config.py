@@ -12,8 +12,8 @@ from bench.backend.matching import BackendConfig, check_matcher
 from bench.frontend.features import DetectorConfig
 from bench.frontend.geometry import SignalConfig
 from bench.frontend.policies import PolicyConfig, own_fields, settings_for
+from bench.harness.declared import package_settings
 from bench.render.config import RenderConfig
-from bench.vocabulary import SETTINGS
 
 METHODS_SECTION = "methods"
 """The key of the methods' own settings in `RunConfig.as_dict` (and `config.json`)."""
@@ -43,7 +43,7 @@ class RunConfig:
 
     def own(self, method: str) -> dict:
         """A method's own settings, its defaults filled in ({} if it has none)."""
-        cls = SETTINGS.get(method)
+        cls = package_settings().get(method)
         if cls is None:
             return {}
         cfg = self.policy_config(method)
@@ -55,7 +55,7 @@ class RunConfig:
 
     def with_own(self, method: str, **values) -> RunConfig:
         """These settings with some of `method`'s own settings changed."""
-        cls = SETTINGS.get(method)
+        cls = package_settings().get(method)
         valid = own_fields(cls) if cls else []
         for k in values:
             if k not in valid:
@@ -68,7 +68,9 @@ class RunConfig:
     def as_dict(self) -> dict:
         """The shared settings, and under `methods` each method's own (what
         `config.json` records; the folder is bound to the shared ones alone)."""
-        return self.shared() | {METHODS_SECTION: {m: self.own(m) for m in sorted(SETTINGS)}}
+        return self.shared() | {
+            METHODS_SECTION: {m: self.own(m) for m in sorted(package_settings())}
+        }
 
     def validate(self) -> RunConfig:
         """Each section's own check (the signals' is here), and each method's."""
@@ -76,10 +78,10 @@ class RunConfig:
             if section is not None:
                 section.validate()
         check_matcher(self.backend, self.detector.detector)
-        unknown = sorted(set(self.methods) - set(SETTINGS))
+        unknown = sorted(set(self.methods) - set(package_settings()))
         if unknown:
             raise BenchError(f"{unknown[0]} has no settings of its own")
-        for method in SETTINGS:
+        for method in package_settings():
             self.policy_config(method).validate()
         prior, first = self.signals.depth_prior, self.signals.first_pass
         if (prior is not None and not prior > 0) or first < 8:

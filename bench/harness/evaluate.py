@@ -10,7 +10,6 @@ beside a model (`TaskRunner.keep`: tri's point errors, for Figure 2) is written 
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 import time
@@ -36,6 +35,7 @@ from bench.harness.predict import (
     stored_poses,
 )
 from bench.harness.tasks import RUNNERS
+from bench.render.entry import entry_meta
 from bench.results import PREDICTION, Workspace
 from bench.vocabulary import CODE, METHODS, METRICS, Job, Unit
 
@@ -154,7 +154,7 @@ def render_seconds(entry: Path) -> float:
     """A render entry's mean seconds per view (NaN for a dataset)."""
     if Source.kind(entry) != "render":
         return math.nan
-    return float(np.mean(json.loads((Path(entry) / "meta.json").read_text())["seconds_per_view"]))
+    return float(np.mean(entry_meta(entry)["seconds_per_view"]))
 
 
 def make_row(

@@ -34,6 +34,7 @@ from pathlib import Path
 
 from bench import BenchError
 from bench.evaluation.truth import scene_truth
+from bench.failures import ERROR
 from bench.frontend import plugins
 from bench.frontend.geometry import RIG
 from bench.frontend.policies import PolicyFailed
@@ -45,7 +46,6 @@ from bench.harness.methods import runner
 from bench.harness.predict import LoadedScene, has_prediction, predict
 from bench.harness.tasks import RUNNERS
 from bench.results import Workspace
-from bench.summary import ERROR
 from bench.vocabulary import Job, Unit
 
 _HELD: dict = {}
@@ -134,6 +134,7 @@ def compute_unit(
 ) -> list[dict]:
     """The rows of one unit: predicted (unless it only re-scores a current prediction),
     then scored; failed rows saying where, if its policy fails."""
+    plugins.load(cfg.policy.modules)  # in a worker process, the policies from outside
     jobs, run = list(work.jobs), runner(unit.method)
     try:
         if not (work.rescore and has_prediction(ws, unit, jobs, cfg)):
@@ -146,9 +147,7 @@ def compute_unit(
 
 
 def unit_task(unit: Unit, plan: Plan, cfg: RunConfig, ws: Workspace, *_after) -> list[dict]:
-    """The rows of one unit of a plan (`_after`: what it waits for); a worker process
-    registers the policies from outside first."""
-    plugins.load(cfg.policy.modules)
+    """The rows of one unit of a plan (`_after`: what it waits for)."""
     scene = _scene(plan.entries[unit.group], cfg, ws.renders, plan.grants)
     return compute_unit(scene, unit, plan.work[unit], cfg, ws)
 

@@ -30,6 +30,7 @@ import pandas as pd
 
 from bench import ROOT, BenchError
 from bench.console import log, progress
+from bench.failures import ERROR, exclusions, failures
 from bench.files import write_text_atomic
 from bench.frontend import plugins
 from bench.frontend.policies import check_methods, learned_weights
@@ -39,9 +40,10 @@ from bench.harness.evaluate import evaluation_hash
 from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
 from bench.harness.predict import prediction_hash
 from bench.harness.tasks import RUNNERS
-from bench.render.entry import entry_name, render_scene
+from bench.render.entry import entry_meta, entry_name, render_scene
 from bench.results import (
     DAMAGED,
+    MANIFEST,
     Workspace,
     append_runs,
     bind_results_dir,
@@ -53,7 +55,6 @@ from bench.results import (
     set_aside_damaged,
 )
 from bench.scenes.spec import load_spec, scene_names
-from bench.summary import ERROR, exclusions, failures
 from bench.vocabulary import (
     KEY,
     METHODS,
@@ -150,20 +151,20 @@ class BenchConfig:
         """Every unit of the grid that has a job; a whole-pool method (`all`, `colmap`)
         is one unit per scene and seed, with budget 0."""
         return [
-            Unit(sc, sd, p, b)
+            Unit(sc, sd, m, b)
             for sc in self.scenes
             for sd in self.seeds
-            for p in self.methods
-            for b in ((0,) if METHODS[p].whole_pool else self.budgets)
-            if self.jobs(p)
+            for m in self.methods
+            for b in ((0,) if METHODS[m].whole_pool else self.budgets)
+            if self.jobs(m)
         ]
 
-    def jobs(self, policy: str) -> list[Job]:
-        """Every job of a unit of `policy` (a peer runs the tasks that admit peers; a
+    def jobs(self, method: str) -> list[Job]:
+        """Every job of a unit of `method` (a peer runs the tasks that admit peers; a
         method that needs another detector's pool runs none)."""
-        if METHODS[policy].pool not in ("", self.run.detector.detector):
+        if METHODS[method].pool not in ("", self.run.detector.detector):
             return []
-        peer = METHODS[policy].role == "peer"
+        peer = METHODS[method].role == "peer"
         tasks = [t for t in self.tasks if RUNNERS[t].spec.peers or not peer]
         return [Job(t, pr) for t in tasks for pr in self.protocols]
 
@@ -302,7 +303,7 @@ def _run_in(
     log(f"{len(done)} of {len(done) + n_rows} rows already in {ws.runs_csv}; " + ", ".join(todo))
     groups = sorted({u.group for u in work}, key=lambda g: (cfg.scenes.index(g[0]), g[1]))
     entries = {}
-    with progress("render", len(groups)) as bar:
+    with progress("render", len(groups), "scene") as bar:
         for sc, sd in groups:
             t = time.perf_counter()
             entries[sc, sd] = cfg.dataset(sc) or render_scene(sc, sd, cfg.run.render, ws.renders)
@@ -321,12 +322,14 @@ def _run_in(
             append_runs(ws.runs_csv, [r | {"invocation": invocation["id"]} for r in new], vocab)
     stage_s["runs_wall"] = time.perf_counter() - t_runs
     out = read_runs(ws.runs_csv)
+    invocation |= {"rows": n_rows, "seconds": {"total": time.perf_counter() - t_start, **stage_s}}
+    write_manifest(ws, cfg, invocation, out)  # before the report: its page shows the run
     if report is not None:
         t = time.perf_counter()
         report(out, ws.results, ws.renders)
-        stage_s["report"] = time.perf_counter() - t
-    invocation |= {"rows": n_rows, "seconds": {"total": time.perf_counter() - t_start, **stage_s}}
-    write_manifest(ws, cfg, invocation, out)
+        invocation["seconds"]["report"] = time.perf_counter() - t
+        invocation["seconds"]["total"] = time.perf_counter() - t_start
+        write_manifest(ws, cfg, invocation, out)
     ours = in_grid(cfg, out)
     said = [failures(ours), exclusions(ours, Vocabulary.current(), bool(cfg.datasets))]
     said = [s for s in said if s]
@@ -351,7 +354,11 @@ def in_grid(cfg: BenchConfig, rows: pd.DataFrame) -> pd.DataFrame:
 def _computed(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, stage_s: dict):
     """The rows of each unit as it finishes, with progress bars; the stage seconds added
     to `stage_s`."""
-    with progress("frontend", len(plan.entries)) as fbar, progress("runs", len(plan.work)) as bar:
+    rows = sum(len(w.jobs) for w in plan.work.values())
+    with (
+        progress("frontend", len(plan.entries), "scene") as fbar,
+        progress("runs", rows, "rows") as bar,
+    ):
 
         def scene_ready(group, info):
             scene, seed = group
@@ -366,7 +373,7 @@ def _computed(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, stage
             bar.set_postfix_str(
                 f"{first['scene']} s{first['seed']} {first['method']} b{first['budget']}"
             )
-            bar.update()
+            bar.update(len(new))
 
 
 def _add_seconds(stage_s: dict[str, float], new: list[dict]) -> None:
@@ -418,13 +425,17 @@ def write_manifest(ws: Workspace, cfg: BenchConfig, invocation: dict, rows: pd.D
     """Versions, variant, host, settings and the invocations that computed the rows of
     `runs.csv`: each with its commit and seconds per stage, kept while it owns a row (a rerun
     that computes nothing adds nothing), and their sum."""
-    path = ws.results / "manifest.json"
+    path = ws.results / MANIFEST
     try:
         earlier = json.loads(path.read_text()).get("invocations", [])
     except (OSError, ValueError, AttributeError):
         earlier = []
     live = set(rows["invocation"])
-    kept = [i for i in earlier if isinstance(i, dict) and i.get("id") in live]
+    kept = [
+        i
+        for i in earlier
+        if isinstance(i, dict) and i.get("id") in live and i.get("id") != invocation["id"]
+    ]
     if invocation["rows"]:
         kept.append(invocation)
     for inv in kept:
@@ -434,9 +445,7 @@ def write_manifest(ws: Workspace, cfg: BenchConfig, invocation: dict, rows: pd.D
         for k, v in inv["seconds"].items():
             total[k] = total.get(k, 0.0) + v
     entries = [ws.renders / k for k in rows["render_key"].unique()]
-    metas = [
-        json.loads((e / "meta.json").read_text()) for e in entries if Source.kind(e) == "render"
-    ]
+    metas = [entry_meta(e) for e in entries if Source.kind(e) == "render"]
     manifest = {
         "versions": {"python": platform.python_version(), **module_versions(MODULES)},
         "variant": sorted({m["variant"] for m in metas}),

@@ -4,11 +4,10 @@ scoring (`bench.harness.evaluate`), and whether `bench select` can run it on pho
 Every dispatch on a method goes through its declared kind (`runner`): no module compares
 a method's name.
 
-The package's methods are declared by the modules of `DECLARED_IN` (imported here, so
-every entry point that runs methods has them); a method from outside is declared by a
-policy module or an entry point (`bench.frontend.plugins`). A package that brings a new
-kind of method declares it (`bench.vocabulary.declare_kind`) and registers its runner
-here (`register_kind`).
+The package's methods are declared by the modules of `bench.harness.declared`; a method
+from outside is declared by a policy module or an entry point (`bench.frontend.plugins`).
+A package that brings a new kind of method declares it (`bench.vocabulary.declare_kind`)
+and registers its runner here (`register_kind`).
 """
 
 from __future__ import annotations
@@ -16,9 +15,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from bench import BenchError
-from bench.backend import peers
-from bench.evaluation import oracle
-from bench.frontend import feedback, policies
 from bench.harness.evaluate import Shared, own_pipeline_shared, selection_shared
 from bench.harness.predict import (
     Store,
@@ -34,11 +30,7 @@ from bench.vocabulary import (
     MULTI_VIEW,
     OWN_PIPELINE,
     PER_VIEW,
-    Vocabulary,
 )
-
-DECLARED_IN = (policies, feedback, peers, oracle)
-"""The modules that declare the package's methods."""
 
 
 @dataclass(frozen=True)
@@ -64,11 +56,6 @@ def register_kind(kind: str, runner: KindRunner) -> None:
     if kind in RUNNERS:
         raise BenchError(f"kind {kind!r} has a runner already")
     RUNNERS[kind] = runner
-
-
-def declared() -> Vocabulary:
-    """The package's vocabulary: every method, task and metric it declares."""
-    return Vocabulary.current()
 
 
 def runner(method: str) -> KindRunner:

@@ -51,7 +51,7 @@ from bench.frontend.stage import FrontEnd, front_end
 from bench.frontend.views import Source
 from bench.harness.config import RunConfig
 from bench.harness.tasks import RUNNERS, Matched
-from bench.results import PREDICTION, Workspace
+from bench.results import LOOP, PREDICTION, Workspace
 from bench.vocabulary import CODE, METHODS, Job, Unit
 
 
@@ -256,7 +256,7 @@ def _store_selection(scene, unit, jobs, cfg, ws, record, select) -> None:
         if rounds:
             loop = ws.model_dir(unit, grant_jobs[0])
             loop.mkdir(parents=True, exist_ok=True)
-            write_text_atomic(loop / "loop.json", json.dumps(rounds, indent=1))
+            write_text_atomic(loop / LOOP, json.dumps(rounds, indent=1))
 
 
 def store_own_pipeline(scene, unit, jobs, cfg, ws, record) -> None:

@@ -37,6 +37,7 @@ from bench.evaluation.relative import RelativePoses, evaluate_pairs
 from bench.evaluation.truth import SceneTruth
 from bench.files import atomic_path
 from bench.frontend.geometry import IMAGES, RIG
+from bench.results import POINT_ERRORS
 from bench.vocabulary import PROTOCOLS, Task, declare_task
 
 
@@ -83,10 +84,6 @@ def register(runner: TaskRunner) -> None:
 
 def view_of_name(names: list[str]) -> dict[str, int]:
     return {name: k for k, name in enumerate(names)}
-
-
-POINT_ERRORS = "point_errors.csv"
-"""Beside a tri model: each point's distance to the ground-truth surface (Figure 2)."""
 
 
 def write_point_errors(model, truth: SceneTruth, out: Path) -> None:

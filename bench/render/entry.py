@@ -8,7 +8,6 @@ renders only the 15 views a rig of 6 on the same path does not have, and the oth
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import time
@@ -104,7 +103,7 @@ def render_view_entry(
     if missing, damaged or forced; its meta."""
     with files.locked(entry):
         if entry.exists() and not force and files.entry_problem(entry) is None:
-            return json.loads((entry / "meta.json").read_text())
+            return files.read_meta(entry)
         with files.atomic_dir(entry) as tmp:
             t0 = time.perf_counter()
             image, gt, names = render_view(desc, v, cfg, variant)
@@ -142,6 +141,23 @@ def _resolved(
     return spec, variant, f"{name}-s{seed}-{render_key(spec, seed, cfg, variant)}"
 
 
+def entry_meta(entry: Path) -> dict:
+    """What a render entry records of itself (`render_scene`): scene, seed, settings,
+    variant, versions, seconds per view, shape names, the cameras: the one reader of a
+    render entry's record."""
+    return files.read_meta(entry)
+
+
+def image_name(view: int) -> str:
+    """The file name of a render entry's view `view` (its COLMAP model names it so)."""
+    return f"view_{view:02d}.png"
+
+
+def truth_name(view: int) -> str:
+    """The file name of a render entry's ground-truth layers of view `view`."""
+    return f"gt_{view:02d}.npz"
+
+
 def entry_name(name: str, seed: int, cfg: RenderConfig, renders_dir: Path) -> str:
     """The name of the cache entry of (scene, seed, settings), without rendering it: what
     a row of `runs.csv` records as its `render_key`, so a changed scene is noticed."""
@@ -174,12 +190,11 @@ def render_scene(
                     / f"{name}-s{seed}-{view_key(spec, seed, cfg, variant, u)}"
                 )
                 meta = render_view_entry(desc, v, cfg, variant, view, force)
-                for kind in ("view", "gt"):
-                    src = next(view.glob(f"{kind}.*"))
-                    _link(src, tmp / f"{kind}_{v:02d}{src.suffix}")
+                _link(view / "view.png", tmp / image_name(v))
+                _link(view / "gt.npz", tmp / truth_name(v))
                 seconds.append(meta["seconds"])
                 names = meta["shape_names"]
-            write_colmap_rig(desc.cameras, tmp, [f"view_{v:02d}.png" for v in range(cfg.views)])
+            write_colmap_rig(desc.cameras, tmp, [image_name(v) for v in range(cfg.views)])
             files.write_meta(
                 tmp,
                 {

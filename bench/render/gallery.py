@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from bench.files import atomic_path
+from bench.render.entry import entry_meta, image_name
 
 
 def write_gallery(entries: dict[str, Path], out: Path, thumb_width: int = 320) -> Path:
@@ -16,8 +16,8 @@ def write_gallery(entries: dict[str, Path], out: Path, thumb_width: int = 320) -
     rows = []
     for name, entry in entries.items():
         thumbs = []
-        for v in range(len(json.loads((entry / "meta.json").read_text())["cameras"])):
-            img = cv2.imread(str(entry / f"view_{v:02d}.png"))
+        for v in range(len(entry_meta(entry)["cameras"])):
+            img = cv2.imread(str(entry / image_name(v)))
             h = round(img.shape[0] * thumb_width / img.shape[1])
             thumbs.append(cv2.resize(img, (thumb_width, h), interpolation=cv2.INTER_AREA))
         cv2.putText(thumbs[0], name, (8, 28), cv2.FONT_HERSHEY_SIMPLEX, 0.9, (0, 0, 0), 4)

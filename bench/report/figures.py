@@ -18,7 +18,7 @@ import pandas as pd  # noqa: E402
 from matplotlib.ticker import FixedLocator, NullLocator  # noqa: E402
 
 from bench.files import atomic_path  # noqa: E402
-from bench.results import Workspace  # noqa: E402
+from bench.results import POINT_ERRORS, Workspace  # noqa: E402
 from bench.vocabulary import (  # noqa: E402
     FIGURE_SCENE,
     GROUND_TRUTH,
@@ -221,7 +221,7 @@ def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | 
     if not (model_dir / "images.txt").is_file() or not entry.is_dir():
         return f"missing {model_dir if not model_dir.is_dir() else entry}"
     images, ids, X = read_text_model(model_dir)
-    errors = model_dir / "point_errors.csv"
+    errors = model_dir / POINT_ERRORS
     err = np.zeros(len(ids))
     if errors.is_file() and len(ids):
         known = pd.read_csv(errors).set_index("point3D_id")["error"]

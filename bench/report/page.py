@@ -13,19 +13,34 @@ from pathlib import Path
 
 import pandas as pd
 
+from bench.results import (
+    CONFIG,
+    FIGURE2,
+    FIGURE3,
+    FIGURE_BUDGET,
+    FIGURE_TRANSFER,
+    MANIFEST,
+    PAIRED,
+    PAIRED_SFM,
+    RUNS,
+    TABLE1,
+    TABLE2,
+    TRANSFER,
+    png,
+    read_vocabulary,
+)
 from bench.vocabulary import HEADLINE, HEADLINE_BUDGET, HEADLINE_POLICY, PAIRED_PEERS, Vocabulary
 
-PAGE = "README.md"
 POOLED = ("all", "all scenes")
 """How the tables name the pooled rows."""
 TASK_COLUMNS = 3
 """How many of a task's Table 1 columns (its first, in the task registry's order) the
 page shows; the CSV has them all."""
 FIGURES = {
-    "figure3.png": "Headline metrics per method at the headline budget, 95% intervals",
-    "figure_budget.png": "Each headline metric against the budget",
-    "figure2.png": f"Figure 2: the {HEADLINE_POLICY} selection and its points coloured by error",
-    "figure_transfer.png": "The rendered ranking against each dataset's",
+    png(FIGURE3): "Headline metrics per method at the headline budget, 95% intervals",
+    png(FIGURE_BUDGET): "Each headline metric against the budget",
+    png(FIGURE2): f"Figure 2: the {HEADLINE_POLICY} selection and its points coloured by error",
+    png(FIGURE_TRANSFER): "The rendered ranking against each dataset's",
 }
 
 
@@ -91,7 +106,7 @@ def _grid_section(runs: pd.DataFrame, config: dict) -> list[str]:
         out.append(f"- {col}: {', '.join(values)}")
     settings = config.get("settings") or {}
     if settings:
-        out += ["", "<details><summary>Settings (config.json)</summary>", "", "```"]
+        out += ["", f"<details><summary>Settings ({CONFIG})</summary>", "", "```"]
         out += [json.dumps(settings, indent=1, sort_keys=True), "```", "</details>"]
     return out
 
@@ -109,9 +124,9 @@ def _table1_section(t1: pd.DataFrame, vocab: Vocabulary, title: str) -> list[str
         header = ["method", "budget", "runs", *cols, "why an interval is missing"]
         body = {
             b: [
-                [str(r["strategy"]), _num(r["budget"]), _num(r["runs"])]
+                [str(r["strategy"]), _num(r["budget"]), _runs(r, vocab, task.name)]
                 + [_interval(r, c) for c in cols]
-                + [_text(r.get("note"), "")]
+                + [_why(r.get("note"), cols)]
                 for _, r in at.iterrows()
             ]
             for b, at in rows.groupby("budget")
@@ -123,6 +138,26 @@ def _table1_section(t1: pd.DataFrame, vocab: Vocabulary, title: str) -> list[str
             out += ["<details><summary>Other budgets</summary>", ""]
             out += _table(header, rest) + ["", "</details>", ""]
     return out
+
+
+def _runs(r: pd.Series, vocab: Vocabulary, task: str) -> str:
+    """The runs a task's means count (those the exclusion rule leaves out not), and how
+    many of them could not be computed (scored at their failure value)."""
+    excluded = r.get(vocab.column(task, "excluded_runs"))
+    used = r["runs"] - (excluded if pd.notna(excluded) else 0)
+    errors = r.get(vocab.column(task, "error_runs"))
+    errors = errors if pd.notna(errors) else 0
+    return _num(used) + (f" ({_num(errors)} could not be computed)" if errors else "")
+
+
+def _why(note, cols: list[str]) -> str:
+    """The reasons of a Table 1 `note` (`reason: metric, ...; ...`) that apply to `cols`."""
+    reasons = []
+    for part in _text(note, "").split("; "):
+        why, _, metrics = part.rpartition(": ")
+        if why and set(metrics.split(", ")) & set(cols):
+            reasons.append(why)
+    return "; ".join(reasons)
 
 
 def _table2_section(t2: pd.DataFrame) -> list[str]:
@@ -213,35 +248,35 @@ def _exclusions(runs: pd.DataFrame, t1: pd.DataFrame, vocab: Vocabulary) -> list
 def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
     """The page of a results folder, from its files (`runs`: its rows, if already read)."""
     results = Path(results)
-    runs = pd.read_csv(results / "runs.csv") if runs is None else runs
-    vocab = Vocabulary.load(results)
-    t1 = _read(results, "table1.csv")
+    runs = pd.read_csv(results / RUNS) if runs is None else runs
+    vocab = read_vocabulary(results)
+    t1 = _read(results, TABLE1)
     out = [
         f"# Results: `{results.name}`",
         "",
-        "Written by `bench plot` from this folder's `runs.csv`, `manifest.json` and "
-        "`config.json`; every number below is in those files or the tables beside them. "
+        f"Written by `bench plot` from this folder's `{RUNS}`, `{MANIFEST}` and "
+        f"`{CONFIG}`; every number below is in those files or the tables beside them. "
         "Do not edit: the next `bench plot` rewrites it.",
         "",
     ]
-    out += _run_section(_json(results, "manifest.json"), runs) + [""]
-    out += _grid_section(runs, _json(results, "config.json")) + [""]
+    out += _run_section(_json(results, MANIFEST), runs) + [""]
+    out += _grid_section(runs, _json(results, CONFIG)) + [""]
     out += _table1_section(t1, vocab, "Table 1: means over runs, 95% intervals")
-    out += _table2_section(_read(results, "table2.csv"))
+    out += _table2_section(_read(results, TABLE2))
     out += _paired_section(
-        _read(results, "paired.csv"),
+        _read(results, PAIRED),
         vocab,
         f"Paired: {HEADLINE_POLICY} against every method, all scenes",
         None,
     )
     for peer in PAIRED_PEERS:
         out += _paired_section(
-            _read(results, "paired_sfm.csv"),
+            _read(results, PAIRED_SFM),
             vocab,
             f"Paired sfm: every method against `{peer}`, all scenes",
             peer,
         )
-    out += _transfer_section(_read(results, "transfer.csv"))
+    out += _transfer_section(_read(results, TRANSFER))
     figures = [(n, t) for n, t in FIGURES.items() if (results / n).is_file()]
     if figures:
         out += ["## Figures", ""] + [f"![{t}]({n})" + "\n" for n, t in figures]

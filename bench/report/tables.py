@@ -35,7 +35,12 @@
   `_posefree`), and the ratio of the two (`posefree_to_posed`).
 
 A run that reconstructed nothing has no rmse (left out of that mean; `failed_runs` counts
-such runs) and zero completeness (kept in the completeness mean).
+such runs) and zero completeness (kept in the completeness mean). A run that could not be
+computed (its method raised or broke its contract, its worker died: `error_runs`) scores
+each metric's failure value (mAA 0, AUC 0, completeness 0) in every mean, paired
+difference and ranking; a metric without one (rmse) has no mean for that method and
+budget (`note`: incomplete), so it is never ranked (`counted`). `note` gives, per reason
+an interval is missing, the metrics it applies to.
 """
 
 from __future__ import annotations
@@ -45,8 +50,8 @@ import math
 import numpy as np
 import pandas as pd
 
+from bench.failures import ERROR, exclusion_rule
 from bench.report.stats import paired_difference, stratified_interval
-from bench.summary import exclusion_rule
 from bench.vocabulary import (
     GROUND_TRUTH,
     HEADLINE,
@@ -66,18 +71,43 @@ def rule_column(vocab: Vocabulary, task: str) -> str:
     return vocab.column(task, "exclusion")
 
 
+def counted(df: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
+    """The rows as every mean counts them, with `error` marking the rows that could not be
+    computed (their failure starts with `ERROR`: a method raised, broke its contract or
+    lost its worker): such a row scores each metric of its task that has a failure value
+    (`Metric.failure`: mAA 0, AUC 0, completeness 0), and a metric without one (rmse) is
+    blanked in every row of the method, budget, task and protocol where a row could not
+    be computed: an incomplete mean is never shown or ranked."""
+    failure = df["failure"] if "failure" in df else pd.Series("", index=df.index)
+    error = failure.fillna("").str.startswith(ERROR)
+    df = df.assign(error=error)
+    if not error.any():
+        return df
+    keys = ["method", "budget", "task", "protocol"]
+    hit = error.groupby([df[k] for k in keys]).transform("any")
+    for task, t in vocab.tasks.items():
+        mine = df["task"] == task
+        for name in (m for m in t.metrics if m in df):
+            value = vocab.metrics[name].failure
+            if value is None:
+                df.loc[mine & hit, name] = math.nan
+            else:
+                df.loc[mine & error, name] = value
+    return df
+
+
 def headline_frame(
     df: pd.DataFrame, vocab: Vocabulary, protocol: str = HEADLINE[1], dataset: bool = False
 ) -> pd.DataFrame:
-    """One row per (scene, seed, method, budget) under a track protocol: the headline
-    task's columns, and every other task's as `<task>_<name>` (a unit without one of the
-    tasks has NaN for it); with a task with the exclusion rule (`Task.exclusion_reference`),
-    its `rule_column` and, where the rule is applied, `REFERENCE_MAPS` (`dataset`: the rows
-    are of datasets)."""
-    rows = df[df["protocol"] == protocol]
+    """One row per (scene, seed, method, budget) under a track protocol, as the means
+    count them (`counted`): the headline task's columns, and every other task's as
+    `<task>_<name>` (a unit without one of the tasks has NaN for it); with a task with the
+    exclusion rule (`Task.exclusion_reference`), its `rule_column` and, where the rule is
+    applied, `REFERENCE_MAPS` (`dataset`: the rows are of datasets)."""
+    rows = counted(df[df["protocol"] == protocol], vocab)
     frame = rows[rows["task"] == HEADLINE[0]].drop(columns=REFERENCE_MAPS, errors="ignore")
     for task in (t for t in vocab.tasks if t != HEADLINE[0]):
-        cols = [c for c in (*vocab.tasks[task].metrics, "status") if c in df]
+        cols = [c for c in (*vocab.tasks[task].metrics, "status", "error") if c in rows]
         part = rows[rows["task"] == task][UNIT + cols]
         frame = frame.merge(
             part.rename(columns={c: f"{task}_{c}" for c in cols}), on=UNIT, how="outer"
@@ -147,22 +177,33 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     for (policy, budget), g in rows.groupby(["method", "budget"], sort=False):
         row = {"strategy": vocab.label(policy), "method": policy, "budget": budget}
         row["runs"] = len(g)
-        row["failed_runs"] = int((g["status"] == "failed").sum())
-        for t in (t for t in others if f"{t}_status" in g):
-            row[f"{t}_failed_runs"] = int((g[f"{t}_status"] == "failed").sum())
+        errors = {}  # per task: the runs that could not be computed (`counted`)
+        for t in (t for t in (HEADLINE[0], *others) if vocab.column(t, "status") in g):
+            failed = g[vocab.column(t, "status")] == "failed"
+            error = g.get(vocab.column(t, "error"), pd.Series(False, index=g.index))
+            errors[t] = int(error.fillna(False).astype(bool).sum())
+            row[vocab.column(t, "failed_runs")] = int(failed.sum())
+            row[vocab.column(t, "error_runs")] = errors[t]
         for task in vocab.exclusion_tasks:
             if rule_column(vocab, task) in g:
                 row[rule_column(vocab, task)] = g[rule_column(vocab, task)].iloc[0]
         for task in vocab.exclusion_tasks if REFERENCE_MAPS in g else ():
             row[vocab.column(task, "excluded_runs")] = int(g[REFERENCE_MAPS].eq(0).sum())
-        notes = []
+        notes: dict[str, list[str]] = {}  # why a metric has no interval: its metrics
         for m in metrics:
             if m in g:
                 row[m], lo, hi, note, seen = summaries.get((m, policy, budget), none)
                 bounds = vocab.range_of(vocab.split(m)[1])
                 row[f"{m}_lo"], row[f"{m}_hi"] = _within(lo, hi, bounds)
-                notes += [note] if note and seen else []
-        row["note"] = "; ".join(dict.fromkeys(notes))
+                task, name = vocab.split(m)
+                if errors.get(task) and vocab.metrics[name].failure is None:
+                    note, seen = (
+                        f"incomplete: {errors[task]} of {len(g)} runs could not be computed",
+                        True,
+                    )
+                if note and seen:
+                    notes.setdefault(note, []).append(m)
+        row["note"] = "; ".join(f"{why}: {', '.join(ms)}" for why, ms in notes.items())
         out.append(row)
     t = pd.DataFrame(out)
     if t.empty:

@@ -8,7 +8,7 @@ the budgeted methods that both results folders hold are ranked by their mean, be
 (by the metric's direction, `Task.lower_better`), on the dataset and on the rendered
 benchmark (all its scenes and seeds pooled, at the same budget, under the headline
 protocol; for a task with the exclusion rule, without the cells stock COLMAP does not map
-where that rule holds, `bench.summary.exclusion_rule`; a dataset's cells are never left
+where that rule holds, `bench.failures.exclusion_rule`; a dataset's cells are never left
 out); tied means share their mean rank. `transfer.csv` has Kendall's tau-b between the
 two rankings with a 95% percentile bootstrap interval (the methods resampled with
 replacement, `DRAWS` draws, seed 0), the winner on each side and the methods whose rank
@@ -24,7 +24,6 @@ regime nearest the dataset's view count (ties: the denser): the comparison the R
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -33,7 +32,7 @@ import numpy as np
 import pandas as pd
 
 from bench.report.tables import headline_frame, solvable
-from bench.results import read_runs
+from bench.results import RUNS, read_runs, read_settings, read_vocabulary
 from bench.vocabulary import Vocabulary
 
 DRAWS = 2000
@@ -127,8 +126,8 @@ def transfer(
     """(`transfer.csv`, `transfer_ranks.csv`) of a dataset folder's rows (under their
     vocabulary) against the rendered results folder `rendered` (module docstring)."""
     mine = headline_frame(dataset_rows, vocab, dataset=True)
-    theirs = headline_frame(read_runs(Path(rendered) / "runs.csv"), Vocabulary.load(rendered))
-    views = json.loads((Path(rendered) / "config.json").read_text())["settings"]["render"]["views"]
+    theirs = headline_frame(read_runs(Path(rendered) / RUNS), read_vocabulary(rendered))
+    views = read_settings(rendered)["render"]["views"]
     summary, ranks = [], []
     for dataset, rows in mine.groupby("scene", sort=False):
         for metric in vocab.first_headline():

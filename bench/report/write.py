@@ -15,7 +15,6 @@ removed, never left stale.
 
 from __future__ import annotations
 
-import json
 import shutil
 from collections.abc import Sequence
 from pathlib import Path
@@ -24,6 +23,7 @@ import pandas as pd
 
 from bench import BenchError
 from bench.console import log
+from bench.failures import errors, exclusions, failures
 from bench.files import atomic_path, write_text_atomic
 from bench.report.figures import (
     figure2,
@@ -33,7 +33,7 @@ from bench.report.figures import (
     figure_transfer,
     headline_budget,
 )
-from bench.report.page import PAGE, results_page
+from bench.report.page import results_page
 from bench.report.tables import (
     frontend_cost,
     headline_frame,
@@ -47,9 +47,34 @@ from bench.report.tables import (
 )
 from bench.report.transfer import said as transfer_said
 from bench.report.transfer import transfer_regimes
-from bench.results import read_runs
-from bench.summary import errors, exclusions, failures
-from bench.vocabulary import VOCABULARY_FILE, Vocabulary
+from bench.results import (
+    CONFIG,
+    FIGURE2,
+    FIGURE3,
+    FIGURE_BUDGET,
+    FIGURE_TRANSFER,
+    FRONTEND_COST,
+    GALLERY,
+    MANIFEST,
+    PAGE,
+    PAIRED,
+    PAIRED_SFM,
+    RUNS,
+    TABLE1,
+    TABLE1_TWOVIEW,
+    TABLE2,
+    TABLE_SCENES,
+    TABLES,
+    TRANSFER,
+    TRANSFER_RANKS,
+    VOCABULARY,
+    png,
+    read_runs,
+    read_settings,
+    read_vocabulary,
+    table1_of,
+)
+from bench.vocabulary import Vocabulary
 
 
 def _drop(*paths: Path) -> None:
@@ -60,7 +85,7 @@ def _drop(*paths: Path) -> None:
 def is_dataset_run(results: Path) -> bool:
     """Whether `results` holds runs on datasets (its settings render nothing)."""
     try:
-        return json.loads((Path(results) / "config.json").read_text())["settings"]["render"] is None
+        return read_settings(results)["render"] is None
     except (OSError, ValueError, KeyError, TypeError):
         return False
 
@@ -72,21 +97,23 @@ def write_report(
     recorded in `results`; for a results folder of datasets, the transfer tables against
     the rendered results folders `rendered`; last, the folder's page."""
     results = Path(results)
-    vocab = Vocabulary.load(results)
+    vocab = read_vocabulary(results)
     df = with_shares(df, vocab)
-    t1 = write_tables(df, results, vocab)
+    tables = write_tables(df, results, vocab)
     if is_dataset_run(results):
         _write_transfer(df, vocab, results, rendered)
-    if t1.empty:
-        _drop(results / "figure3.png", results / "figure3.pdf", results / "figure_budget.png")
-        log("no run of the headline task and protocol: no Table 1 and no figures")
+    drawn = next((t for t in tables if not t.empty), None)  # the headline protocol first
+    if drawn is None:
+        _drop(results / png(FIGURE3), results / f"{FIGURE3}.pdf", results / png(FIGURE_BUDGET))
+        log("no run under any track protocol: no Table 1 and no figures")
     else:
-        _write_figures(df, t1, results, Path(renders))
+        _write_figures(df, drawn, results, Path(renders))
     write_text_atomic(results / PAGE, results_page(results, df))
 
 
-def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> pd.DataFrame:
-    """Every table of `results` from the rows `df` (with the oracle share); Table 1."""
+def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> list[pd.DataFrame]:
+    """Every table of `results` from the rows `df` (with the report's shares); Table 1 of
+    each track protocol, the headline's first (what the figures draw: the first with rows)."""
     datasets = is_dataset_run(results)
     frame = headline_frame(df, vocab, dataset=datasets)
     t1, pairs = table1(frame, vocab), paired(frame, vocab)
@@ -96,31 +123,31 @@ def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> pd.DataF
     if datasets:
         _write_tables(results, _per_dataset(frame, vocab, results))
     tables = {
-        "table1.csv": t1,
-        "table1_twoview.csv": table1(headline_frame(df, vocab, "twoview", datasets), vocab),
-        "table2.csv": table2(frame, pairs, vocab),
-        "paired.csv": pairs,
-        "paired_sfm.csv": paired_sfm(frame, vocab),
-        "table_scenes.csv": table_scenes(frame, vocab) if len(frame) else pd.DataFrame(),
-        "frontend_cost.csv": frontend_cost(df, vocab),
+        TABLE1: t1,
+        TABLE1_TWOVIEW: table1(headline_frame(df, vocab, "twoview", datasets), vocab),
+        TABLE2: table2(frame, pairs, vocab),
+        PAIRED: pairs,
+        PAIRED_SFM: paired_sfm(frame, vocab),
+        TABLE_SCENES: table_scenes(frame, vocab) if len(frame) else pd.DataFrame(),
+        FRONTEND_COST: frontend_cost(df, vocab),
     }
     _write_tables(results, tables)
-    return t1
+    return [tables[TABLE1], tables[TABLE1_TWOVIEW]]
 
 
 def _write_figures(df: pd.DataFrame, t1: pd.DataFrame, results: Path, renders: Path) -> None:
-    vocab = Vocabulary.load(results)
+    vocab = read_vocabulary(results)
     note = figure3_note(df, vocab, is_dataset_run(results))
-    figure3(t1, vocab, results / "figure3", note=note)
+    figure3(t1, vocab, results / FIGURE3, note=note)
     if (t1["budget"] > 0).sum() and t1.loc[t1["budget"] > 0, "budget"].nunique() > 1:
-        figure_budget(t1, vocab, results / "figure_budget")
+        figure_budget(t1, vocab, results / FIGURE_BUDGET)
     else:
-        _drop(results / "figure_budget.png")
-    why = figure2(df, results, renders, results / "figure2")
-    if why and (figure2_expected(df) or (results / "figure2.png").exists()):
-        log(f"figure2.png not drawn (and any older one removed): {why}")
+        _drop(results / png(FIGURE_BUDGET))
+    why = figure2(df, results, renders, results / FIGURE2)
+    if why and (figure2_expected(df) or (results / png(FIGURE2)).exists()):
+        log(f"{png(FIGURE2)} not drawn (and any older one removed): {why}")
     if why:
-        _drop(results / "figure2.png")
+        _drop(results / png(FIGURE2))
 
 
 def figure3_note(df: pd.DataFrame, vocab: Vocabulary, dataset: bool = False) -> str:
@@ -140,19 +167,19 @@ def _write_tables(results: Path, tables: dict[str, pd.DataFrame]) -> None:
 def _per_dataset(frame: pd.DataFrame, vocab: Vocabulary, results: Path) -> dict:
     """`table1-<dataset>.csv` per dataset when there are several (the old ones dropped)."""
     scenes = list(dict.fromkeys(frame["scene"]))
-    tables = {p.name: pd.DataFrame() for p in results.glob("table1-*.csv")}
+    tables = {p.name: pd.DataFrame() for p in results.glob(table1_of("*"))}
     if len(scenes) > 1:
-        tables |= {f"table1-{s}.csv": table1(frame[frame["scene"] == s], vocab) for s in scenes}
+        tables |= {table1_of(s): table1(frame[frame["scene"] == s], vocab) for s in scenes}
     return tables
 
 
 def _write_transfer(df: pd.DataFrame, vocab: Vocabulary, results: Path, rendered: Sequence[Path]):
     """transfer.csv, transfer_ranks.csv and figure_transfer.png (the matched regime's), or
     why not (logged)."""
-    names = ("transfer.csv", "transfer_ranks.csv")
-    missing = [Path(r) / "runs.csv" for r in rendered if not (Path(r) / "runs.csv").is_file()]
+    names = (TRANSFER, TRANSFER_RANKS)
+    missing = [Path(r) / RUNS for r in rendered if not (Path(r) / RUNS).is_file()]
     if not rendered or missing:
-        _drop(*(results / n for n in (*names, "figure_transfer.png")))
+        _drop(*(results / n for n in (*names, png(FIGURE_TRANSFER))))
         where = "; ".join(f"{m} is missing" for m in missing) or "none given"
         log(
             f"no transfer.csv: no rendered results to compare with ({where}; give a rendered "
@@ -162,28 +189,18 @@ def _write_transfer(df: pd.DataFrame, vocab: Vocabulary, results: Path, rendered
     summary, ranks = transfer_regimes(df, vocab, rendered)
     _write_tables(results, dict(zip(names, (summary, ranks))))
     if summary.empty:
-        _drop(results / "figure_transfer.png")
+        _drop(results / png(FIGURE_TRANSFER))
         log("no transfer.csv: the datasets and the rendered results share no ranked budget")
         return
     budget = headline_budget(summary)
     matched = summary["matched"], ranks["matched"]
-    figure_transfer(ranks[matched[1]], summary[matched[0]], budget, results / "figure_transfer")
+    figure_transfer(ranks[matched[1]], summary[matched[0]], budget, results / FIGURE_TRANSFER)
     for line in transfer_said(summary, budget):
-        log(f"{results / 'transfer.csv'}: {line}")
+        log(f"{results / TRANSFER}: {line}")
 
 
-PUBLISHED_FILES = ("runs.csv", "config.json", VOCABULARY_FILE, "manifest.json", "scenes.png")
-REPORT_FILES = (
-    "table1.csv",
-    "table1_twoview.csv",
-    "table2.csv",
-    "paired.csv",
-    "paired_sfm.csv",
-    "table_scenes.csv",
-    "frontend_cost.csv",
-    PAGE,
-)
-FIGURES = ("figure2.png", "figure3.png", "figure3.pdf", "figure_budget.png")
+PUBLISHED_FILES = (RUNS, CONFIG, VOCABULARY, MANIFEST, GALLERY, *TABLES)
+FIGURE_FILES = (png(FIGURE2), png(FIGURE3), f"{FIGURE3}.pdf", png(FIGURE_BUDGET))
 
 
 def check_publishable(results: Path, regime: dict | None = None) -> None:
@@ -192,12 +209,12 @@ def check_publishable(results: Path, regime: dict | None = None) -> None:
     them) and, given a `regime` (its `name`, `scenes`, `seeds`, `views`, `width` and
     `height`), a grid or render size that is not that regime's."""
     results = Path(results)
-    rows = read_runs(results / "runs.csv")
+    rows = read_runs(results / RUNS)
     if errors(rows):
         raise BenchError(
             f"{results} is not published: {errors(rows)}; the same `bench run` again computes them"
         )
-    missing = [n for n in ("table1.csv", PAGE) if not (results / n).is_file()]
+    missing = [n for n in (TABLE1, PAGE) if not (results / n).is_file()]
     if missing:
         raise BenchError(
             f"{results} has no {' or '.join(missing)}: `bench plot --results {results}` "
@@ -205,7 +222,7 @@ def check_publishable(results: Path, regime: dict | None = None) -> None:
         )
     if regime is None:
         return
-    render = json.loads((results / "config.json").read_text())["settings"]["render"]
+    render = read_settings(results)["render"]
     if render is None:
         differ = ["a dataset run, not a render"]
     else:
@@ -240,13 +257,13 @@ def publish(results: Path, to: Path, regime: dict | None = None) -> int:
     check_publishable(results, regime)
     to.mkdir(parents=True, exist_ok=True)
     copied = 0
-    for name in (n for n in (*PUBLISHED_FILES, *REPORT_FILES, *FIGURES) if n != PAGE):
+    for name in (*PUBLISHED_FILES, *FIGURE_FILES):
         src, dst = Path(results) / name, to / name
         if src.is_file():
             with atomic_path(dst) as tmp:
                 shutil.copyfile(src, tmp)
             copied += 1
-        elif name != "scenes.png":
+        elif name != GALLERY:
             dst.unlink(missing_ok=True)
     write_text_atomic(to / PAGE, results_page(to))
     return copied + 1

@@ -6,7 +6,14 @@ one-way)."""
 from __future__ import annotations
 
 from bench.scenes.generators import path_positions  # importing it registers every builder
-from bench.scenes.spec import _GENERATORS, Generator, build_scene, load_spec, scene_names
+from bench.scenes.spec import (
+    _GENERATORS,
+    Generator,
+    build_scene,
+    generator_of,
+    load_spec,
+    scene_names,
+)
 
 __all__ = [
     "build_scene",
@@ -16,11 +23,6 @@ __all__ = [
     "path_positions",
     "scene_names",
 ]
-
-
-def generator_of(name: str) -> Generator:
-    """The builder registered for scene type `name`."""
-    return _GENERATORS[name]
 
 
 def generator_functions() -> list[Generator]:

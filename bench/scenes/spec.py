@@ -88,6 +88,18 @@ def generator(name: str) -> Callable[[Generator], Generator]:
     return register
 
 
+def generator_of(name: str) -> Generator:
+    """The builder registered for scene type `name`; a scene declared in `scenes/` without
+    one is a `BenchError` saying where to add it."""
+    if name not in _GENERATORS:
+        raise BenchError(
+            f"scene {name!r} is declared in {SCENES_DIR / (name + '.toml')} but no builder "
+            f'is registered for it: add `@generator("{name}")` to a function in '
+            "bench/scenes/generators.py (docs/extending.md)"
+        )
+    return _GENERATORS[name]
+
+
 def scene_names() -> list[str]:
     return sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
 
@@ -115,5 +127,5 @@ def build_scene(
     """Generate the scene deterministically from its parameters and seed, seen by `views`
     cameras (import it from `bench.scenes.catalog`, which registers the builders)."""
     rng = np.random.default_rng([seed, int.from_bytes(spec.name.encode()[:8], "little")])
-    meshes, cameras, sun = _GENERATORS[spec.name](spec.params, rng, width, height, views)
+    meshes, cameras, sun = generator_of(spec.name)(spec.params, rng, width, height, views)
     return SceneDescription(spec.name, seed, dict(spec.params), meshes, cameras, sun)

@@ -1,0 +1,27 @@
+"""The package's declarations in one place: importing this module imports every module
+that declares a method, a task or a metric (`DECLARED_IN`), so `package_vocabulary` and
+`package_settings` hold all of them (`bench.vocabulary` holds the registries; a method
+from outside is declared by a policy module or an entry point, `bench.frontend.plugins`).
+"""
+
+from __future__ import annotations
+
+from bench.backend import peers
+from bench.evaluation import oracle
+from bench.frontend import feedback, policies
+from bench.harness import tasks
+from bench.vocabulary import SETTINGS, Vocabulary
+
+DECLARED_IN = (policies, feedback, peers, oracle, tasks)
+"""The modules that declare the package's methods, tasks and metrics."""
+
+
+def package_vocabulary() -> Vocabulary:
+    """Every method, task and metric declared in this process: the package's and those
+    of the policy modules loaded."""
+    return Vocabulary.current()
+
+
+def package_settings() -> dict[str, type]:
+    """The dataclass of each declared method's own settings (`bench.vocabulary.SETTINGS`)."""
+    return SETTINGS

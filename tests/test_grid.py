@@ -1,0 +1,441 @@
+"""`bench run` and `bench plot` over a small grid: the files, resumption, what is computed
+again and what is not, the configuration guard, reproducibility, bad input in one line."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import shutil
+
+import numpy as np
+import pandas as pd
+import pycolmap
+import pytest
+
+from bench import BenchError, vocabulary
+from bench.cli import main
+from bench.harness import evaluate, execute
+from bench.harness import grid as harness
+from bench.harness import predict as prediction
+from bench.harness.config import RunConfig
+from bench.render import entry as render
+from bench.report.write import write_report
+from bench.results import Workspace, read_runs
+from bench.vocabulary import KEY, Job, Unit
+from tests.conftest import (
+    MEDIUM,
+    POLICIES,
+    ROWS,
+    TIMING,
+    bench_run,
+    small_grid,
+    spy,
+)
+
+SMALL = small_grid()
+
+
+def test_quick_run_writes_every_file_with_documented_columns(quick_results):
+    for name in (
+        "runs.csv",
+        "table1.csv",
+        "table1_twoview.csv",
+        "table2.csv",
+        "paired.csv",
+        "figure2.png",
+        "figure3.png",
+        "figure3.pdf",
+        "manifest.json",
+        "config.json",
+    ):
+        assert (quick_results / name).is_file(), name
+    runs = pd.read_csv(quick_results / "runs.csv")
+    assert len(runs) == ROWS and set(runs["method"]) == set(POLICIES)
+    assert set(runs.loc[runs["method"] == "all", "budget"]) == {0}  # one run, the whole pool
+    assert set(zip(runs["task"], runs["protocol"])) == {
+        (t, p) for t in ("tri", "sfm", "pairs") for p in ("multiview", "twoview")
+    }
+    assert set(runs.loc[runs["method"].str.startswith("colmap"), "task"]) == {"sfm", "pairs"}
+    pairs = runs[runs["task"] == "pairs"]  # scored from the poses stored with the prediction
+    assert pairs["auc_10"].between(0, 1).all() and (pairs["pairs_estimated"] > 0).any()
+    assert (pairs.loc[pairs["status"] == "failed", "auc_20"] == 0).all()  # scored, all missing
+    capped = runs.loc[runs["method"] == "colmap-b", "keypoints_per_view"]
+    assert len(capped) and (capped == 64).all()  # a hard cap: exactly B per view
+    assert runs["maa"].notna().sum() == runs["task"].eq("sfm").sum()  # never NaN, failed or not
+    assert {
+        "render_key",
+        "prediction_hash",
+        "evaluation_hash",
+        "status",
+        "failure",
+        *TIMING,
+    } <= set(runs.columns)
+    t1 = pd.read_csv(quick_results / "table1.csv")
+    assert {
+        "strategy",
+        "rmse",
+        "acc_completeness_pct",
+        "inlier_pct",
+        "coverage_pct",
+        "runtime_proxy",
+        "wall_ms",
+        "rmse_lo",
+        "rmse_hi",
+        "accuracy_pct",
+        "completeness_vs_oracle_pct",
+    } <= set(t1.columns)
+    assert list(t1["method"]) == POLICIES
+    t2 = pd.read_csv(quick_results / "table2.csv")
+    assert list(t2.columns[:2]) == ["scene", "budget"]
+    assert set(t2["scene"]) == {"table", "facade", "all scenes"}
+    assert {
+        "adaptive_rmse",
+        "best_baseline_rmse",
+        "best_baseline_rmse_policy",
+        "adaptive_acc_completeness_pct",
+        "best_baseline_acc_completeness_pct",
+        "best_baseline_acc_completeness_policy",
+    } <= set(t2.columns)
+    manifest = json.loads((quick_results / "manifest.json").read_text())
+    keys = {"versions", "variant", "host", "settings", "grid", "git_commit", "seconds"}
+    assert keys | {"invocations"} <= set(manifest)
+    assert manifest["seconds"]["total"] > 0 and "render" in manifest["seconds"]
+    for run in ("adaptive-b64", "all-b0", "oracle-b64/twoview"):
+        assert (quick_results / "models" / "table-s0" / run / "points3D.txt").is_file()
+    # every job's model in its own folder (sfm's two protocols once shared one)
+    ws, mapped = Workspace(quick_results, quick_results), runs[(runs["task"] == "sfm")]
+    for r in mapped[mapped["status"] == "ok"].itertuples():
+        folder = ws.model_dir(Unit(r.scene, r.seed, r.method, r.budget), Job(r.task, r.protocol))
+        model = pycolmap.Reconstruction(str(folder))
+        assert (model.num_reg_images(), model.num_points3D()) == (r.registered_views, r.points)
+    assert set(mapped.loc[mapped["status"] == "ok", "protocol"]) == {"multiview", "twoview"}
+
+
+def test_plot_rebuilds_the_tables_from_runs_csv_alone(quick_results, tmp_path, renders_dir, capsys):
+    for name in ("runs.csv", "vocabulary.json"):
+        shutil.copy(quick_results / name, tmp_path / name)
+    assert main(["plot", "--results", str(tmp_path), "--renders", str(renders_dir)]) == 0
+    for name in ("table1.csv", "table2.csv"):
+        assert (tmp_path / name).read_bytes() == (quick_results / name).read_bytes()
+    assert (tmp_path / "figure3.png").is_file()
+    assert "figure2.png not drawn" in capsys.readouterr().err  # no exported model was copied
+
+
+def test_several_budgets_give_a_budget_figure(quick_results, tmp_path, renders_dir):
+    shutil.copy(quick_results / "vocabulary.json", tmp_path)
+    runs = pd.read_csv(quick_results / "runs.csv")
+    budgeted = runs[runs["budget"] > 0]
+    write_report(pd.concat([runs, budgeted.assign(budget=32)]), tmp_path, renders_dir)
+    assert (tmp_path / "figure_budget.png").is_file()
+    t1 = pd.read_csv(tmp_path / "table1.csv")
+    assert sorted(set(t1["budget"])) == [0, 32, 64] and len(t1) == 2 * 6 + 2
+
+
+def test_same_command_gives_identical_metrics(quick_results, renders_dir, tmp_path):
+    bench_run(SMALL, tmp_path, renders_dir)
+    a, b = (pd.read_csv(d / "runs.csv") for d in (quick_results, tmp_path))
+    metrics = [c for c in a.columns if c not in TIMING]
+    pd.testing.assert_frame_equal(a[metrics], b[metrics])
+
+
+def test_interrupted_run_resumes_without_redoing_rows(renders_dir, tmp_path, monkeypatch):
+    calls = []
+    real = execute.predict
+
+    def interrupt_after_three(scene, unit, *args):
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        calls.append(unit)
+        return real(scene, unit, *args)
+
+    monkeypatch.setattr(execute, "predict", interrupt_after_three)
+    with pytest.raises(KeyboardInterrupt):
+        bench_run(SMALL, tmp_path, renders_dir)
+    assert len(pd.read_csv(tmp_path / "runs.csv")) == 3 * 6  # tasks x protocols
+    monkeypatch.setattr(execute, "predict", real)
+    calls.clear()
+    spy(monkeypatch, calls)
+    bench_run(SMALL, tmp_path, renders_dir)
+    assert len(calls) == 2 * 8 - 3  # every unit of both scenes, but the three done
+    runs = pd.read_csv(tmp_path / "runs.csv")
+    assert len(runs) == ROWS and not runs.duplicated(list(KEY)).any()
+    calls.clear()
+    rendered = []
+    monkeypatch.setattr(harness, "render_scene", lambda *a, **k: rendered.append(a))
+    bench_run(SMALL, tmp_path, renders_dir)  # all done: nothing rendered, nothing run
+    assert calls == [] and rendered == []
+
+
+def test_growing_a_results_folder_runs_only_the_new_rows(
+    quick_results, renders_dir, tmp_path, monkeypatch
+):
+    """A new budget needs no --overwrite and runs only its rows; a changed setting
+    is refused, naming the setting."""
+    shutil.copytree(quick_results, tmp_path / "r")
+    calls = []
+    spy(monkeypatch, calls)
+    grown = dataclasses.replace(SMALL, scenes=("table",), budgets=(64, 32))
+    bench_run(grown, tmp_path / "r", renders_dir)
+    assert sorted(calls) == [(p, 32) for p in sorted(POLICIES[:6])]
+    runs = pd.read_csv(tmp_path / "r" / "runs.csv")
+    assert len(runs) == ROWS + 5 * 6 + 4  # the new budget's selections and its colmap-b
+    other = dataclasses.replace(SMALL, run=RunConfig(render=dataclasses.replace(MEDIUM, spp=4)))
+    with pytest.raises(BenchError, match=r"other settings \(render.spp: 16 there, 4 now\)"):
+        bench_run(other, tmp_path / "r", renders_dir)
+    assert len(pd.read_csv(tmp_path / "r" / "runs.csv")) == len(runs)  # nothing lost
+
+
+def test_rows_computed_by_other_code_are_computed_again(
+    quick_results, renders_dir, tmp_path, monkeypatch
+):
+    """The key that decides whether a row is finished covers the stages' code."""
+    shutil.copytree(quick_results, tmp_path / "r")
+    monkeypatch.setattr(prediction, "shared_code_hash", lambda: "another-code")
+    calls = []
+    spy(monkeypatch, calls)
+    bench_run(dataclasses.replace(SMALL, scenes=("table",)), tmp_path / "r", renders_dir)
+    assert len(calls) == 8  # every unit of the table scene, again
+    runs = pd.read_csv(tmp_path / "r" / "runs.csv")
+    assert len(runs) == ROWS // 2  # one hash per method: its own code and settings
+    assert runs.groupby("method")["prediction_hash"].nunique().max() == 1
+
+
+def test_a_changed_scene_is_computed_again_and_no_other(
+    quick_results, renders_dir, tmp_path, monkeypatch, capsys
+):
+    """A row records the render entry it was computed on: a scene whose generator,
+    parameters or render settings changed since (here its render code) is rendered and
+    computed again; the other scene's rows are kept as they are."""
+    shutil.copytree(quick_results, tmp_path / "r")
+    real = render.render_code_hash
+    monkeypatch.setattr(render, "render_code_hash", lambda s: real(s) + "-edited" * (s == "table"))
+    calls = []
+    spy(monkeypatch, calls, what=lambda unit: unit.scene)
+    runs = bench_run(SMALL, tmp_path / "r", renders_dir)
+    assert calls == ["table"] * 8
+    assert "the scene table (its generator, parameters or render settings) changed" in (
+        capsys.readouterr().err
+    )
+    before = read_runs(quick_results / "runs.csv").set_index(list(KEY))["render_key"]
+    after = runs.set_index(list(KEY))["render_key"].reindex(before.index)
+    table = before.index.get_level_values("scene") == "table"
+    assert (after[table] != before[table]).all() and (after[~table] == before[~table]).all()
+
+
+def test_a_changed_metric_rescores_the_stored_predictions_alone(
+    quick_results, renders_dir, tmp_path, monkeypatch
+):
+    """Scores apart from predictions: a new evaluation hash (a metric edited), or
+    --reevaluate, scores every row again from the stored predictions without selecting,
+    matching or mapping, and gives the same metrics."""
+    shutil.copytree(quick_results, tmp_path / "r")
+    calls = []
+    spy(monkeypatch, calls)
+    monkeypatch.setattr(evaluate, "evaluation_hash", lambda: "another-metric")
+    monkeypatch.setattr(harness, "evaluation_hash", lambda: "another-metric")
+    again = bench_run(SMALL, tmp_path / "r", renders_dir)
+    assert calls == [] and set(again["evaluation_hash"]) == {"another-metric"}
+    before = read_runs(quick_results / "runs.csv")
+    metrics = [c for c in before.columns if c not in TIMING and c != "evaluation_hash"]
+    pd.testing.assert_frame_equal(before[metrics], again[metrics])
+    bench_run(SMALL, tmp_path / "r", renders_dir, reevaluate=True)
+    assert calls == []
+    shutil.rmtree(tmp_path / "r" / "models" / "table-s0" / "texture-b64")  # its prediction lost
+    bench_run(SMALL, tmp_path / "r", renders_dir, reevaluate=True)
+    assert calls == [("texture", 64)]  # predicted again; nothing else
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (None, "runs.csv not found"),
+        ("scene,seed\n\x00\x01,\n", "damaged: its header lacks method"),
+        ('scene,seed,method\n"unclosed', "damaged: its header lacks"),
+    ],
+)
+def test_plot_rejects_bad_runs_csv_in_one_line(tmp_path, capsys, content, message):
+    if content is not None:
+        (tmp_path / "runs.csv").write_text(content)
+    assert main(["plot", "--results", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (
+            ["run", "--methods", "best"],
+            "unknown method 'best'; valid: random, texture, grid, adaptive, ",
+        ),
+        (
+            ["run", "--protocols", "threeview"],
+            "unknown protocol 'threeview'; valid: multiview, twoview",
+        ),
+        (["run", "--budget", "0"], "budget must be positive"),
+        (["run", "--budget", "12x"], "--budget takes one comma-separated list"),
+        (["run", "--budget", "128,,256"], "e.g. --budget 128,256,512"),
+        (["run", "--scenes", "table", "facade"], "list options take one comma-separated list"),
+        (["run", "--seeds", "-1"], "seeds must be non-negative integers"),
+        (["run", "--scenes", "moon"], "unknown scene 'moon'"),
+        (["run", "--detector", "surf"], "invalid choice: 'surf'"),
+        (["run", "--weights", "0.3,x,0,0,0"], "is not a list of float"),
+        (["run", "--weights", "0.3,0.2"], "weights must be five numbers"),
+        (["run", "--seeds", "3-1"], "the range 3-1 is empty (write it low-high)"),
+        (["train-weights", "--seeds", "5-3"], "the range 5-3 is empty"),
+        (["run", "--scheduler", "x:1", "--workers", "2"], "--workers does not apply"),
+        (["run", "--scheduler", "notanaddress"], "cannot reach the Dask scheduler notanaddress"),
+        (["run", "--scheduler", "tcp://127.0.0.1:1"], "cannot reach the Dask scheduler tcp://"),
+    ],
+)
+def test_run_bad_input_is_one_clear_line(argv, message, tmp_path, capsys):
+    where = ["--results", str(tmp_path / "r")] if argv[0] == "run" else []
+    with pytest.raises(SystemExit) as e:
+        raise SystemExit(main([*argv, *where]))
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+    assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["run", "--results", "{file}"],
+        ["run", "--results", "{file}/sub"],
+        ["run", "--renders", "{file}"],
+        ["plot", "--results", "{file}"],
+        ["publish", "--results", "{file}"],
+        ["publish", "--to", "{file}"],
+        ["upgrade", "--results", "{file}"],
+        ["export", "table", "--out", "{file}"],
+    ],
+)
+def test_a_file_where_a_folder_belongs_is_named(argv, tmp_path, capsys):
+    """`--results FILE` said only `File exists` (or that runs.csv was not found)."""
+    file = tmp_path / "notes.txt"
+    file.write_text("mine\n")
+    with pytest.raises(SystemExit) as e:
+        raise SystemExit(main([a.format(file=file) for a in argv]))
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 2 and len(err) == 1
+    assert f"{argv[-2]}: {file}" in err[0] and "is a file; give a folder" in err[0]
+    assert file.read_text() == "mine\n" and os.listdir(tmp_path) == ["notes.txt"]
+
+
+def test_version_names_the_distribution(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0 and "kpbudget-bench" in capsys.readouterr().out
+
+
+# --- statistics -----------------------------------------------------------------------
+
+
+def test_cells_stock_colmap_cannot_map_are_marked_and_left_out_of_the_sfm_means():
+    from bench.report.tables import headline_frame, paired_sfm, table1, table_scenes
+    from bench.results import mark_reference
+
+    rows = []
+    # stock COLMAP maps seed 0; seed 1 it registers in part, seed 2 with wrong poses
+    for seed, ref, ref_maa in ((0, 6, 1.0), (1, 2, 0.3), (2, 6, 0.1)):
+        cell = dict(scene="s", seed=seed, task="sfm", protocol="multiview", views=6, status="ok")
+        rows.append(cell | dict(method="colmap", budget=0, registered_views=ref, maa=ref_maa))
+        for policy, maa in (("texture", 0.5), ("adaptive", 0.7), ("colmap-b", 0.4)):
+            maa += 0.2 * seed
+            rows.append(cell | dict(method=policy, budget=64, registered_views=6, maa=maa))
+    table = mark_reference(pd.DataFrame(rows), vocabulary.Vocabulary.current())
+    maps = table.groupby("seed")["reference_maps"].agg(set).to_dict()
+    assert maps == {0: {1}, 1: {0}, 2: {0}}
+    vocab = vocabulary.Vocabulary.current()
+    frame = headline_frame(table, vocab)
+    t1 = table1(frame, vocab).set_index("method")
+    assert t1.loc["texture", "sfm_maa"] == 0.5 and t1.loc["texture", "runs"] == 3
+    assert t1.loc["texture", "sfm_excluded_runs"] == 2
+    pairs = paired_sfm(frame, vocab).set_index(["scene", "method", "baseline", "metric"])
+    vs_texture = pairs.loc[("all scenes", "adaptive", "texture", "sfm_maa")]
+    assert vs_texture["n"] == 1 and vs_texture["mean_diff"] == pytest.approx(0.2)
+    assert pairs.loc[("s", "texture", "colmap-b", "sfm_maa"), "mean_diff"] == pytest.approx(0.1)
+    scenes = table_scenes(frame, vocab).set_index(["method", "budget"])
+    assert scenes.loc[("texture", 64), "sfm_excluded_seeds"] == 2
+    assert scenes.loc[("texture", 64), "sfm_maa"] == 0.5
+
+
+def test_a_reference_at_the_exclusion_boundary_maps():
+    """Stock COLMAP maps a cell when it registers every view with mAA of at least 0.5:
+    exactly 0.5 maps, just below does not, nor every view but one at mAA 1."""
+    from bench.results import mark_reference
+
+    cells = {0: (6, 0.5), 1: (6, 0.5 - 1e-9), 2: (5, 1.0), 3: (6, 1.0)}
+    rows = [
+        dict(scene="s", seed=seed, task="sfm", protocol="multiview", views=6, status="ok")
+        | dict(method="colmap", budget=0, registered_views=reg, maa=maa)
+        for seed, (reg, maa) in cells.items()
+    ]
+    table = mark_reference(pd.DataFrame(rows), vocabulary.Vocabulary.current())
+    assert table.set_index("seed")["reference_maps"].to_dict() == {0: 1, 1: 0, 2: 0, 3: 1}
+
+
+def test_kendall_tau_and_its_interval_on_hand_made_rankings():
+    from bench.report.transfer import kendall_tau, tau_interval
+
+    assert kendall_tau([1, 2, 3, 4], [10, 20, 30, 40]) == 1
+    assert kendall_tau([1, 2, 3, 4], [4, 3, 2, 1]) == -1
+    assert kendall_tau([1, 2, 3, 4], [1, 3, 2, 4]) == pytest.approx(4 / 6)  # 5 of 6 agree
+    assert kendall_tau([1, 1, 2], [1, 2, 3]) == pytest.approx(2 / math.sqrt(2 * 3))  # tau-b
+    assert math.isnan(kendall_tau([1, 1, 1], [1, 2, 3]))
+    assert tau_interval(np.arange(6.0), np.arange(6.0)) == (1.0, 1.0)
+    lo, hi = tau_interval(np.arange(6.0), np.array([0, 2, 1, 3, 5, 4.0]))
+    assert -1 <= lo < kendall_tau(np.arange(6.0), np.array([0, 2, 1, 3, 5, 4.0])) < hi <= 1
+
+
+def test_a_budget_above_every_pool_is_refused_in_one_line(tmp_path, capsys):
+    tiny = ["--width", "64", "--height", "48", "--spp", "2", "--max-depth", "2"]
+    argv = [
+        "run",
+        "--scenes",
+        "table",
+        "--seeds",
+        "0",
+        "--budget",
+        "100000",
+        "--workers",
+        "1",
+        *tiny,
+    ]
+    assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "budget 100000 exceeds every candidate pool of table seed 0" in err[-1]
+    assert not (tmp_path / "r").exists()  # a refused run binds no folder to its settings
+    other = ["--budget", "16", "--spp", "3", "--methods", "texture", "--tasks", "tri"]
+    argv = [*argv[:5], *argv[7:], "--protocols", "multiview"]  # the same, less the budget
+    assert main([*argv, *other, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 0
+    assert (
+        json.loads((tmp_path / "r" / "config.json").read_text())["settings"]["render"]["spp"] == 3
+    )
+
+
+def test_a_second_run_into_a_folder_in_use_is_refused_in_one_line(tmp_path, capsys):
+    """Two runs into one folder at once lost the first run's rows; now the second is
+    refused while the first holds the folder (as another process would hold it)."""
+    from bench.files import exclusive
+
+    results = tmp_path / "r"
+    results.mkdir()
+    with exclusive(results / ".bench-run.lock", "the first run"):
+        argv = ["run", "--quick", "--scenes", "table", "--methods", "texture"]
+        assert main([*argv, "--results", str(results), "--renders", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"results folder {results} is in use by another bench" in err[0]
+    assert sorted(p.name for p in results.iterdir()) == []  # nothing written, lock released
+
+
+def test_nothing_to_compute_is_said_in_one_line(tmp_path, capsys):
+    argv = ["run", "--quick", "--methods", "colmap", "--tasks", "tri"]
+    assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert (
+        len(err) == 1 and "nothing to compute" in err[0] and "peers run only sfm, pairs" in err[0]
+    )
