@@ -124,8 +124,10 @@ def run_peer(
     cfg: BackendConfig,
     protocols: list[str],
 ) -> PeerRun:
-    """Extract (and cap) and match once with stock COLMAP, estimate each verified pair's
-    relative pose, then map under each track protocol (see the module docstring)."""
+    """Extract (and cap, as the peer's `CAPS` says) and match once with stock COLMAP,
+    estimate each verified pair's relative pose, then map under each track protocol (see
+    the module docstring)."""
+    cap = CAPS[peer]
     work = Path(tempfile.mkdtemp(prefix="bench-peer-"))
     db_path = work / "database.db"
     db = pycolmap.Database.open(str(db_path))
@@ -135,7 +137,7 @@ def run_peer(
         db.close()
     extraction = pycolmap.FeatureExtractionOptions()
     extraction.num_threads = 1
-    if peer == "colmap-soft-b":
+    if cap == SOFT:
         extraction.sift.max_num_features = budget
     matching = pycolmap.FeatureMatchingOptions()
     matching.num_threads = 1
@@ -151,7 +153,7 @@ def run_peer(
                 extraction_options=extraction,
                 device=pycolmap.Device.cpu,
             )
-            if peer == "colmap-b":
+            if cap == HARD:
                 _cap_database(db_path, names, budget)
             detect_s = time.perf_counter() - t
             t = time.perf_counter()
@@ -179,6 +181,10 @@ def run_peer(
         shutil.rmtree(work, ignore_errors=True)
 
 
+HARD, SOFT = "hard", "soft"
+CAPS = {"colmap": None, "colmap-b": HARD, "colmap-soft-b": SOFT}
+"""How each stock-COLMAP peer holds its extraction to the budget: not at all (COLMAP's
+default, budget 0), exactly B keypoints (`hard_cap`), or SIFT's own soft limit."""
 implemented_by(
     [  # peer rows: `colmap` (budget 0: COLMAP's default), the others one per budget
         declare_method(m).name
