@@ -8,18 +8,22 @@ The package's methods are declared by the modules of `DECLARED_IN` (imported her
 every entry point that runs methods has them); a method from outside is declared by a
 policy module or an entry point (`bench.frontend.plugins`). A package that brings a new
 kind of method declares it (`bench.vocabulary.declare_kind`) and registers its runner
-here (`register_kind`).
+here (`register_kind`). The view choosers and the view oracle pick views, one at a time,
+and score their own units (the nbv task, `bench.harness.nbv`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from bench import BenchError
+from bench.acquisition import choosers
 from bench.backend import peers
-from bench.evaluation import oracle
+from bench.evaluation import next_views, oracle
 from bench.frontend import feedback, policies
-from bench.harness.evaluate import Shared, own_pipeline_shared, selection_shared
+from bench.harness import nbv
+from bench.harness.evaluate import Shared, evaluate, own_pipeline_shared, selection_shared
 from bench.harness.predict import (
     Store,
     oracle_selection,
@@ -37,7 +41,7 @@ from bench.vocabulary import (
     Vocabulary,
 )
 
-DECLARED_IN = (policies, feedback, peers, oracle)
+DECLARED_IN = (policies, feedback, peers, oracle, choosers, next_views)
 """The modules that declare the package's methods."""
 
 
@@ -47,11 +51,15 @@ class KindRunner:
 
     store: Store
     """Compute and store a unit's prediction (`bench.harness.predict.predict`)."""
-    read: Shared
-    """Read it back for scoring (`bench.harness.evaluate.evaluate`)."""
+    read: Shared | None = None
+    """Read it back for scoring (`bench.harness.evaluate.evaluate`); None where `score`
+    reads it itself."""
     photos: bool = False
     """Whether `bench select` runs it on photographs (it needs neither ground truth nor a
     pipeline of its own)."""
+    score: Callable[..., list[dict]] = evaluate
+    """(scene, unit, jobs, settings, workspace, `read`) -> the unit's rows, from its stored
+    prediction: `bench.harness.evaluate.evaluate`, or the kind's own."""
 
 
 RUNNERS: dict[str, KindRunner] = {}
@@ -80,3 +88,9 @@ register_kind(PER_VIEW, KindRunner(store_selection(policy_selection), selection_
 register_kind(MULTI_VIEW, KindRunner(store_selection(policy_selection), selection_shared, True))
 register_kind(GROUND_TRUTH, KindRunner(store_selection(oracle_selection), selection_shared))
 register_kind(OWN_PIPELINE, KindRunner(store_own_pipeline, own_pipeline_shared))
+register_kind(
+    choosers.CHOOSER, KindRunner(nbv.store_trajectory(nbv.chooser_pick), score=nbv.nbv_rows)
+)
+register_kind(
+    next_views.VIEW_ORACLE, KindRunner(nbv.store_trajectory(nbv.oracle_pick), score=nbv.nbv_rows)
+)

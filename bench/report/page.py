@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from bench.report import nbv
 from bench.vocabulary import HEADLINE, HEADLINE_BUDGET, HEADLINE_POLICY, PAIRED_PEERS, Vocabulary
 
 PAGE = "README.md"
@@ -26,6 +27,7 @@ FIGURES = {
     "figure_budget.png": "Each headline metric against the budget",
     "figure2.png": f"Figure 2: the {HEADLINE_POLICY} selection and its points coloured by error",
     "figure_transfer.png": "The rendered ranking against each dataset's",
+    nbv.FIGURE: "Next views: each score against the views added, per chooser",
 }
 
 
@@ -241,6 +243,7 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
             f"Paired sfm: every method against `{peer}`, all scenes",
             peer,
         )
+    out += nbv.page_section(results, vocab)
     out += _transfer_section(_read(results, "transfer.csv"))
     figures = [(n, t) for n, t in FIGURES.items() if (results / n).is_file()]
     if figures:

@@ -5,7 +5,8 @@ reconstructs, and nothing here imports the stages that do.
 Written files: `table1.csv` (headline task and protocol), `table1_twoview.csv`,
 `table2.csv`, `paired.csv`, `paired_sfm.csv`, `table_scenes.csv`, `frontend_cost.csv`
 (`bench.report.tables`), `figure3.png/.pdf`, `figure_budget.png` (with several budgets)
-and `figure2.png` (`bench.report.figures`), and last the folder's page, `README.md`
+and `figure2.png` (`bench.report.figures`), `table3.csv` and `figure_views.png` with rows
+of the next-views task (`bench.report.nbv`), and last the folder's page, `README.md`
 (`bench.report.page`). A results folder of datasets also gets
 `table1-<dataset>.csv` per dataset when it holds several, and `transfer.csv`,
 `transfer_ranks.csv` and `figure_transfer.png` against rendered results folders
@@ -33,6 +34,8 @@ from bench.report.figures import (
     figure_transfer,
     headline_budget,
 )
+from bench.report.nbv import FIGURE as FIGURE_VIEWS
+from bench.report.nbv import TABLE3, figure_views, table3
 from bench.report.page import PAGE, results_page
 from bench.report.tables import (
     frontend_cost,
@@ -82,6 +85,8 @@ def write_report(
         log("no run of the headline task and protocol: no Table 1 and no figures")
     else:
         _write_figures(df, t1, results, Path(renders))
+    if not figure_views(df, vocab, results / FIGURE_VIEWS):
+        _drop(results / FIGURE_VIEWS)
     write_text_atomic(results / PAGE, results_page(results, df))
 
 
@@ -103,6 +108,7 @@ def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> pd.DataF
         "paired_sfm.csv": paired_sfm(frame, vocab),
         "table_scenes.csv": table_scenes(frame, vocab) if len(frame) else pd.DataFrame(),
         "frontend_cost.csv": frontend_cost(df, vocab),
+        TABLE3: table3(df, vocab),
     }
     _write_tables(results, tables)
     return t1
@@ -181,9 +187,10 @@ REPORT_FILES = (
     "paired_sfm.csv",
     "table_scenes.csv",
     "frontend_cost.csv",
+    TABLE3,
     PAGE,
 )
-FIGURES = ("figure2.png", "figure3.png", "figure3.pdf", "figure_budget.png")
+FIGURES = ("figure2.png", "figure3.png", "figure3.pdf", "figure_budget.png", FIGURE_VIEWS)
 
 
 def check_publishable(results: Path, regime: dict | None = None) -> None:
