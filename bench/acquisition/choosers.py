@@ -22,18 +22,22 @@ centre to the nearest other one (1 where it is 0).
   views (or a path end and the nearest captured view) that holds candidates. It picks the
   candidate nearest the middle of the longest gap.
 * `weak-triangulation` (the paper's section 7): its weak points are the reconstructed points
-  whose largest angle between viewing rays is below `WEAK_ANGLE_DEG` or whose track has at
-  most `FEW_VIEWS` views, and the selected keypoints no point holds (where the feature
-  field is strong but untriangulated): a keypoint with verified matches is placed where
-  the rays of its match component meet (least squares, the rig's poses), one without at the
-  median depth of the `NEIGHBOURS` nearest triangulated keypoints of its view. A candidate
-  sees a weak point X when X projects into its image in front of it, its distance to X is
-  within a factor `SCALE_RATIO` of the nearest observer's, and its ray to X differs from
-  some observer's by at most `MATCHABLE_DEG` (else it is not expected to match). It picks
-  the candidate with the largest sum over the weak points it sees of the triangulation angle
-  it gives them, min(max_o angle(C_c - X, C_o - X), `WEAK_ANGLE_DEG`) over the observers o
-  within `MATCHABLE_DEG`. Where no candidate sees a weak point, it picks as farthest-view.
-  Occlusion is not modelled.
+  whose largest angle between viewing rays is below `WEAK_ANGLE_DEG`, and the selected
+  keypoints no point holds (where the feature field is strong, since the policy selected
+  them, but nothing is triangulated): a keypoint with verified matches is placed where
+  the rays of its match component meet (least squares, the rig's poses; its observers are
+  the views of the component), one without at the median depth of the `NEIGHBOURS` nearest
+  triangulated keypoints of its view. A candidate sees a weak point X when X projects into
+  its image in front of it, its distance to X is within a factor `SCALE_RATIO` of the
+  nearest observer's, and its ray to X is within `MATCHABLE_DEG` of some observer's (else
+  it is not expected to match); the angle it gives X is the largest between its ray and
+  such an observer's. It picks the candidate with the largest expected gain in capped
+  triangulation angle over the weak points it sees: min(max(a0, a), `WEAK_ANGLE_DEG`)
+  minus, for a point, min(a0, `WEAK_ANGLE_DEG`), with a0 the point's (or the untriangulated
+  track's) largest angle so far and a the candidate's; an untriangulated track counts only
+  where the new view brings it to the fewest views the track protocol triangulates
+  (`ChooserInput.min_views`: a track matched in two views, under the headline protocol).
+  Where no candidate gains anything, it picks as farthest-view. Occlusion is not modelled.
 
 Ties go to the candidate earliest on the path.
 """
@@ -118,6 +122,9 @@ class ChooserInput:
     model: OwnModel
     candidates: tuple[CandidatePose, ...]
     """The poses not captured yet, in path order."""
+    min_views: int = 3
+    """The fewest views a track needs to become a point (the run's track protocol: 3 for
+    `multiview`, 2 for `twoview`)."""
 
 
 Chooser = Callable[[ChooserInput, np.random.Generator], int]
@@ -234,10 +241,8 @@ def gap_view(inp: ChooserInput, rng: np.random.Generator) -> int:
 
 
 WEAK_ANGLE_DEG = 10.0
-"""A point triangulated at a smaller largest angle is weak; also the most a point counts
-(the angle at which the parallax signal saturates, `bench.frontend.signals`)."""
-FEW_VIEWS = 3
-"""A track of at most this many views is weak (the fewest the headline protocol keeps)."""
+"""A point triangulated at a smaller largest angle is weak; the angle at which a point's
+gain is capped (where the parallax signal saturates, `bench.frontend.signals`)."""
 MATCHABLE_DEG = 40.0
 """A candidate whose ray to a point differs from every observer's by more is not expected
 to match it."""
@@ -295,16 +300,30 @@ def point_of(inp: ChooserInput) -> np.ndarray:
     return where
 
 
-def weak_points(inp: ChooserInput) -> tuple[np.ndarray, np.ndarray]:
-    """The weak points of the module docstring: positions (P, 3) and which captured views
-    observe each (P, n) bool."""
+@dataclass(frozen=True)
+class WeakPoints:
+    """The weak points of a capture (module docstring)."""
+
+    X: np.ndarray
+    """(P, 3) positions."""
+    seen: np.ndarray
+    """(P, captured) whether each captured view observes each."""
+    angle: np.ndarray
+    """(P,) the largest angle in degrees between their observers' rays (0 for one)."""
+    point: np.ndarray
+    """(P,) whether it is a reconstructed point (else an untriangulated track)."""
+
+
+def weak_points(inp: ChooserInput) -> WeakPoints:
+    """The weak points of the module docstring."""
     centres = np.array([c.view.camera.center for c in inp.captured]).reshape(-1, 3)
     n = len(centres)
     X = inp.model.points.reshape(-1, 3)
     seen = np.zeros((len(X), n), bool)
     for p, track in enumerate(inp.model.tracks):
         seen[p, track[:, 0]] = True
-    weak = (_largest_angle(X, centres, seen) < WEAK_ANGLE_DEG) | (seen.sum(1) <= FEW_VIEWS)
+    angle = _largest_angle(X, centres, seen)
+    weak = angle < WEAK_ANGLE_DEG
     held = point_of(inp)
     depth = _depths(inp, held)
     offsets = np.cumsum([0] + [len(c.selection) for c in inp.captured])
@@ -336,16 +355,22 @@ def weak_points(inp: ChooserInput) -> tuple[np.ndarray, np.ndarray]:
         wide = _largest_angle(met, centres, comp_seen[multi]) >= PARALLEL_DEG
         Xc[np.flatnonzero(multi)[wide]] = met[wide]
     use = placed & np.isfinite(Xc).all(1)
-    return np.concatenate([X[weak], Xc[use]]), np.concatenate([seen[weak], comp_seen[use]])
+    Xc, comp_seen = Xc[use], comp_seen[use]
+    return WeakPoints(
+        np.concatenate([X[weak], Xc]),
+        np.concatenate([seen[weak], comp_seen]),
+        np.concatenate([angle[weak], _largest_angle(Xc, centres, comp_seen)]),
+        np.r_[np.ones(int(weak.sum()), bool), np.zeros(len(Xc), bool)],
+    )
 
 
 def expected_angles(X: np.ndarray, seen: np.ndarray, inp: ChooserInput) -> np.ndarray:
     """(candidates, P): the triangulation angle in degrees each candidate gives each point
-    it sees (module docstring), 0 where it does not see it."""
+    (module docstring), NaN where it does not see it."""
     centres = np.array([c.view.camera.center for c in inp.captured]).reshape(-1, 3)
     to_obs = centres[None] - X[:, None]  # (P, n, 3)
     near = np.where(seen, np.linalg.norm(to_obs, axis=2), np.inf).min(1)
-    out = np.zeros((len(inp.candidates), len(X)))
+    out = np.full((len(inp.candidates), len(X)), np.nan)
     for k, cand in enumerate(inp.candidates):
         cam = cand.camera
         uv, z = cam.project(X)
@@ -359,16 +384,25 @@ def expected_angles(X: np.ndarray, seen: np.ndarray, inp: ChooserInput) -> np.nd
         angle = np.degrees(np.arccos(np.clip(cos, -1, 1)))
         usable = seen & (angle <= MATCHABLE_DEG)
         best = np.where(usable, angle, -1.0).max(1) if len(X) else np.zeros(0)
-        out[k] = np.where(inside & (best >= 0), best, 0.0)
+        out[k] = np.where(inside & (best >= 0), best, np.nan)
     return out
+
+
+def angle_gains(weak: WeakPoints, inp: ChooserInput) -> np.ndarray:
+    """(candidates, P): each candidate's gain in each weak point's capped triangulation
+    angle (module docstring), 0 where it sees it not or brings no point."""
+    a = expected_angles(weak.X, weak.seen, inp)
+    reach = weak.point | (weak.seen.sum(1) + 1 >= inp.min_views)
+    new = np.minimum(np.fmax(weak.angle, a), WEAK_ANGLE_DEG)
+    old = np.where(weak.point, np.minimum(weak.angle, WEAK_ANGLE_DEG), 0.0)
+    return np.where(np.isfinite(a) & reach, new - old, 0.0)
 
 
 @chooser("weak-triangulation", "Weak triangulation (paper, section 7)")
 def weak_triangulation(inp: ChooserInput, rng: np.random.Generator) -> int:
-    """The candidate that gives the weak points it sees the largest capped triangulation
-    angles (module docstring)."""
-    X, seen = weak_points(inp)
-    score = np.minimum(expected_angles(X, seen, inp), WEAK_ANGLE_DEG).sum(1)
+    """The candidate with the largest expected gain in the weak points' capped
+    triangulation angles (module docstring)."""
+    score = angle_gains(weak_points(inp), inp).sum(1)
     if not (score > 0).any():
         return farthest_view(inp, rng)
     return int(np.argmax(score))

@@ -80,6 +80,7 @@ from bench.vocabulary import (
     FRACTION,
     METHODS,
     NEXT_VIEWS,
+    PROTOCOLS,
     Job,
     Metric,
     Task,
@@ -272,6 +273,7 @@ def chooser_pick(ctx: Context, views: tuple, left: list[int], step: int, protoco
         tuple(pairs),
         own_model(model),
         tuple(CandidatePose(c, path[c].camera) for c in left),
+        PROTOCOLS[protocol],
     )
     t = time.perf_counter()
     pick = choose(ctx.unit.method, inp, chooser_rng(ctx.unit.seed, ctx.unit.method, step))
