@@ -312,10 +312,13 @@ def _run_in(
             work[unit] = Work(tuple(missing), rescore=redo)
     n_rows = sum(len(w.jobs) for w in work.values())
     if not cfg.units():
+        only = [f"the {', '.join(r.kinds)} methods only {t}" for t, r in RUNNERS.items() if r.kinds]
         raise BenchError(
             f"nothing to compute: no method of {', '.join(cfg.methods)} runs a task of "
             f"{', '.join(cfg.tasks)} (the COLMAP peers run only "
-            f"{', '.join(t for t, r in RUNNERS.items() if r.spec.peers)})"
+            f"{', '.join(t for t, r in RUNNERS.items() if r.spec.peers)}"
+            + "".join(f"; {o}" for o in only)
+            + ")"
         )
     stage_s = dict.fromkeys(
         ["render", "frontend", "select", "match", "verify", "task", "evaluate_matches", "evaluate"],

@@ -391,7 +391,7 @@ register(
             needs=("maa_k0", "candidates"),
             metrics=(*GAINS, *SCORES, "candidates", "initial_views", "task_ms", "wall_ms"),
             doc="next views: a chooser adds views to an initial capture (off by default)",
-            headline=GAINS[:4],
+            headline=GAINS[:2],
         ),
         kinds=(CHOOSER, VIEW_ORACLE),
         rig=lambda cfg: replace(cfg.render, views=cfg.nbv.path),
