@@ -341,8 +341,6 @@ def store_trajectory(pick: Pick) -> Callable:
             record["jobs"][job.key] = {
                 "grant": RIG,
                 "failure": None,
-                "task_s": ctx.seconds.get("task", 0.0),
-                "model": False,
                 "seconds": dict(ctx.seconds),
                 "initial": [ctx.names[v] for v in initial],
                 "chosen": [ctx.names[v] for v in chosen],
