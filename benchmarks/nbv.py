@@ -14,14 +14,12 @@ and 4 + 4 on Herz-Jesu) -> RESULTS/nbv-datasets/, compared with RESULTS/nbv/ (`-
 The datasets have poses alone, so their scores are the sfm task's mAA and the oracle picks
 by it.
 
-Cost, estimated from a measured unit grid (table seed 0, 640x480, 2-core machine shared
-with another run, one worker; docs/protocol.md): one (scene, seed) of the 21-view path
-takes about 10 minutes of CPU at budgets 128, 256 and 512 (the oracle-view units half of
-it) and about 4 at 256 alone; its 15 views beyond the sparse rig take about 2 minutes to
-render (7 s a view; 2.5 with none rendered). Renders, all budgets, two workers: about
-2.5 h cold (1.7 h with the sparse regime's views cached); `--budget 256`: about 1.2 h
-(45 min with them cached). The datasets (three budgets): about 40 min, most of it
-Herz-Jesu's 3072x2048 front ends.
+Cost, from one measured path (table seed 0, 640x480, the three budgets, one worker on a
+2-core machine shared with another run: 588 s cold, 149 s of it rendering the 21 views,
+`oracle-view` 352 s of the 438 s of units; docs/protocol.md): renders, all budgets, two
+workers, about 2.3 h cold (50 min of it rendering), 2 h with the sparse regime's views
+rendered; `--budget 256` about 1.2 h cold. The datasets (three budgets, not measured):
+about 40 min, most of it Herz-Jesu's 3072x2048 front ends of each capture.
 """
 
 from __future__ import annotations

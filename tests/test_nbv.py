@@ -35,6 +35,7 @@ from bench.frontend.views import View
 from bench.harness.config import NbvConfig, RunConfig
 from bench.harness.grid import BenchConfig
 from bench.render.entry import render_scene
+from bench.report.transfer import transfer
 from bench.results import read_runs
 from bench.vocabulary import METHODS, Vocabulary
 from tests.conftest import MEDIUM, bench_run
@@ -234,7 +235,10 @@ def test_a_small_nbv_run_writes_rows_of_the_contract_table3_and_the_figure(nbv_r
     assert set(t3["baseline"]) == {"random-view", "farthest-view", "gap-view"}
     assert (results / "figure_views.png").is_file()
     assert "## Table 3: next views" in (results / "README.md").read_text()
-    assert "nbv" in Vocabulary.load(results).tasks
+    vocab = Vocabulary.load(results)
+    assert vocab.first_headline()[-1] == "nbv_maa_gain_k2"  # what transfer.csv ranks by
+    summary, _ = transfer(runs.assign(scene="photos"), vocab, results)
+    assert set(summary["metric"]) == {"nbv_maa_gain_k2"} and (summary["methods"] == 5).all()
 
 
 def test_the_view_oracle_bounds_every_chooser_in_its_score(nbv_run):
@@ -273,3 +277,18 @@ def test_on_a_dataset_with_poses_alone_the_oracle_picks_by_maa(nbv_run, renders_
     assert runs["completeness_k0"].isna().all() and runs["maa_k0"].notna().all()
     assert runs.loc["oracle-view", "maa_gain_k1"] >= runs.loc["random-view", "maa_gain_k1"]
     assert runs["maa_k0"].iloc[0] == rendered["maa_k0"].iloc[0]  # the same initial capture
+
+
+def test_the_quick_preset_offers_five_candidates_and_nbv_settings_are_set_on_the_command_line(
+    capsys,
+):
+    from bench.cli import build_parser, main
+    from bench.cli.run import run_config
+
+    argv = ["run", "--quick", "--tasks", "nbv", "--set", "nbv.added=1,3"]
+    cfg = run_config(build_parser("run").parse_args(argv)).validate()
+    assert (cfg.nbv.path, cfg.nbv.added, cfg.nbv.policy) == (11, (1, 3), "cross-view")
+    assert RunConfig().nbv.path == 21  # the dense regime's path, the sparse rig's six on it
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    assert "so it is off by default" in " ".join(capsys.readouterr().out.split())

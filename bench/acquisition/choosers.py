@@ -196,10 +196,8 @@ def spacing(cams: list[Camera]) -> float:
 
 def pose_distance(a: Camera, b: Camera, scale: float) -> float:
     """d(a, b) of the module docstring."""
-    cos = float(np.clip(a.R[2] @ b.R[2], -1, 1))
-    return float(np.linalg.norm(a.center - b.center)) / scale + np.degrees(np.arccos(cos)) / (
-        ANGLE_UNIT_DEG
-    )
+    angle = np.degrees(np.arccos(np.clip(a.R[2] @ b.R[2], -1, 1)))
+    return float(np.linalg.norm(a.center - b.center) / scale + angle / ANGLE_UNIT_DEG)
 
 
 @chooser("random-view", "Random next view", role="baseline")

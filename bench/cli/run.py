@@ -89,7 +89,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         ",".join(n for n, r in RUNNERS.items() if r.default),
         "T1,T2",
         f"tasks: {tasks}. The nbv task runs alone (--tasks nbv), on each scene's 21-view path "
-        "(the nbv.* settings), with the view choosers: its cost (about 2 h cold for the "
+        "(the nbv.* settings), with the view choosers: its cost (about 2.3 h cold for the "
         "sparse regime's scenes and seeds on two cores, docs/protocol.md) is beyond the "
         "default grid's hour, so it is off by default; --quick --tasks nbv is its smoke run",
     )
