@@ -253,6 +253,7 @@ def test_the_view_oracle_bounds_every_chooser_in_its_score(nbv_run):
 def test_rows_scored_again_from_the_stored_models_are_the_same(nbv_run, renders_dir):
     grid, results, runs = nbv_run
     again = bench_run(grid, results, renders_dir, reevaluate=True)
+    assert set(again["invocation"]).isdisjoint(runs["invocation"])  # every row scored again
     scores = [c for c in runs if c.startswith(("completeness", "maa"))]
     pd.testing.assert_frame_equal(runs[scores], again[scores])
 

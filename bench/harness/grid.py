@@ -269,13 +269,13 @@ def _current_rows(
         stale |= changed
     for scene in set(df["scene"]) & set(cfg.scenes) - {Path(d).name for d in cfg.datasets}:
         rows = ~stale & (df["scene"] == scene)
-        known = rows & df["task"].isin(RUNNERS)  # a row of each task against its own rig
+        tasked = rows & df["task"].isin(RUNNERS)  # a row of each task against its own rig
         key = {
             (sd, t): entry_name(scene, int(sd), cfg.render(t), ws.renders)
-            for sd, t in set(zip(df["seed"][known], df["task"][known]))
+            for sd, t in set(zip(df["seed"][tasked], df["task"][tasked]))
         }
         expected = [key.get(k) for k in zip(df["seed"], df["task"])]
-        changed = known & (df["render_key"] != pd.Series(expected, index=df.index))
+        changed = tasked & (df["render_key"] != pd.Series(expected, index=df.index))
         if changed.any():
             log(
                 f"the scene {scene} (its generator, parameters or render settings) changed "
