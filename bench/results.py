@@ -105,12 +105,13 @@ TABLES = (
     "paired_sfm.csv",
     "table_scenes.csv",
     "frontend_cost.csv",
+    "table3.csv",
 )
-"""The report's tables (`bench.report.tables`)."""
-TABLE1, TABLE1_TWOVIEW, TABLE2, PAIRED, PAIRED_SFM, TABLE_SCENES, FRONTEND_COST = TABLES
-FIGURES = ("figure2", "figure3", "figure_budget")
+"""The report's tables (`bench.report.tables`; Table 3, of the nbv task: `bench.report.nbv`)."""
+TABLE1, TABLE1_TWOVIEW, TABLE2, PAIRED, PAIRED_SFM, TABLE_SCENES, FRONTEND_COST, TABLE3 = TABLES
+FIGURES = ("figure2", "figure3", "figure_budget", "figure_views")
 """The report's figures, without their suffix (`.png`; Figure 3 also `.pdf`)."""
-FIGURE2, FIGURE3, FIGURE_BUDGET = FIGURES
+FIGURE2, FIGURE3, FIGURE_BUDGET, FIGURE_VIEWS = FIGURES
 TRANSFER, TRANSFER_RANKS, FIGURE_TRANSFER = "transfer.csv", "transfer_ranks.csv", "figure_transfer"
 """A dataset folder's ranking against rendered folders (`bench.report.transfer`)."""
 

@@ -33,6 +33,9 @@ HEADLINE = ("tri", "multiview")
 HEADLINE_BUDGET = 256
 HEADLINE_POLICY = "adaptive"
 """The paper's method, compared with every baseline in `table2.csv` and `paired.csv`."""
+NEXT_VIEWS = "nbv"
+"""The next-views task (`bench.harness.nbv`): its gains are Table 3 and `figure_views.png`
+(`bench.report.nbv`)."""
 FIGURE_SCENE = "table"
 """The scene of Figure 2 (the headline method's selection and its points)."""
 PAIRED_PEERS = ("colmap-b", "aliked-b", "disk-b")

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import bench.harness.declared  # noqa: F401 (every method, task and metric, as each entry point has them)
 from bench.camera import Camera, look_at
 from bench.frontend.colmap_model import read_model
 from bench.render.config import RenderConfig

@@ -12,9 +12,19 @@ import pytest
 import bench
 
 PACKAGE = Path(bench.__file__).parent
-STAGES = ("scenes", "render", "frontend", "backend", "evaluation", "harness", "report", "cli")
+STAGES = (
+    "scenes",
+    "render",
+    "frontend",
+    "backend",
+    "acquisition",
+    "evaluation",
+    "harness",
+    "report",
+    "cli",
+)
 """The subpackages in data-flow order; the modules directly in `bench/` are shared."""
-FIREWALLED = ("frontend", "backend")
+FIREWALLED = ("frontend", "backend", "acquisition")
 GROUND_TRUTH = ("bench.scenes", "bench.render", "bench.evaluation")
 """What holds or produces ground truth: scene geometry, the renderer, the evaluation."""
 
@@ -96,9 +106,10 @@ def firewall_breaches(source: str, name: str) -> set[str]:
     return bad | ({"gt_ files"} if "gt_" in source and name not in GUARDS else set())
 
 
-@pytest.mark.parametrize(
-    "name", [m for m in MODULES if m.split(".")[1:2] in ([f] for f in FIREWALLED)]
-)
+FIREWALLED_MODULES = [m for m in MODULES if m.split(".")[1:2] in ([f] for f in FIREWALLED)]
+
+
+@pytest.mark.parametrize("name", FIREWALLED_MODULES)
 def test_front_and_back_end_cannot_reach_ground_truth(name):
     assert not firewall_breaches(MODULES[name].read_text(), name)
 
@@ -116,6 +127,22 @@ def test_front_and_back_end_cannot_reach_ground_truth(name):
 def test_the_firewall_check_catches_a_planted_breach(planted):
     source = MODULES["bench.frontend.policies"].read_text() + "\n" + planted + "\n"
     assert firewall_breaches(source, "bench.frontend.policies")
+
+
+@pytest.mark.parametrize(
+    "planted",
+    [
+        "from bench.evaluation.next_views import best_candidate",
+        "from bench.evaluation.truth import SceneTruth",
+        "import bench.scenes.catalog",
+        "np.load(entry / 'gt_03.npz')",
+    ],
+)
+def test_a_view_chooser_module_reaching_ground_truth_is_refused(planted):
+    """The view choosers' stage is firewalled like the front and back end."""
+    assert "bench.acquisition.choosers" in FIREWALLED_MODULES
+    source = MODULES["bench.acquisition.choosers"].read_text() + "\n" + planted + "\n"
+    assert firewall_breaches(source, "bench.acquisition.choosers")
 
 
 REPORT_MAY_IMPORT = ("bench.report", "bench.vocabulary", "bench.results", "bench.files")

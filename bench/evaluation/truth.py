@@ -129,6 +129,9 @@ class SceneTruth:
     """What truth there is: rendered, per-pixel (a dataset's), point cloud or poses."""
     seen: list[np.ndarray] | None = None
     """Per view, the ids of the 3D points a dataset's model observes there (None: none)."""
+    reach: list[np.ndarray] | None = None
+    """Per view, the distance `CORRESPONDENCE_PX` spans at each candidate's point (its
+    depth / focal length x 3 px): the radius of the tracks (`track_points`)."""
 
     @property
     def per_pixel(self) -> bool:
@@ -157,7 +160,13 @@ class SceneTruth:
             points.append(P)
         pool_xy = [c.xy for c in pools]
         track, track_views = _tracks(cams, gts, points, pool_xy)
-        return SceneTruth(Surface(samples), cams, gts, points, pool_xy, track, track_views)
+        reach = [
+            CORRESPONDENCE_PX * cam.to_camera(np.nan_to_num(p))[:, 2] / cam.fx
+            for cam, p in zip(cams, points)
+        ]
+        return SceneTruth(
+            Surface(samples), cams, gts, points, pool_xy, track, track_views, reach=reach
+        )
 
     def reconstructable(self, min_views: int) -> int | None:
         """Ground-truth tracks spanning at least `min_views` views (None without per-pixel
@@ -173,12 +182,7 @@ class SceneTruth:
             return None
         label = np.concatenate(self.track)
         P = np.concatenate(self.points)
-        px = np.concatenate(
-            [
-                CORRESPONDENCE_PX * cam.to_camera(np.nan_to_num(p))[:, 2] / cam.fx
-                for cam, p in zip(self.cams, self.points)
-            ]
-        )
+        px = np.concatenate(self.reach)
         keep = (self.track_views[label] >= min_views) & np.isfinite(P).all(1)
         tracks, member = np.unique(label[keep], return_inverse=True)
         count = np.bincount(member, minlength=len(tracks))[:, None]

@@ -6,13 +6,14 @@ from outside is declared by a policy module or an entry point, `bench.frontend.p
 
 from __future__ import annotations
 
+from bench.acquisition import choosers
 from bench.backend import peers
-from bench.evaluation import oracle
+from bench.evaluation import next_views, oracle
 from bench.frontend import feedback, policies
-from bench.harness import tasks
+from bench.harness import nbv, tasks
 from bench.vocabulary import SETTINGS, Vocabulary
 
-DECLARED_IN = (policies, feedback, peers, oracle, tasks)
+DECLARED_IN = (policies, feedback, peers, oracle, choosers, next_views, tasks, nbv)
 """The modules that declare the package's methods, tasks and metrics."""
 
 

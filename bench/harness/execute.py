@@ -41,7 +41,7 @@ from bench.frontend.policies import PolicyFailed
 from bench.frontend.stage import FrontEnd, front_end
 from bench.frontend.views import load_views
 from bench.harness.config import RunConfig
-from bench.harness.evaluate import evaluate, identities
+from bench.harness.evaluate import identities
 from bench.harness.methods import runner
 from bench.harness.predict import LoadedScene, has_prediction, predict
 from bench.harness.tasks import RUNNERS
@@ -143,7 +143,7 @@ def compute_unit(
         tasks = ", ".join(getattr(e, "tasks", ())) or "?"
         why = f"{e} in {unit.scene} seed {unit.seed}, task {tasks}"
         return failed_rows(scene.entry, unit, jobs, cfg, why)
-    return evaluate(scene, unit, jobs, cfg, ws, run.read)
+    return run.score(scene, unit, jobs, cfg, ws, run.read)
 
 
 def unit_task(unit: Unit, plan: Plan, cfg: RunConfig, ws: Workspace, *_after) -> list[dict]:

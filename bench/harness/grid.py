@@ -40,6 +40,7 @@ from bench.harness.evaluate import evaluation_hash
 from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
 from bench.harness.predict import prediction_hash
 from bench.harness.tasks import RUNNERS
+from bench.render.config import RenderConfig
 from bench.render.entry import entry_meta, entry_name, render_scene
 from bench.results import (
     DAMAGED,
@@ -92,7 +93,10 @@ class BenchConfig:
     seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
     methods: tuple[str, ...] = field(default_factory=default_methods)
     budgets: tuple[int, ...] = (128, 256, 512)
-    tasks: tuple[str, ...] = field(default_factory=lambda: tuple(RUNNERS))
+    tasks: tuple[str, ...] = field(
+        default_factory=lambda: tuple(n for n, r in RUNNERS.items() if r.default)
+    )
+    """Default: every task but those run on request (`TaskRunner.default`: nbv)."""
     protocols: tuple[str, ...] = tuple(PROTOCOLS)
     run: RunConfig = field(default_factory=RunConfig)
     datasets: tuple[str, ...] = ()
@@ -131,6 +135,12 @@ class BenchConfig:
             raise BenchError(
                 f"unknown task {unknown[0] if unknown else ''!r}; valid: {', '.join(RUNNERS)}"
             )
+        rigged = [t for t in self.tasks if RUNNERS[t].rig is not None]
+        if rigged and len(self.tasks) > 1 and not self.datasets:
+            raise BenchError(
+                f"the {rigged[0]} task renders its own rig (the scene's planned path): run it "
+                f"alone, --tasks {rigged[0]}"
+            )
         if not self.seeds or min(self.seeds) < 0:
             raise BenchError(f"seeds must be non-negative integers, got {list(self.seeds)}")
         if not self.budgets or min(self.budgets) <= 0:
@@ -160,13 +170,26 @@ class BenchConfig:
         ]
 
     def jobs(self, method: str) -> list[Job]:
-        """Every job of a unit of `method` (a peer runs the tasks that admit peers; a
-        method that needs another detector's pool runs none)."""
+        """Every job of a unit of `method`: the tasks its kind runs (`TaskRunner.kinds`;
+        a peer runs the tasks that admit peers; a method that needs another detector's
+        pool runs none)."""
         if METHODS[method].pool not in ("", self.run.detector.detector):
             return []
-        peer = METHODS[method].role == "peer"
-        tasks = [t for t in self.tasks if RUNNERS[t].spec.peers or not peer]
+        peer, kind = METHODS[method].role == "peer", METHODS[method].kind
+        claimed = {k for r in RUNNERS.values() for k in r.kinds}
+        tasks = [
+            t
+            for t in self.tasks
+            if (RUNNERS[t].spec.peers or not peer)
+            and (kind in RUNNERS[t].kinds if RUNNERS[t].kinds else kind not in claimed)
+        ]
         return [Job(t, pr) for t in tasks for pr in self.protocols]
+
+    def render(self, task: str | None = None) -> RenderConfig | None:
+        """The render settings of the entries a task's units read (`TaskRunner.rig`; the
+        grid's first task by default): the run's unless the task has its own rig."""
+        rig = RUNNERS[task or self.tasks[0]].rig
+        return self.run.render if rig is None or self.run.render is None else rig(self.run)
 
 
 @dataclass(frozen=True)
@@ -247,11 +270,13 @@ def _current_rows(
         stale |= changed
     for scene in set(df["scene"]) & set(cfg.scenes) - {Path(d).name for d in cfg.datasets}:
         rows = ~stale & (df["scene"] == scene)
+        tasked = rows & df["task"].isin(RUNNERS)  # a row of each task against its own rig
         key = {
-            sd: entry_name(scene, int(sd), cfg.run.render, ws.renders)
-            for sd in set(df["seed"][rows])
+            (sd, t): entry_name(scene, int(sd), cfg.render(t), ws.renders)
+            for sd, t in set(zip(df["seed"][tasked], df["task"][tasked]))
         }
-        changed = rows & (df["render_key"] != df["seed"].map(key))
+        expected = [key.get(k) for k in zip(df["seed"], df["task"])]
+        changed = tasked & (df["render_key"] != pd.Series(expected, index=df.index))
         if changed.any():
             log(
                 f"the scene {scene} (its generator, parameters or render settings) changed "
@@ -288,10 +313,13 @@ def _run_in(
             work[unit] = Work(tuple(missing), rescore=redo)
     n_rows = sum(len(w.jobs) for w in work.values())
     if not cfg.units():
+        only = [f"the {', '.join(r.kinds)} methods only {t}" for t, r in RUNNERS.items() if r.kinds]
         raise BenchError(
             f"nothing to compute: no method of {', '.join(cfg.methods)} runs a task of "
             f"{', '.join(cfg.tasks)} (the COLMAP peers run only "
-            f"{', '.join(t for t, r in RUNNERS.items() if r.spec.peers)})"
+            f"{', '.join(t for t, r in RUNNERS.items() if r.spec.peers)}"
+            + "".join(f"; {o}" for o in only)
+            + ")"
         )
     stage_s = dict.fromkeys(
         ["render", "frontend", "select", "match", "verify", "task", "evaluate_matches", "evaluate"],
@@ -306,7 +334,7 @@ def _run_in(
     with progress("render", len(groups), "scene") as bar:
         for sc, sd in groups:
             t = time.perf_counter()
-            entries[sc, sd] = cfg.dataset(sc) or render_scene(sc, sd, cfg.run.render, ws.renders)
+            entries[sc, sd] = cfg.dataset(sc) or render_scene(sc, sd, cfg.render(), ws.renders)
             stage_s["render"] += time.perf_counter() - t
             bar.set_postfix_str(f"{sc} seed {sd}")
             bar.update()
@@ -378,7 +406,7 @@ def _computed(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, stage
 
 def _add_seconds(stage_s: dict[str, float], new: list[dict]) -> None:
     """A unit's stage seconds into the run's totals (the shared stages counted once)."""
-    for k in ("select", "match", "verify", "evaluate_matches"):
+    for k in ("frontend", "select", "match", "verify", "evaluate_matches"):
         stage_s[k] += np.nan_to_num(new[0].get(f"{k}_ms", 0.0)) / 1000
     for r in new:
         stage_s["task"] += np.nan_to_num(r.get("task_ms", 0.0)) / 1000

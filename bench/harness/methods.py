@@ -7,15 +7,21 @@ a method's name.
 The package's methods are declared by the modules of `bench.harness.declared`; a method
 from outside is declared by a policy module or an entry point (`bench.frontend.plugins`).
 A package that brings a new kind of method declares it (`bench.vocabulary.declare_kind`)
-and registers its runner here (`register_kind`).
+and registers its runner here (`register_kind`). The view choosers and the view oracle
+pick views, one at a time, and score their own units (the nbv task, `bench.harness.nbv`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from bench import BenchError
-from bench.harness.evaluate import Shared, own_pipeline_shared, selection_shared
+from bench.acquisition import choosers
+from bench.evaluation import next_views
+from bench.harness import nbv
+from bench.harness.declared import package_vocabulary
+from bench.harness.evaluate import Shared, evaluate, own_pipeline_shared, selection_shared
 from bench.harness.predict import (
     Store,
     oracle_selection,
@@ -39,11 +45,15 @@ class KindRunner:
 
     store: Store
     """Compute and store a unit's prediction (`bench.harness.predict.predict`)."""
-    read: Shared
-    """Read it back for scoring (`bench.harness.evaluate.evaluate`)."""
+    read: Shared | None = None
+    """Read it back for scoring (`bench.harness.evaluate.evaluate`); None where `score`
+    reads it itself."""
     photos: bool = False
     """Whether `bench select` runs it on photographs (it needs neither ground truth nor a
     pipeline of its own)."""
+    score: Callable[..., list[dict]] = evaluate
+    """(scene, unit, jobs, settings, workspace, `read`) -> the unit's rows, from its stored
+    prediction: `bench.harness.evaluate.evaluate`, or the kind's own."""
 
 
 RUNNERS: dict[str, KindRunner] = {}
@@ -59,7 +69,11 @@ def register_kind(kind: str, runner: KindRunner) -> None:
 
 
 def runner(method: str) -> KindRunner:
-    """The runner of a declared method's kind."""
+    """The runner of a declared method's kind (every method of the package is declared:
+    `bench.harness.declared`)."""
+    if method not in METHODS:
+        valid = ", ".join(package_vocabulary().methods)
+        raise BenchError(f"unknown method {method!r}; valid: {valid}")
     return RUNNERS[METHODS[method].kind]
 
 
@@ -67,3 +81,9 @@ register_kind(PER_VIEW, KindRunner(store_selection(policy_selection), selection_
 register_kind(MULTI_VIEW, KindRunner(store_selection(policy_selection), selection_shared, True))
 register_kind(GROUND_TRUTH, KindRunner(store_selection(oracle_selection), selection_shared))
 register_kind(OWN_PIPELINE, KindRunner(store_own_pipeline, own_pipeline_shared))
+register_kind(
+    choosers.CHOOSER, KindRunner(nbv.store_trajectory(nbv.chooser_pick), score=nbv.nbv_rows)
+)
+register_kind(
+    next_views.VIEW_ORACLE, KindRunner(nbv.store_trajectory(nbv.oracle_pick), score=nbv.nbv_rows)
+)

@@ -13,6 +13,10 @@ is declared on its `Task` and read from the results folder's recorded vocabulary
   selection's matches estimated it (stored with the prediction), scored by relative-pose
   AUC and mAA (`bench.evaluation.relative`). The track protocol does not apply: its rows
   under each protocol hold the same scores.
+
+The next-views task (`nbv`) is registered where it is run, `bench.harness.nbv`: only the
+view choosers run it (`TaskRunner.kinds`), each unit whole, on the scene's planned path
+(`TaskRunner.rig`), and it is not in the default grid (`TaskRunner.default`).
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -39,6 +44,10 @@ from bench.files import atomic_path
 from bench.frontend.geometry import IMAGES, RIG
 from bench.results import POINT_ERRORS
 from bench.vocabulary import PROTOCOLS, Task, declare_task
+
+if TYPE_CHECKING:  # (RunConfig imports the declaring modules, this one among them)
+    from bench.harness.config import RunConfig
+    from bench.render.config import RenderConfig
 
 
 @dataclass(frozen=True)
@@ -61,8 +70,9 @@ relative poses of the verified pairs) -> metrics."""
 @dataclass(frozen=True)
 class TaskRunner:
     spec: Task
-    reconstruct: Reconstruct
-    evaluate: Evaluate
+    reconstruct: Reconstruct | None = None
+    """None for a task whose methods' kind runs its units whole (`kinds`: the nbv task)."""
+    evaluate: Evaluate | None = None
     record: Callable[[Matched], object] | None = None
     """The model exported when the task reconstructs nothing (None: nothing is)."""
     maps: bool = False
@@ -72,6 +82,14 @@ class TaskRunner:
     keep: Callable[[object, SceneTruth, Path], None] | None = None
     """What the scoring writes beside a job's exported model (the model, the truth, the
     model's folder); None: nothing."""
+    kinds: tuple[str, ...] = ()
+    """The kinds of method that run it (`bench.vocabulary.KINDS`); empty: every kind that
+    no task claims this way (`bench.harness.grid.BenchConfig.jobs`)."""
+    rig: Callable[[RunConfig], RenderConfig] | None = None
+    """The render settings of the entry its units read on a rendered scene (None: the
+    run's); a grid runs such a task alone."""
+    default: bool = True
+    """Whether `bench run` runs it without `--tasks`."""
 
 
 RUNNERS: dict[str, TaskRunner] = {}

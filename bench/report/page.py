@@ -13,12 +13,14 @@ from pathlib import Path
 
 import pandas as pd
 
+from bench.report import nbv
 from bench.results import (
     CONFIG,
     FIGURE2,
     FIGURE3,
     FIGURE_BUDGET,
     FIGURE_TRANSFER,
+    FIGURE_VIEWS,
     MANIFEST,
     PAIRED,
     PAIRED_SFM,
@@ -41,6 +43,7 @@ FIGURES = {
     png(FIGURE_BUDGET): "Each headline metric against the budget",
     png(FIGURE2): f"Figure 2: the {HEADLINE_POLICY} selection and its points coloured by error",
     png(FIGURE_TRANSFER): "The rendered ranking against each dataset's",
+    png(FIGURE_VIEWS): "Next views: each score against the views added, per chooser",
 }
 
 
@@ -276,6 +279,7 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
             f"Paired sfm: every method against `{peer}`, all scenes",
             peer,
         )
+    out += nbv.page_section(results, vocab)
     out += _transfer_section(_read(results, TRANSFER))
     figures = [(n, t) for n, t in FIGURES.items() if (results / n).is_file()]
     if figures:

@@ -5,7 +5,8 @@ reconstructs, and nothing here imports the stages that do.
 Written files: `table1.csv` (headline task and protocol), `table1_twoview.csv`,
 `table2.csv`, `paired.csv`, `paired_sfm.csv`, `table_scenes.csv`, `frontend_cost.csv`
 (`bench.report.tables`), `figure3.png/.pdf`, `figure_budget.png` (with several budgets)
-and `figure2.png` (`bench.report.figures`), and last the folder's page, `README.md`
+and `figure2.png` (`bench.report.figures`), `table3.csv` and `figure_views.png` with rows
+of the next-views task (`bench.report.nbv`), and last the folder's page, `README.md`
 (`bench.report.page`). A results folder of datasets also gets
 `table1-<dataset>.csv` per dataset when it holds several, and `transfer.csv`,
 `transfer_ranks.csv` and `figure_transfer.png` against rendered results folders
@@ -33,6 +34,7 @@ from bench.report.figures import (
     figure_transfer,
     headline_budget,
 )
+from bench.report.nbv import figure_views, table3
 from bench.report.page import results_page
 from bench.report.tables import (
     frontend_cost,
@@ -53,6 +55,7 @@ from bench.results import (
     FIGURE3,
     FIGURE_BUDGET,
     FIGURE_TRANSFER,
+    FIGURE_VIEWS,
     FRONTEND_COST,
     GALLERY,
     MANIFEST,
@@ -63,6 +66,7 @@ from bench.results import (
     TABLE1,
     TABLE1_TWOVIEW,
     TABLE2,
+    TABLE3,
     TABLE_SCENES,
     TABLES,
     TRANSFER,
@@ -108,6 +112,8 @@ def write_report(
         log("no run under any track protocol: no Table 1 and no figures")
     else:
         _write_figures(df, drawn, results, Path(renders))
+    if not figure_views(df, vocab, results / FIGURE_VIEWS):
+        _drop(results / png(FIGURE_VIEWS))
     write_text_atomic(results / PAGE, results_page(results, df))
 
 
@@ -130,6 +136,7 @@ def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> list[pd.
         PAIRED_SFM: paired_sfm(frame, vocab),
         TABLE_SCENES: table_scenes(frame, vocab) if len(frame) else pd.DataFrame(),
         FRONTEND_COST: frontend_cost(df, vocab),
+        TABLE3: table3(df, vocab),
     }
     _write_tables(results, tables)
     return [tables[TABLE1], tables[TABLE1_TWOVIEW]]
@@ -200,7 +207,7 @@ def _write_transfer(df: pd.DataFrame, vocab: Vocabulary, results: Path, rendered
 
 
 PUBLISHED_FILES = (RUNS, CONFIG, VOCABULARY, MANIFEST, GALLERY, *TABLES)
-FIGURE_FILES = (png(FIGURE2), png(FIGURE3), f"{FIGURE3}.pdf", png(FIGURE_BUDGET))
+FIGURE_FILES = (*map(png, (FIGURE2, FIGURE3, FIGURE_BUDGET, FIGURE_VIEWS)), f"{FIGURE3}.pdf")
 
 
 def check_publishable(results: Path, regime: dict | None = None) -> None:
