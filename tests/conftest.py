@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +52,12 @@ def medium_entry(renders_dir):
         return made[scene]
 
     return get
+
+
+def default_sigint() -> None:
+    """A child's Ctrl-C back to its default action (`preexec_fn`): a suite started in the
+    background by a non-interactive shell has SIGINT ignored, and a child inherits that."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def rig(entry: Path) -> list[Camera]:

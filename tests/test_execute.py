@@ -27,6 +27,7 @@ from tests.conftest import (
     MEDIUM,
     TIMING,
     bench_run,
+    default_sigint,
     small_grid,
     spy,
 )
@@ -110,7 +111,9 @@ def test_a_signal_to_the_process_group_with_workers_stops_in_a_few_lines(
 
     cmd = [sys.executable, "-m", "bench", "run", "--quick", "--scenes", "table", "--workers", "2"]
     cmd += ["--results", str(tmp_path / "r"), "--renders", str(renders_dir)]
-    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    proc = subprocess.Popen(
+        cmd, stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=default_sigint
+    )
     deadline = time.monotonic() + 120
     while not (tmp_path / "r" / "runs.csv").exists() and time.monotonic() < deadline:
         assert proc.poll() is None, proc.stderr.read()

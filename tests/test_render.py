@@ -18,7 +18,7 @@ from bench.cli import main
 from bench.render import entry as render
 from bench.render import mitsuba, variant
 from bench.scenes.catalog import build_scene, load_spec, scene_names
-from tests.conftest import TINY, rig
+from tests.conftest import TINY, default_sigint, rig
 
 
 @pytest.mark.parametrize("scene", scene_names())
@@ -293,7 +293,7 @@ def test_a_signal_during_a_render_leaves_no_lock_or_temporary_folder(tmp_path, s
 
     cmd = [sys.executable, "-m", "bench", "render", "table", "--seed", "5", "--width", "96"]
     cmd += ["--height", "72", "--spp", "64", "--renders", str(tmp_path)]
-    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)
     deadline = time.monotonic() + 120
     while not list(tmp_path.glob(".tmp-*")) and time.monotonic() < deadline:
         assert proc.poll() is None, proc.stderr.read()
