@@ -19,7 +19,10 @@ Cost, from one measured path (table seed 0, 640x480, the three budgets, one work
 `oracle-view` 352 s of the 438 s of units; docs/protocol.md): renders, all budgets, two
 workers, about 2.3 h cold (50 min of it rendering), 2 h with the sparse regime's views
 rendered; `--budget 256` about 1.2 h cold. The datasets (three budgets, not measured):
-about 40 min, most of it Herz-Jesu's 3072x2048 front ends of each capture.
+about 40 min, most of it Herz-Jesu's 3072x2048 front ends of each capture. Measured at
+`--budget 256` (two workers, commit e0c830d): renders 66.1 min (180 of the 420 views
+rendered, the rest cached by both regimes' runs; the machine shared for about half of it),
+datasets 6.0 min.
 """
 
 from __future__ import annotations

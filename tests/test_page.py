@@ -18,11 +18,11 @@ from bench.vocabulary import Vocabulary
 PUBLISHED = Path(__file__).resolve().parents[1] / "results" / "published"
 
 
-@pytest.mark.parametrize("regime", ["published", "published-dense"])
+@pytest.mark.parametrize("regime", ["published", "published-dense", "published-nbv"])
 def test_the_published_page_is_what_its_runs_csv_gives(tmp_path, regime):
-    """Every table of each regime's published snapshot computed again from its runs.csv
-    alone gives its page, word for word: no number on it is typed by hand or left from
-    older rows."""
+    """Every table of each published snapshot (both regimes, the next views) computed again
+    from its runs.csv alone gives its page, word for word: no number on it is typed by hand
+    or left from older rows."""
     snapshot, folder = PUBLISHED.with_name(regime), tmp_path / regime
     shutil.copytree(snapshot, folder, ignore=shutil.ignore_patterns("*.csv", PAGE))
     shutil.copyfile(snapshot / "runs.csv", folder / "runs.csv")
