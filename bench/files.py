@@ -191,11 +191,15 @@ def exclusive(path: Path, what: str):
 
 @contextmanager
 def atomic_dir(entry: Path) -> Iterator[Path]:
-    """Yield a temporary directory that replaces `entry` only if the block completes."""
-    for stale in entry.parent.glob(f".tmp-{entry.name}-*"):
-        shutil.rmtree(stale, ignore_errors=True)  # left by an interrupted writer (we hold the lock)
-    tmp = temp_dir_beside(entry)
+    """Yield a temporary directory that replaces `entry` only if the block completes. The
+    caller holds `entry`'s lock, so every `.tmp-<entry>-*` beside it is this writer's or an
+    interrupted one's: all are removed on the way out, also one a signal left between its
+    creation and the block (a signal during `bench render` left one)."""
+    temporary = f".tmp-{entry.name}-*"
     try:
+        for stale in entry.parent.glob(temporary):
+            shutil.rmtree(stale, ignore_errors=True)
+        tmp = temp_dir_beside(entry)
         yield tmp
         if entry.exists():
             trash = entry.parent / f".tmp-{entry.name}-old{os.getpid()}"
@@ -203,4 +207,5 @@ def atomic_dir(entry: Path) -> Iterator[Path]:
             shutil.rmtree(trash)
         tmp.rename(entry)
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        for left in entry.parent.glob(temporary):
+            shutil.rmtree(left, ignore_errors=True)

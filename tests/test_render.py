@@ -306,6 +306,23 @@ def test_a_signal_during_a_render_leaves_no_lock_or_temporary_folder(tmp_path, s
     assert_no_partial_work(tmp_path)
 
 
+def test_a_signal_between_a_temporary_folder_and_its_block_leaves_no_folder(tmp_path, monkeypatch):
+    """A signal after `atomic_dir` made its temporary folder and before its block began left
+    the folder behind (the test above, once in a fresh clone: `views/.tmp-table-s5-...`)."""
+    from bench import files
+
+    made = files.temp_dir_beside
+
+    def interrupted(target):
+        made(target)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(files, "temp_dir_beside", interrupted)
+    with pytest.raises(KeyboardInterrupt), files.atomic_dir(tmp_path / "entry"):
+        pass
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_the_developing_step_enters_the_key_and_leaves_the_ground_truth(tiny_entry, renders_dir):
     raw = tiny_entry("table")
     developed = render.render_scene("table", 0, replace(TINY, denoise=3.0), renders_dir)
