@@ -331,6 +331,23 @@ def test_version_names_the_distribution(capsys):
     assert e.value.code == 0 and "kpbudget-bench" in capsys.readouterr().out
 
 
+def test_one_version_in_the_command_the_package_the_changelog_and_the_readme(capsys):
+    import re
+    import tomllib
+
+    from bench import ROOT
+
+    with pytest.raises(SystemExit):
+        main(["--version"])
+    printed = capsys.readouterr().out.split()[1]
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert "version" not in project["project"] and "version" in project["project"]["dynamic"]
+    assert project["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "bench.__version__"}
+    newest = re.search(r"^## (\S+)", (ROOT / "CHANGELOG.md").read_text(), re.M).group(1)
+    standing = re.search(r"Where they stand \((\S+?);", (ROOT / "README.md").read_text())
+    assert printed == newest == standing.group(1)
+
+
 # --- statistics -----------------------------------------------------------------------
 
 
