@@ -16,22 +16,56 @@ a task's outcome (a mapper that registered no view) does not start so."""
 
 
 NUMBER = re.compile(r"\d+")
+HOLE = "\x00"
+"""Where a number of a failure was, in the reason its rows are grouped by."""
 
 
 def _kind(row) -> str:
-    """A failure's reason without its numbers (an error: its method)."""
+    """A failure's reason with `HOLE` for each number (an error: its method)."""
     if row.failure.startswith(ERROR):
         return f"{row.task}: error of {row.method}"
-    return f"{row.task}: {NUMBER.sub('N', row.failure)[:60]}"
+    return f"{row.task}: {NUMBER.sub(HOLE, row.failure)[:60]}"
+
+
+def _values(numbers: list[int]) -> str:
+    """The numbers a hole of a reason stood for: '0', '0 or 1', '0 to 3'."""
+    lo, hi = min(numbers), max(numbers)
+    return str(lo) if lo == hi else f"{lo} or {hi}" if len(set(numbers)) == 2 else f"{lo} to {hi}"
+
+
+def _said(kind: str, failed: list[str]) -> str:
+    """A reason with each hole filled by the numbers it stood for in its rows' failures."""
+    holes = kind.count(HOLE)
+    found = [[int(x) for x in NUMBER.findall(f)][:holes] for f in failed]
+    for i in range(holes):
+        kind = kind.replace(HOLE, _values([f[i] for f in found]), 1)
+    return kind
 
 
 def failures(rows: pd.DataFrame) -> str:
-    """'N failed (n task: reason; ...)', or '' when no row failed."""
+    """'N failed (n task: reason; ...)', each number of a reason as its rows had it (0,
+    0 or 1, 0 to 3), or '' when no row failed."""
     failed = rows[rows["status"] == "failed"]
     if failed.empty:
         return ""
-    kinds = pd.Series([_kind(r) for r in failed.itertuples()]).value_counts()
-    return f"{len(failed)} failed ({'; '.join(f'{n} {k}' for k, n in kinds.items())})"
+    kinds: dict[str, list[str]] = {}
+    for r in failed.itertuples():
+        kinds.setdefault(_kind(r), []).append(r.failure)
+    by_count = sorted(kinds.items(), key=lambda kv: -len(kv[1]))
+    said = [f"{len(fs)} {_said(k, fs)}" for k, fs in by_count]
+    return f"{len(failed)} failed ({'; '.join(said)})"
+
+
+def outcomes(rows: pd.DataFrame) -> str:
+    """Why failed rows that are a task's outcome (not an error) are not a fault, or ''."""
+    failed = rows[rows["status"] == "failed"]["failure"].fillna("")
+    if not (~failed.str.startswith(ERROR)).any():
+        return ""
+    return (
+        "a failed row is a task's outcome (a map or track not made), scored at each metric's "
+        "failure value (mAA 0), not an error: expected more often at small budgets and "
+        "renders (--quick)"
+    )
 
 
 def errors(rows: pd.DataFrame) -> str:

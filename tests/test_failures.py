@@ -14,7 +14,7 @@ import pytest
 from bench.camera import look_at
 from bench.cli import main
 from bench.cli.common import parse_list
-from bench.failures import exclusions, failures
+from bench.failures import exclusions, failures, outcomes
 from bench.frontend.features import Candidates
 from bench.frontend.policies import POLICIES, PolicyFailed, PolicyInput, policy, select
 from bench.frontend.signals import SIGNALS, Signals
@@ -189,10 +189,21 @@ def test_the_summary_says_what_failed_by_reason_and_which_cells_sfm_leaves_out()
             REFERENCE_MAPS: [0, 0, 1, 1, 0],
         }
     )
-    assert failures(rows) == (
-        "3 failed (2 sfm: the mapper registered N view(s); "
+    assert failures(rows) == (  # each number as its rows had it, never a literal N
+        "3 failed (2 sfm: the mapper registered 0 or 1 view(s); "
         "1 tri: no pair of views has verified matches)"
     )
+    assert "not an error" in outcomes(rows) and "--quick" in outcomes(rows)
+    three = rows.assign(
+        failure=[f"the mapper registered {n} view(s) of {n + 5}" for n in (0, 2, 3, 0, 0)]
+    )
+    assert failures(three).startswith(
+        "3 failed (2 sfm: the mapper registered 0 or 3 view(s) of 5 or 8; "
+    )
+    three = three.assign(task="sfm")
+    assert failures(three) == "3 failed (3 sfm: the mapper registered 0 to 3 view(s) of 5 to 8)"
+    errors_only = rows.assign(failure="error: RuntimeError: boom (p.py:3)")
+    assert "N" not in failures(errors_only) and outcomes(errors_only) == ""
     assert exclusions(rows, Vocabulary.current()) == (
         "sfm means leave out 2 of 3 (scene, seed): corridor seed 1, table seed 0 "
         "(colmap with all features does not map them)"

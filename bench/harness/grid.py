@@ -30,7 +30,7 @@ import pandas as pd
 
 from bench import ROOT, BenchError
 from bench.console import log, progress
-from bench.failures import ERROR, exclusions, failures
+from bench.failures import ERROR, exclusions, failures, outcomes
 from bench.files import write_text_atomic
 from bench.frontend import plugins
 from bench.frontend.policies import check_methods, learned_weights
@@ -359,7 +359,11 @@ def _run_in(
         invocation["seconds"]["total"] = time.perf_counter() - t_start
         write_manifest(ws, cfg, invocation, out)
     ours = in_grid(cfg, out)
-    said = [failures(ours), exclusions(ours, Vocabulary.current(), bool(cfg.datasets))]
+    said = [
+        failures(ours),
+        outcomes(ours),
+        exclusions(ours, Vocabulary.current(), bool(cfg.datasets)),
+    ]
     said = [s for s in said if s]
     log(
         f"{n_rows} rows done, {len(done)} reused, in {invocation['seconds']['total']:.0f} s"

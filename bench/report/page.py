@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from bench.failures import outcomes
 from bench.report import nbv
 from bench.results import (
     CONFIG,
@@ -237,6 +238,7 @@ def _exclusions(runs: pd.DataFrame, t1: pd.DataFrame, vocab: Vocabulary) -> list
     else:
         reasons = failed["failure"].fillna("").str.split(":").str[0].value_counts()
         out += [f"- {n} rows failed: {why}" for why, n in reasons.items()]
+        out += [f"- {outcomes(runs)}"] if outcomes(runs) else []
     for task in vocab.exclusion_tasks:
         excluded = vocab.column(task, "excluded_runs")
         if excluded in t1 and t1[excluded].fillna(0).sum():
