@@ -284,6 +284,9 @@ def test_plot_rejects_bad_runs_csv_in_one_line(tmp_path, capsys, content, messag
         (["run", "--weights", "0.3,x,0,0,0"], "is not a list of float"),
         (["run", "--weights", "0.3,0.2"], "weights must be five numbers"),
         (["run", "--seeds", "3-1"], "the range 3-1 is empty (write it low-high)"),
+        (["run", "--scenes", ""], "--scenes takes one comma-separated list"),  # ran all four
+        (["run", "--seeds", ""], "--seeds takes one comma-separated list"),
+        (["run", "--dataset", "/nonexistent/set"], "/nonexistent/set does not exist"),
         (["train-weights", "--seeds", "5-3"], "the range 5-3 is empty"),
         (["run", "--scheduler", "x:1", "--workers", "2"], "--workers does not apply"),
         (["run", "--scheduler", "notanaddress"], "cannot reach the Dask scheduler notanaddress"),
@@ -298,6 +301,28 @@ def test_run_bad_input_is_one_clear_line(argv, message, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
     assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["render", "table", "--views", "100000"], "views must be from 2 to 256, got 100000"),
+        (["render", "moon"], "unknown scene 'moon'"),  # was after the render variant's line
+        (["export", "table", "--out", "{tmp}/mine"], "exists and is not an earlier export"),
+        (["upgrade", "--results", "{tmp}/missing"], "missing not found: give a results folder"),
+    ],
+)
+def test_refused_before_any_work_in_one_line(argv, message, tmp_path, capsys):
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("mine\n")
+    argv = [a.format(tmp=tmp_path) for a in argv] + ["--renders", str(tmp_path / "renders")]
+    if argv[0] == "upgrade":
+        argv = argv[:-2]
+    with pytest.raises(SystemExit) as e:
+        raise SystemExit(main(argv))
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 2 and len(err) == 1 and message in err[0], err
+    assert not (tmp_path / "renders").exists() and not (tmp_path / "missing").exists()
 
 
 @pytest.mark.parametrize(

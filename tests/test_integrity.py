@@ -109,6 +109,8 @@ def test_a_hand_edited_metric_is_refused_by_plot_publish_and_a_resumed_run(
     assert (r / "table1.csv").read_bytes() == before  # nothing rewritten from it
     assert main(["publish", "--results", str(r), "--to", str(tmp_path / "p")]) == 2
     assert where in _one_line(capsys) and not (tmp_path / "p" / "runs.csv").exists()
+    assert main(["upgrade", "--results", str(r)]) == 2  # was "up to date; nothing changed", 0
+    assert where in _one_line(capsys)
     with pytest.raises(BenchError, match="do not match its row_checksum") as e:
         bench_run(GRID, r, renders_dir)
     assert f"--reevaluate --results {r}` (with the grid it holds) scores altered" in str(e.value)
@@ -262,6 +264,8 @@ def test_publish_into_a_regimes_snapshot_checks_its_grid(small_run, tmp_path, ca
     assert "seeds 0, the regime's 0, 1, 2, 3, 4; " in err and "views" not in err
     assert not (tmp_path / "results" / "published").exists()
     assert main(["publish", "--to", str(tmp_path / "mine")]) == 0  # a snapshot of its own
+    said = capsys.readouterr().err  # and it says that it is no regime's grid
+    assert "published as is, not as a regime's snapshot: results/latest is not the sparse" in said
 
 
 def test_a_setting_added_since_the_snapshot_differs_only_off_its_default(

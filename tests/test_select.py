@@ -122,14 +122,22 @@ def test_a_guessed_focal_is_an_untrusted_prior_and_is_said(tmp_path, capsys):
 
 def test_a_budget_above_the_pools_is_counted_per_image(tmp_path, capsys):
     """`--budget 1000000` said "2998469 short of 1000000 per image": a sum over images
-    against a per-image budget."""
+    against a per-image budget. A budget above every pool is refused as `bench run`
+    refuses it (it was accepted, up to 1000000000)."""
     folder = photos(tmp_path / "im")
-    assert select(folder, tmp_path / "o", "--budget", "1000000", "--policy", "texture") == 0
+    assert select(folder, tmp_path / "o", "--budget", "1000000000", "--policy", "texture") == 2
     pools = [len(detect(v, DetectorConfig())) for v in load_image_folder(folder)]
+    err = capsys.readouterr().err.strip().splitlines()
+    assert (
+        f"budget 1000000000 exceeds every candidate pool of the 3 image(s) of {folder}" in err[-1]
+    )
+    assert f"Use budgets up to {max(pools)}" in err[-1] and not (tmp_path / "o").exists()
+    budget = max(pools)  # the largest pool alone holds it
+    assert select(folder, tmp_path / "o", "--budget", str(budget), "--policy", "texture") == 0
     err = capsys.readouterr().err
-    said = f"{sum(pools)} keypoints in 3 images, 1000000 per image (fewer in 3 of them: "
-    assert said + f"{min(pools)} to {max(pools)})" in err and "short of" not in err
-    assert "3 of 3 image(s) have fewer candidates than the budget 1000000 per image" in err
+    said = f"{sum(pools)} keypoints in 3 images, {budget} per image (fewer in 2 of them: "
+    assert said + f"{min(pools)} to {sorted(pools)[1]})" in err and "short of" not in err
+    assert f"2 of 3 image(s) have fewer candidates than the budget {budget} per image" in err
     budget = sorted(pools)[1]  # the smallest pool alone falls short
     assert select(folder, tmp_path / "o", "--budget", str(budget), "--policy", "texture") == 0
     said = f"{min(pools) + 2 * budget} keypoints in 3 images, {budget} per image (fewer in 1 "
@@ -181,6 +189,25 @@ def test_a_focal_length_the_views_do_not_determine_is_not_estimated():
     assert "views whose optical axes meet" in found.why
     few = estimate_focal(*_seen(cams[:2], X), SignalConfig())
     assert few.factor is None and few.why == "1 pair(s) of images share 15 matches, 2 needed"
+
+
+def test_a_database_already_in_out_is_kept_under_the_name_said(tmp_path, capsys):
+    """A second `bench select --out` into a folder replaced its database.db ("replacing
+    ..."): the first one was lost."""
+    folder, out = photos(tmp_path / "im"), tmp_path / "o"
+    assert select(folder, out, "--policy", "texture") == 0
+    first = (out / "database.db").read_bytes()
+    for n in (1, 2):
+        capsys.readouterr()
+        assert select(folder, out, "--policy", "random") == 0
+        said = f"{out / 'database.db'} already existed: kept as {out / f'database.{n}.db'}"
+        assert said in capsys.readouterr().err
+    assert (out / "database.1.db").read_bytes() == first
+    assert sorted(p.name for p in out.iterdir()) == [
+        "database.1.db",
+        "database.2.db",
+        "database.db",
+    ]
 
 
 def test_out_file_is_refused_before_any_work(tmp_path, capsys):

@@ -24,8 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> None:
-    from bench.evaluation.export import export_dataset
+    from bench.evaluation.export import check_target, export_dataset
     from bench.render.entry import render_scene
 
     cfg = config_from_args(RenderConfig, args).validate()
+    check_target(args.out)  # one line, before the renderer says which variant it uses
     print(export_dataset(render_scene(args.scene, args.seed, cfg, args.renders), args.out))

@@ -70,6 +70,19 @@ def regime_grid(name: str) -> dict:
     }
 
 
+def _say_not_a_regime(results, regime: str) -> None:
+    """One line where a folder published with --to and no --regime is not the regime's
+    grid (a --quick run, say): it is published as is, and `--regime` would refuse it."""
+    from bench import BenchError
+    from bench.console import log
+    from bench.report.write import check_publishable
+
+    try:
+        check_publishable(results, regime_grid(regime))
+    except BenchError as e:
+        log(f"published as is, not as a regime's snapshot: {e}")
+
+
 def run(args: argparse.Namespace) -> None:
     from bench import BenchError
     from bench.report.write import check_publishable, publish
@@ -83,6 +96,8 @@ def run(args: argparse.Namespace) -> None:
     runs_file(args.results / RUNS)
     with holding(args.results, reading=True):
         check_publishable(args.results, grid)  # before anything is created
+        if grid is None:  # a snapshot of its own: said when it is no regime's grid
+            _say_not_a_regime(args.results, regime)
     try:
         args.to.mkdir(parents=True, exist_ok=True)
     except OSError as e:

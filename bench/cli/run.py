@@ -279,7 +279,9 @@ def run_config(args: argparse.Namespace):
     }
     render = dataclasses.replace(render, **overrides)
     if args.dataset:  # a dataset's images are what they are: nothing renders
-        given = [f"--{k.replace('_', '-')}" for k in overrides] + ["--scenes"] * bool(args.scenes)
+        given = [f"--{k.replace('_', '-')}" for k in overrides] + ["--scenes"] * (
+            args.scenes is not None
+        )
         if given:
             log(f"{', '.join(given)} ignored with --dataset: its images are not rendered")
         render = None
@@ -362,11 +364,12 @@ def run(args: argparse.Namespace) -> None:
     else:
         seeds = parse_list(
             "--seeds",
-            args.seeds or ("0" if args.quick else REGIMES[regime][1]),
+            args.seeds if args.seeds is not None else ("0" if args.quick else REGIMES[regime][1]),
             int,
             "0,1,2 or 100-119",
         )
-        scenes = parse_list("--scenes", args.scenes or ",".join(scene_names()), str, "table,facade")
+        scenes = args.scenes if args.scenes is not None else ",".join(scene_names())
+        scenes = parse_list("--scenes", scenes, str, "table,facade")
         methods = with_reference(methods, tasks)
     budget = args.budget if args.budget is not None else ("256" if args.quick else "128,256,512")
     cfg = BenchConfig(

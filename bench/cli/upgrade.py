@@ -21,9 +21,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> None:
+    from bench import BenchError
     from bench.harness.declared import package_vocabulary
     from bench.results import holding, upgrade
 
+    if not args.results.is_dir():  # before the lock, which would be "cannot write"
+        raise BenchError(f"{args.results} not found: give a results folder of `bench run`")
     with holding(args.results):
         changed = upgrade(args.results, package_vocabulary())
     print(

@@ -30,11 +30,16 @@ from bench.frontend.colmap_model import read_model
 from bench.render.entry import entry_meta
 
 
+def check_target(out: Path) -> None:
+    """Refuse an `out` that exists and is not an earlier export (before anything renders)."""
+    if Path(out).exists() and not (Path(out) / "dataset.json").is_file():
+        raise BenchError(f"{out} exists and is not an earlier export; choose an empty folder")
+
+
 def export_dataset(entry: Path, out: Path) -> Path:
     """Write the dataset (module docstring); an earlier export at `out` is replaced."""
     entry, out = Path(entry), Path(out)
-    if out.exists() and not (out / "dataset.json").is_file():
-        raise BenchError(f"{out} exists and is not an earlier export; choose an empty folder")
+    check_target(out)
     if out.exists():
         try:
             was = json.loads((out / "dataset.json").read_text())

@@ -27,6 +27,25 @@ from bench.frontend.signals import SIGNALS, Signals
 from bench.vocabulary import METHODS
 
 
+def check_budgets(pools: list[int], budgets, where: str) -> None:
+    """Refuse an empty front end, or a budget above every pool of `where` (every policy
+    would select the whole pool): the one rule of `bench run` and `bench select`. `pools`:
+    each view's candidate count."""
+    largest = max(pools, default=0)
+    if largest == 0:
+        raise BenchError(
+            f"the detector found no candidate in any view of {where}; "
+            "the images are too small or too flat for it (try a larger --width/--height)"
+        )
+    too_big = [b for b in budgets if b > largest]
+    if too_big:
+        raise BenchError(
+            f"budget {too_big[0]} exceeds every candidate pool of {where} "
+            f"(the largest has {largest}); every policy would select the whole pool. "
+            f"Use budgets up to {largest}"
+        )
+
+
 class DeclaredSignals:
     """A view's signals as a policy sees them: those it declared, and no other."""
 

@@ -38,6 +38,7 @@ from bench.failures import ERROR
 from bench.frontend import plugins
 from bench.frontend.geometry import RIG
 from bench.frontend.policies import PolicyFailed
+from bench.frontend.selection import check_budgets
 from bench.frontend.stage import FrontEnd, front_end
 from bench.frontend.views import load_views
 from bench.harness.config import RunConfig
@@ -112,20 +113,9 @@ def scene_task(group: tuple, entry: Path, cfg: RunConfig, renders: Path, plan: P
     seconds and the largest pool."""
     t = time.perf_counter()
     fronts = _front_ends(entry, cfg, renders, plan.grants)
-    largest = max(len(p) for p in next(iter(fronts.values())).pools)
-    scene, seed = group
-    if largest == 0:
-        raise BenchError(
-            f"the detector found no candidate in any view of {scene} seed {seed}; "
-            "the images are too small or too flat for it (try a larger --width/--height)"
-        )
-    too_big = [b for b in plan.budgets if b > largest]
-    if too_big:
-        raise BenchError(
-            f"budget {too_big[0]} exceeds every candidate pool of {scene} seed {seed} "
-            f"(the largest has {largest}); every policy would select the whole pool. "
-            f"Use budgets up to {largest}"
-        )
+    sizes = [len(p) for p in next(iter(fronts.values())).pools]
+    check_budgets(sizes, plan.budgets, f"{group[0]} seed {group[1]}")
+    largest = max(sizes)
     return {"seconds": time.perf_counter() - t, "largest_pool": largest}
 
 

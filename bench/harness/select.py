@@ -8,7 +8,8 @@ guessed, the signals the policy declares) -> B per image by a policy -> OUT/data
 matches and verified two-view geometries) and, with `overlays`, OUT/overlays/<image>.png.
 A focal length that is not known (no EXIF, no model) is written as COLMAP writes a
 guess: a prior it does not trust (`has_prior_focal_length` 0), so its mapper refines it.
-The database is written under a temporary name, then renamed.
+The database is written under a temporary name, then renamed; a database already in OUT is
+kept as OUT/database.<n>.db (the first free n), and the line says so.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from bench.console import log
 from bench.files import atomic_path
 from bench.frontend import plugins
 from bench.frontend.policies import PolicyInput, check_methods
-from bench.frontend.selection import select_views
+from bench.frontend.selection import check_budgets, select_views
 from bench.frontend.stage import compute
 from bench.frontend.views import View, load_image_folder
 from bench.harness.config import RunConfig
@@ -77,6 +78,10 @@ def select_to_database(request: SelectRequest, out: Path, seconds: dict | None =
         log("no poses (no --cameras): the geometry of the signals is estimated from the images")
     views, pools, sigs, front = compute(views, cfg.detector, cfg.signals, METHODS[policy].reads)
     clock |= {k: v for k, v in front.items() if v}
+    budgets = () if METHODS[policy].whole_pool else (budget,)
+    check_budgets(
+        [len(c) for c in pools], budgets, f"the {len(views)} image(s) of {request.images}"
+    )
     cams = [v.camera for v in views]
     match = matcher(cams, pools, cfg.backend, cfg.detector.detector)
     inputs = [PolicyInput(v, c, g) for v, c, g in zip(views, pools, sigs)]
@@ -88,7 +93,8 @@ def select_to_database(request: SelectRequest, out: Path, seconds: dict | None =
     out.mkdir(parents=True, exist_ok=True)
     db = out / "database.db"
     if db.exists():
-        log(f"replacing {db}")
+        kept = keep_aside(db)
+        log(f"{db} already existed: kept as {kept}; the new one is {db}")
     try:
         with atomic_path(db) as tmp:
             write_database(
@@ -131,6 +137,16 @@ def select_to_database(request: SelectRequest, out: Path, seconds: dict | None =
             summary += f" (fewer in {len(short)} of them: {lo}" + (f" to {hi})" if hi > lo else ")")
     log(f"{policy}: {summary} ({seconds}){', matched' if request.match else ''}")
     return db
+
+
+def keep_aside(path: Path) -> Path:
+    """Move an existing file to the first free `<stem>.<n><suffix>` beside it (nothing a
+    user wrote is replaced); returns the new name."""
+    n = 1
+    while (kept := path.with_name(f"{path.stem}.{n}{path.suffix}")).exists():
+        n += 1
+    path.rename(kept)
+    return kept
 
 
 def untrust_guessed_focals(path: Path, views: list[View]) -> None:

@@ -5,6 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 VARIANTS = ("auto", "cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
+MAX_VIEWS = 256
+"""The most views a path takes: twelve times the dense regime's 21, far beyond any grid
+(each view is a path-traced image with its ground-truth layers, seconds and megabytes);
+100000 started rendering."""
 
 
 @dataclass(frozen=True)
@@ -35,8 +39,8 @@ class RenderConfig:
     def validate(self) -> RenderConfig:
         from bench import BenchError
 
-        if self.views < 2:
-            raise BenchError(f"views must be at least 2, got {self.views}")
+        if not 2 <= self.views <= MAX_VIEWS:
+            raise BenchError(f"views must be from 2 to {MAX_VIEWS}, got {self.views}")
         for name in ("width", "height", "spp", "max_depth"):
             if getattr(self, name) <= 0:
                 raise BenchError(f"{name} must be positive, got {getattr(self, name)}")

@@ -133,11 +133,11 @@ def _resolved(
     cfg.validate()
     if not isinstance(seed, int) or seed < 0:
         raise BenchError(f"seed must be a non-negative integer, got {seed!r}")
+    spec = load_spec(name)  # an unknown scene is one line, before the variant's
     variant, why = resolve_variant(cfg.variant, Path(renders_dir))
     if why not in _announced:  # once per process
         log(why)
         _announced.add(why)
-    spec = load_spec(name)
     return spec, variant, f"{name}-s{seed}-{render_key(spec, seed, cfg, variant)}"
 
 
