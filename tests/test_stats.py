@@ -144,6 +144,28 @@ def test_table2_of_a_grid_without_the_tri_task():
     assert math.isnan(t2.loc["s", "oracle_acc_completeness_pct"])
 
 
+def test_the_headline_frame_adds_its_columns_without_a_performance_warning():
+    """pandas' PerformanceWarning ("highly fragmented") was printed six times in nbv and
+    dataset runs: every outer merge leaves a block per column, and the rule's columns were
+    then inserted one by one. Rows that already arrive in 120 blocks add none."""
+    import warnings
+
+    rows = _sfm_rows(())
+    tri = rows.assign(task="tri", acc_completeness_pct=50.0)
+    rows = pd.concat([rows, tri], ignore_index=True)
+    with warnings.catch_warnings():  # a frame of more than 100 blocks
+        warnings.simplefilter("ignore", pd.errors.PerformanceWarning)
+        for k in range(120):
+            rows[f"extra_{k}"] = float(k)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", pd.errors.PerformanceWarning)
+        frame = headline_frame(
+            with_shares(rows, Vocabulary.current()), Vocabulary.current(), dataset=True
+        )
+    assert (frame["sfm_exclusion"] == "not applied: a dataset's poses are the truth").all()
+    assert len(frame) == 4 and frame["extra_119"].eq(119.0).all()
+
+
 def _sfm_rows(reference_cells) -> pd.DataFrame:
     """Two seeds of one scene in the sfm task; stock COLMAP maps seed 0, not seed 1, and
     runs in `reference_cells` only."""

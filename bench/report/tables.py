@@ -104,7 +104,7 @@ def headline_frame(
     `<task>_<name>` (a unit without one of the tasks has NaN for it); with a task with the
     exclusion rule (`Task.exclusion_reference`), its `rule_column` and, where the rule is
     applied, `REFERENCE_MAPS` (`dataset`: the rows are of datasets)."""
-    rows = counted(df[df["protocol"] == protocol], vocab)
+    rows = counted(df[df["protocol"] == protocol].copy(), vocab)  # .copy(): its blocks joined
     frame = rows[rows["task"] == HEADLINE[0]].drop(columns=REFERENCE_MAPS, errors="ignore")
     for task in (t for t in vocab.tasks if t != HEADLINE[0]):
         cols = [c for c in (*vocab.tasks[task].metrics, "status", "error") if c in rows]
@@ -114,13 +114,14 @@ def headline_frame(
         )
     ruled = [t for t in vocab.exclusion_tasks if (df["task"] == t).any()]
     rule = exclusion_rule(df, vocab, dataset) if ruled else None
-    for task in ruled:
-        frame[rule_column(vocab, task)] = rule
+    added = {rule_column(vocab, task): rule for task in ruled}
     if rule == "applied":  # a property of the (scene, seed): on every unit of it
         cells = df.dropna(subset=[REFERENCE_MAPS]).groupby(["scene", "seed"])[REFERENCE_MAPS]
         maps = cells.first()
-        frame[REFERENCE_MAPS] = [maps.get(k) for k in zip(frame["scene"], frame["seed"])]
-    return frame
+        added[REFERENCE_MAPS] = [maps.get(k) for k in zip(frame["scene"], frame["seed"])]
+    # one block per dtype: each outer merge leaves a block per column, and a column added
+    # to 100 of them is pandas' PerformanceWarning
+    return frame.copy().assign(**added)
 
 
 def solvable(rows: pd.DataFrame, metric: str, vocab: Vocabulary) -> pd.DataFrame:
@@ -139,16 +140,17 @@ def with_shares(df: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     that did not run or is 0, or the rows do not measure the metric)."""
     keys = ["scene", "seed", "budget", "task", "protocol"]
     truth = df["method"].isin(vocab.with_kind(GROUND_TRUTH))
+    shares = {}
     for share, of in vocab.shares().items():
         if of not in df:
-            df = df.assign(**{share: math.nan})
+            shares[share] = math.nan
             continue
         ref = df[truth].set_index(keys)[of]
         ref = np.array([ref.get(k, math.nan) for k in df.set_index(keys).index], dtype=float)
         with np.errstate(divide="ignore", invalid="ignore"):
             value = 100.0 * df[of].to_numpy(dtype=float) / ref
-        df = df.assign(**{share: np.where(ref > 0, value, math.nan)})
-    return df
+        shares[share] = np.where(ref > 0, value, math.nan)
+    return df.copy().assign(**shares)  # .copy(): its blocks joined before the columns added
 
 
 def _within(lo: float, hi: float, bounds) -> tuple[float, float]:
