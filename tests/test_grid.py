@@ -154,6 +154,11 @@ def test_interrupted_run_resumes_without_redoing_rows(renders_dir, tmp_path, mon
     with pytest.raises(KeyboardInterrupt):
         bench_run(SMALL, tmp_path, renders_dir)
     assert len(pd.read_csv(tmp_path / "runs.csv")) == 3 * 6  # tasks x protocols
+    # the interrupted invocation is in the manifest with its rows and seconds (it was not:
+    # after a resume the page said frontend 0 and listed the resuming invocation alone)
+    killed = json.loads((tmp_path / "manifest.json").read_text())["invocations"]
+    assert [(i["rows_now"], i["interrupted"]) for i in killed] == [(18, True)]
+    assert killed[0]["seconds"]["frontend"] > 0
     monkeypatch.setattr(execute, "predict", real)
     calls.clear()
     spy(monkeypatch, calls)
@@ -161,6 +166,13 @@ def test_interrupted_run_resumes_without_redoing_rows(renders_dir, tmp_path, mon
     assert len(calls) == 2 * 8 - 3  # every unit of both scenes, but the three done
     runs = pd.read_csv(tmp_path / "runs.csv")
     assert len(runs) == ROWS and not runs.duplicated(list(KEY)).any()
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    both = manifest["invocations"]
+    assert [i["id"] for i in both[:1]] == [killed[0]["id"]] and len(both) == 2
+    assert sum(i["rows_now"] for i in both) == ROWS
+    assert manifest["seconds"]["frontend"] == pytest.approx(
+        sum(i["seconds"]["frontend"] for i in both)
+    )
     calls.clear()
     rendered = []
     monkeypatch.setattr(harness, "render_scene", lambda *a, **k: rendered.append(a))

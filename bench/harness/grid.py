@@ -340,14 +340,22 @@ def _run_in(
             bar.update()
     plan = Plan(entries, work, cfg.budgets)
     t_runs = time.perf_counter()
-    with models_replaced(ws.results, options.overwrite) as state:
-        for new in _computed(plan, cfg.run, ws, options.cluster, stage_s):
-            vocab = Vocabulary.current()
-            if not state["bound"]:  # the folder is bound by the first rows it gets
-                bind_results_dir(ws.results, cfg.run.as_dict(), vocab, options.overwrite)
-                keep_runs(ws.runs_csv, done)  # the rows computed again go first
-                state["bound"] = True
-            append_runs(ws.runs_csv, [r | {"invocation": invocation["id"]} for r in new], vocab)
+    try:
+        with models_replaced(ws.results, options.overwrite) as state:
+            for new in _computed(plan, cfg.run, ws, options.cluster, stage_s):
+                vocab = Vocabulary.current()
+                if not state["bound"]:  # the folder is bound by the first rows it gets
+                    bind_results_dir(ws.results, cfg.run.as_dict(), vocab, options.overwrite)
+                    keep_runs(ws.runs_csv, done)  # the rows computed again go first
+                    state["bound"] = True
+                rows = [r | {"invocation": invocation["id"]} for r in new]
+                append_runs(ws.runs_csv, rows, vocab)
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the rows written keep their seconds
+        stage_s["runs_wall"] = time.perf_counter() - t_runs
+        _interrupted(
+            ws, cfg, invocation | {"seconds": {"total": time.perf_counter() - t_start}}, stage_s
+        )
+        raise
     stage_s["runs_wall"] = time.perf_counter() - t_runs
     out = read_runs(ws.runs_csv)
     invocation |= {"rows": n_rows, "seconds": {"total": time.perf_counter() - t_start, **stage_s}}
@@ -371,6 +379,20 @@ def _run_in(
         + f"; results in {ws.results}"
     )
     return out
+
+
+def _interrupted(ws: Workspace, cfg: BenchConfig, invocation: dict, stage_s: dict) -> None:
+    """The manifest of an interrupted run: its invocation kept with the rows it wrote and
+    the seconds it spent (`interrupted`), so that a resume adds to them (docs/results.md)."""
+    if not ws.runs_csv.is_file():
+        return
+    try:
+        rows = read_runs(ws.runs_csv)
+    except BenchError:  # nothing more to keep than the rows themselves
+        return
+    n = int((rows["invocation"] == invocation["id"]).sum())
+    invocation["seconds"] |= stage_s
+    write_manifest(ws, cfg, invocation | {"rows": n, "interrupted": True}, rows)
 
 
 def in_grid(cfg: BenchConfig, rows: pd.DataFrame) -> pd.DataFrame:
