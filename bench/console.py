@@ -38,6 +38,11 @@ class LogProgress:
     def set_postfix_str(self, text: str) -> None:
         self.postfix = text
 
+    def reset(self, total: int | None = None) -> None:
+        """Start again from 0 (tqdm's `reset`): the rate and time left count from now."""
+        self.n, self.step, self.start = 0, 0, time.perf_counter()
+        self.total = self.total if total is None else total
+
     def update(self, n: int = 1) -> None:
         self.n += n
         pct = 100 * self.n // max(self.total, 1)
@@ -53,8 +58,18 @@ class LogProgress:
             )
 
 
-def progress(stage: str, total: int, unit: str = "unit") -> tqdm | LogProgress:
-    """The progress of one stage: a bar on a terminal, else log lines (module docstring)."""
+class NoProgress(LogProgress):
+    """A stage with nothing to show (a dataset run renders nothing): no line at all."""
+
+    def update(self, n: int = 1) -> None:
+        self.n += n
+
+
+def progress(stage: str, total: int, unit: str = "unit", shown: bool = True):
+    """The progress of one stage: a bar on a terminal, else log lines (module docstring);
+    nothing where not `shown`."""
+    if not shown:
+        return NoProgress(stage, total, unit)
     if not sys.stderr.isatty():
         return LogProgress(stage, total, unit)
     return tqdm(

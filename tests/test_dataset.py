@@ -220,7 +220,9 @@ def test_dataset_runs_name_the_options_they_ignore_and_record_no_render(
     argv += ["--tasks", "tri", "--protocols", "multiview", "--workers", "1", "--width", "100"]
     argv += ["--results", str(tmp_path / "r"), "--renders", str(renders_dir)]
     assert main([*argv, "--scenes", "table"]) == 0
-    assert "--width, --scenes ignored with --dataset" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "--width, --scenes ignored with --dataset" in err
+    assert "render:" not in err  # was "render: 1/1 scene (100 %), 20520.82 scene/s"
     config = json.loads((tmp_path / "r" / "config.json").read_text())
     assert config["settings"]["render"] is None
     assert main([*argv, "--spp", "4"]) == 0  # other render options: named, not refused

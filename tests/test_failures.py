@@ -147,6 +147,21 @@ def test_figure3_of_an_sfm_only_run_draws_its_panels_alone_with_n_a_inside(monke
     assert "3 failed (2 sfm: the mapper ...)" in [t.get_text() for t in drawn["fig"].texts]
 
 
+@pytest.mark.parametrize("panels", [1, 3, 13])
+def test_figure3s_title_is_above_every_panel_title(monkeypatch, tmp_path, panels):
+    """The overall title overlapped the top row's panel titles (13 panels, a tall figure)."""
+    drawn = _drawn(monkeypatch)
+    vocab = Vocabulary.current()
+    cols = [m for m, _ in vocab.panels()][-panels:]
+    t1 = _table1(["texture", "random", "colmap"], {c: [0.4, 0.3, 0.5] for c in cols})
+    figures.figure3(t1, Vocabulary.current(), tmp_path / "figure3", note="1 failed (1 sfm: x)")
+    fig = drawn["fig"]
+    renderer = fig.canvas.get_renderer()
+    title = fig._suptitle.get_window_extent(renderer)
+    tops = [ax.title.get_window_extent(renderer).y1 for ax in fig.axes]
+    assert title.y0 > max(tops) and title.y1 <= fig.bbox.y1
+
+
 def test_the_budget_figures_lines_never_share_a_hue_and_a_style(monkeypatch, tmp_path):
     drawn = _drawn(monkeypatch)
     names = [f"p{k}" for k in range(12)]
@@ -266,6 +281,26 @@ def test_progress_in_a_log_is_a_line_every_few_percent(capsys):
     assert len(lines) == 100 // LOG_STEP_PCT  # 2/40 is 5 %, ..., 40/40 is 100 %
     assert lines[0].startswith("bench: runs: 2/40 rows (5 %), ") and lines[0].endswith(" left")
     assert lines[-1].startswith("bench: runs: 40/40 rows (100 %), ")
+
+
+def test_progress_counts_its_rate_from_a_reset_and_shows_nothing_where_not_shown(
+    capsys, monkeypatch
+):
+    """A dataset run's first estimate was `41:50 left`: the runs' clock started before the
+    long front end; now it restarts when the first front end is ready."""
+    from bench import console
+
+    now = [0.0]
+    monkeypatch.setattr(console.time, "perf_counter", lambda: now[0])
+    with console.LogProgress("runs", 10, "rows") as bar:
+        now[0] = 100.0  # the front end took 100 s; no row yet
+        bar.reset(total=10)
+        now[0] = 101.0
+        bar.update()  # one row in 1 s after the reset: 9 left at 1 row/s
+    assert capsys.readouterr().err.strip().endswith("1.00 rows/s, 00:09 left")
+    with console.progress("render", 1, "scene", shown=False) as bar:
+        bar.update()
+    assert capsys.readouterr().err == ""
 
 
 @pytest.mark.parametrize("name", sorted(POLICIES))

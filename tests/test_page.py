@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import math
 import shutil
 from pathlib import Path
 
@@ -48,8 +49,9 @@ def test_the_page_shows_each_interval_and_no_interval_where_a_table_has_none(tmp
         }
     ).to_csv(tmp_path / "table1.csv", index=False)
     page = results_page(tmp_path)
-    assert "| Texture-only | 256 | 5 | 0.5 [0.25, 0.75] |" in page
-    assert "| Random budget | 256 | 1 | 0.125 |" in page  # one run: the mean alone
+    assert "| texture | 256 | 5 | 0.5 [0.25, 0.75] |" in page  # the key, as --methods takes
+    assert "| random | 256 | 1 | 0.125 |" in page  # one run: the mean alone
+    assert "Texture-only" not in page
     assert "figure3.png" not in page  # no figure drawn, none shown
 
 
@@ -125,3 +127,39 @@ def test_a_task_table_counts_its_own_runs_and_gives_its_own_columns_reasons():
     note = "n/a (no spread): runtime_matching, pairs_task_ms; n/a (1 seed): acc_completeness_pct"
     assert _why(note, ["acc_completeness_pct", "accuracy_pct", "rmse"]) == "n/a (1 seed)"
     assert _why(note, ["sfm_maa"]) == ""
+
+
+def test_bench_runs_table1_names_keys_and_counts_runs_as_the_page_does():
+    """The printed Table 1 was about 330 characters wide, named display labels and counted
+    every unit in `runs` where the page's sfm table leaves out the excluded cells."""
+    from bench.report.page import brief_table1
+
+    t1 = pd.read_csv(PUBLISHED / "table1.csv")
+    vocab = read_vocabulary(PUBLISHED)
+    lines = brief_table1(t1, vocab).splitlines()
+    assert max(map(len, lines)) <= 120
+    header = lines[0].split()
+    assert header[:2] == ["method", "budget"] and "sfm_runs" in header and "sfm_maa" in header
+    page = (PUBLISHED / PAGE).read_text()
+    sfm = page[page.index("### `sfm`") : page.index("### `pairs`")]
+    for line in lines[1:]:
+        cells = dict(zip(header, line.split()))
+        if cells["budget"] == "256":
+            assert f"| {cells['method']} | 256 | {cells['sfm_runs']} | " in sfm, cells
+
+
+def test_table2_counts_the_runs_of_each_column(tmp_path):
+    """Table 2 compared adaptive over 4 runs with random over 3 beside a difference paired
+    over 3, and did not say so; the counts are now in table2.csv and on the page."""
+    from bench.report.tables import headline_frame, paired, table2
+
+    rows = []
+    for seed in range(4):
+        cell = dict(scene="s", seed=seed, budget=64, task="tri", protocol="multiview")
+        for method, rmse in (("texture", 0.2), ("adaptive", 0.1)):
+            value = math.nan if (method, seed) == ("texture", 3) else rmse
+            rows.append(cell | dict(method=method, rmse=value, status="ok"))
+    vocab = Vocabulary.current()
+    frame = headline_frame(pd.DataFrame(rows), vocab)
+    t2 = table2(frame, paired(frame, vocab), vocab).set_index("scene").loc["all scenes"]
+    assert (t2["adaptive_rmse_n"], t2["best_baseline_rmse_n"], t2["diff_rmse_n"]) == (4, 3, 3)

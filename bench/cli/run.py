@@ -337,9 +337,9 @@ def run(args: argparse.Namespace) -> None:
     from bench.failures import errors
     from bench.harness.execute import Cluster, default_workers
     from bench.harness.grid import BenchConfig, RunOptions, in_grid, run_benchmark, with_reference
-    from bench.report.tables import headline_frame, table1, with_shares
+    from bench.report.page import brief_table1
     from bench.report.write import write_report
-    from bench.results import Workspace, read_vocabulary
+    from bench.results import PAGE, Workspace, read_vocabulary
     from bench.scenes.spec import scene_names
     from bench.vocabulary import GROUND_TRUTH, HEADLINE, METHODS
 
@@ -395,17 +395,16 @@ def run(args: argparse.Namespace) -> None:
         reevaluate=args.reevaluate,
         cluster=Cluster(args.workers or default_workers(), args.scheduler),
     )
+    written = []  # the Table 1 the report drew, to print
     report = partial(write_report, rendered=args.rendered or published_snapshots())
-    df = run_benchmark(cfg, Workspace(results, args.renders), options, report=report)
-    protocol = "multiview" if "multiview" in cfg.protocols else cfg.protocols[0]
-    vocab = read_vocabulary(results)
-    t = table1(headline_frame(with_shares(df, vocab), vocab, protocol, bool(datasets)), vocab)
-    print(f"Table 1 ({protocol} protocol; {', '.join(cfg.tasks)}):")
-    cols = ["strategy", "budget", "runs"]  # each task's headline and summary metrics
-    cols += [vocab.column(n, m) for n, t in vocab.tasks.items() for m in (*t.headline, *t.summary)]
-    cols += [vocab.column(n, "excluded_runs") for n in vocab.exclusion_tasks]
-    cols = list(dict.fromkeys(cols))
-    print(t[[c for c in cols if c in t]].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
+    run_report = lambda *a: written.append(report(*a))  # noqa: E731
+    df = run_benchmark(cfg, Workspace(results, args.renders), options, report=run_report)
+    if written and written[0] is not None:
+        protocol = "multiview" if "multiview" in cfg.protocols else cfg.protocols[0]
+        print(
+            f"Table 1 ({protocol} protocol; {', '.join(cfg.tasks)}; {results / PAGE} has the rest):"
+        )
+        print(brief_table1(written[0], read_vocabulary(results)))
     failed = errors(in_grid(cfg, df))
     if failed:  # after every other row and the tables are written
         raise BenchError(f"{failed}; every other row and the tables are written")

@@ -331,7 +331,7 @@ def _run_in(
     log(f"{len(done)} of {len(done) + n_rows} rows already in {ws.runs_csv}; " + ", ".join(todo))
     groups = sorted({u.group for u in work}, key=lambda g: (cfg.scenes.index(g[0]), g[1]))
     entries = {}
-    with progress("render", len(groups), "scene") as bar:
+    with progress("render", len(groups), "scene", shown=not cfg.datasets) as bar:
         for sc, sd in groups:
             t = time.perf_counter()
             entries[sc, sd] = cfg.dataset(sc) or render_scene(sc, sd, cfg.render(), ws.renders)
@@ -419,6 +419,8 @@ def _computed(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, stage
             stage_s["frontend"] += info["seconds"]
             fbar.set_postfix_str(f"{scene} seed {seed}")
             fbar.update()
+            if bar.n == 0:  # the time left counts from the first front end, not before it
+                bar.reset(total=rows)
 
         for new in execute(plan, cfg, ws, cluster, scene_ready):
             _add_seconds(stage_s, new)

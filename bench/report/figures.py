@@ -96,7 +96,8 @@ def figure3(
     if note:
         fig.text(0.01, 0.005, note, fontsize=8, wrap=True, va="bottom")
         bottom = min(0.25, (0.1 + 0.18 * (1 + note.count("\n"))) / fig.get_figheight())
-    fig.tight_layout(rect=(0, bottom, 1, 1))
+    top = 1 - 0.45 / fig.get_figheight()  # the overall title's band, above every panel's
+    fig.tight_layout(rect=(0, bottom, 1, top))
     save(fig, out, ("png", "pdf"))
 
 

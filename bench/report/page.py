@@ -39,6 +39,13 @@ POOLED = ("all", "all scenes")
 TASK_COLUMNS = 3
 """How many of a task's Table 1 columns (its first, in the task registry's order) the
 page shows; the CSV has them all."""
+NAMES = (
+    "A method is named by its key (what `--methods` takes; `vocabulary.json` has its label). "
+    "A metric is named as in `runs.csv` (its rows hold the task in `task`), prefixed with "
+    f"its task in every table but the headline task's ({HEADLINE[0]}): `maa` of the sfm "
+    "rows is `sfm_maa`. `runs`: the runs a task's means count."
+)
+"""How the page names methods and metrics, said once above Table 1."""
 FIGURES = {
     png(FIGURE3): "Headline metrics per method at the headline budget, 95% intervals",
     png(FIGURE_BUDGET): "Each headline metric against the budget",
@@ -118,7 +125,7 @@ def _grid_section(runs: pd.DataFrame, config: dict) -> list[str]:
 def _table1_section(t1: pd.DataFrame, vocab: Vocabulary, title: str) -> list[str]:
     if t1.empty:
         return []
-    out = [f"## {title}", ""]
+    out = [f"## {title}", "", NAMES, ""]
     for task in vocab.tasks.values():
         prefix = "" if task.name == HEADLINE[0] else f"{task.name}_"
         cols = [prefix + c for c in task.metrics[:TASK_COLUMNS] if prefix + c in t1]
@@ -128,7 +135,7 @@ def _table1_section(t1: pd.DataFrame, vocab: Vocabulary, title: str) -> list[str
         header = ["method", "budget", "runs", *cols, "why an interval is missing"]
         body = {
             b: [
-                [str(r["strategy"]), _num(r["budget"]), _runs(r, vocab, task.name)]
+                [str(r["method"]), _num(r["budget"]), _runs(r, vocab, task.name)]
                 + [_interval(r, c) for c in cols]
                 + [_why(r.get("note"), cols)]
                 for _, r in at.iterrows()
@@ -154,6 +161,23 @@ def _runs(r: pd.Series, vocab: Vocabulary, task: str) -> str:
     return _num(used) + (f" ({_num(errors)} could not be computed)" if errors else "")
 
 
+def brief_table1(t1: pd.DataFrame, vocab: Vocabulary) -> str:
+    """Table 1 as `bench run` prints it: each method's key (what `--methods` takes), its
+    budget and, per task, the runs its means count and its first headline metric, as the
+    page has them (the page and table1.csv have the rest)."""
+    out = pd.DataFrame({"method": t1["method"], "budget": t1["budget"]})
+    for name, task in vocab.tasks.items():
+        col = vocab.column(name, task.headline[0]) if task.headline else None
+        if col not in t1 or t1[col].isna().all():
+            continue
+        shown = t1[col].notna()
+        out[f"{name}_runs"] = [
+            _runs(r, vocab, name) if s else "-" for (_, r), s in zip(t1.iterrows(), shown)
+        ]
+        out[col] = [_num(v) for v in t1[col]]
+    return out.to_string(index=False)
+
+
 def _why(note, cols: list[str]) -> str:
     """The reasons of a Table 1 `note` (`reason: metric, ...; ...`) that apply to `cols`."""
     reasons = []
@@ -173,12 +197,14 @@ def _table2_section(t2: pd.DataFrame) -> list[str]:
     ]
     at = t2[t2["budget"] == HEADLINE_BUDGET] if (t2["budget"] == HEADLINE_BUDGET).any() else t2
     header = ["scene", "metric", HEADLINE_POLICY, "best baseline", "difference [95%]", "w/t/l"]
+    header.append(f"runs ({HEADLINE_POLICY} / baseline / paired)")
     body = []
     for _, r in at.iterrows():
         for m in metrics:
             best = r.get(
                 f"best_baseline_{m}_policy", r.get(f"best_baseline_{m.removesuffix('_pct')}_policy")
             )
+            runs = [f"{HEADLINE_POLICY}_{m}_n", f"best_baseline_{m}_n", f"diff_{m}_n"]
             body.append(
                 [
                     str(r["scene"]),
@@ -187,10 +213,16 @@ def _table2_section(t2: pd.DataFrame) -> list[str]:
                     f"{_num(r.get(f'best_baseline_{m}'))} ({_text(best)})",
                     _interval(r, f"diff_{m}", note=f"diff_{m}_note"),
                     _text(r.get(f"diff_{m}_wtl")),
+                    " / ".join(_num(r.get(c)) for c in runs),
                 ]
             )
     title = f"## Table 2: {HEADLINE_POLICY} against the best baseline, budget {_num(at['budget'].iloc[0])}"
-    return [title, ""] + _table(header, body) + [""]
+    said = (
+        "Each mean is over its method's own runs, the difference over the runs both have "
+        "(a run without a value, such as the rmse of a run that triangulated nothing, is in "
+        "neither): the last column counts each."
+    )
+    return [title, "", said, ""] + _table(header, body) + [""]
 
 
 def _paired_section(
@@ -278,7 +310,8 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
         out += _paired_section(
             _read(results, PAIRED_SFM),
             vocab,
-            f"Paired sfm: every method against `{peer}`, all scenes",
+            f"Paired: every method against `{peer}` (held to the budget), all scenes, "
+            "in the tasks it runs",
             peer,
         )
     out += nbv.page_section(results, vocab)

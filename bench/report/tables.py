@@ -12,7 +12,9 @@
   budget, `bench.evaluation.oracle`).
 * `table2.csv`: per scene (and all scenes pooled) and budget, adaptive against the best
   baseline (random, texture, grid and the field's selectors response, ssc, quadtree; never
-  a reference) for each headline metric, with the paired difference to that baseline.
+  a reference) for each headline metric, with the paired difference to that baseline;
+  each mean is over its method's own runs and the difference over the runs both have,
+  and `<adaptive>_<m>_n`, `best_baseline_<m>_n` and `diff_<m>_n` count them.
   `paired.csv`: adaptive against every other policy that is not a reference, per scene
   and pooled, for every headline metric. `paired_sfm.csv`: in the sfm task's mAA and
   registered views, per scene and pooled, every budgeted policy (and the oracle) against
@@ -290,21 +292,21 @@ def table2(rows: pd.DataFrame, pairs: pd.DataFrame, vocab: Vocabulary) -> pd.Dat
         for scope in [*pd.unique(rows["scene"]), "all scenes"]:
             part = rows[rows["budget"] == budget]
             part = part if scope == "all scenes" else part[part["scene"] == scope]
-            means = pd.DataFrame(
-                {
-                    m: solvable(part, m, vocab).groupby("method")[m].mean()
-                    for m in metrics
-                    if m in part
-                }
-            )
+            by_method = {
+                m: solvable(part, m, vocab).groupby("method")[m] for m in metrics if m in part
+            }
+            means = pd.DataFrame({m: g.mean() for m, g in by_method.items()})
+            counts = pd.DataFrame({m: g.count() for m, g in by_method.items()})
             row = {"scene": scope, "budget": budget}
             for m in (m for m in metrics if m in means):
                 row[f"{HEADLINE_POLICY}_{m}"] = means[m].get(HEADLINE_POLICY, math.nan)
+                row[f"{HEADLINE_POLICY}_{m}_n"] = counts[m].get(HEADLINE_POLICY, 0)
                 baselines = vocab.with_role("baseline")
                 base = means.loc[[p for p in baselines if p in means.index], m].dropna()
                 best = (base.idxmin() if m in lower else base.idxmax()) if len(base) else ""
                 row[f"best_baseline_{m}"] = base.get(best, math.nan) if best else math.nan
                 row[f"best_baseline_{m}_policy"] = best
+                row[f"best_baseline_{m}_n"] = counts[m].get(best, 0) if best else 0
                 p = pairs[
                     (pairs["scene"] == scope)
                     & (pairs["budget"] == budget)
@@ -317,6 +319,7 @@ def table2(rows: pd.DataFrame, pairs: pd.DataFrame, vocab: Vocabulary) -> pd.Dat
                 row[f"diff_{m}_hi"] = r.get("hi", math.nan)
                 row[f"diff_{m}_note"] = r.get("note", "")
                 row[f"diff_{m}_wtl"] = f"{r['wins']}/{r['ties']}/{r['losses']}" if len(p) else ""
+                row[f"diff_{m}_n"] = r.get("n", 0)
             for truth in vocab.with_kind(GROUND_TRUTH):  # the reference of the shares
                 for of in dict.fromkeys(vocab.shares().values()):
                     row[f"{truth}_{of}"] = (

@@ -96,10 +96,11 @@ def is_dataset_run(results: Path) -> bool:
 
 def write_report(
     df: pd.DataFrame, results: Path, renders: Path, rendered: Sequence[Path] = ()
-) -> None:
+) -> pd.DataFrame | None:
     """Every table and figure of `results` from the rows `df`, under the vocabulary
     recorded in `results`; for a results folder of datasets, the transfer tables against
-    the rendered results folders `rendered`; last, the folder's page."""
+    the rendered results folders `rendered`; last, the folder's page. Returns the Table 1
+    the figures draw (the headline protocol's, else the first with rows), or None."""
     results = Path(results)
     vocab = read_vocabulary(results)
     df = with_shares(df, vocab)
@@ -115,6 +116,7 @@ def write_report(
     if not figure_views(df, vocab, results / FIGURE_VIEWS):
         _drop(results / png(FIGURE_VIEWS))
     write_text_atomic(results / PAGE, results_page(results, df))
+    return drawn
 
 
 def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> list[pd.DataFrame]:
