@@ -78,3 +78,23 @@ def test_tiers_join_methods_that_cannot_be_told_apart():
     assert tiers(-values, lower_better=True).to_dict() == {"a": 1, "b": 1, "c": 2}
     few = values.iloc[:4]  # four units: the smallest two-sided p is 1/8, never below 0.05
     assert set(tiers(few, lower_better=False)) == {1}
+
+
+def test_a_transfer_row_carries_its_power_with_known_values():
+    from bench.report.transfer import power
+
+    cols = ["x", "y", "colmap-b"]
+    real = pd.DataFrame([[3, 2, 1], [3, 1, 2], [3, 2, 1], [2, 3, 1]], columns=cols, dtype=float)
+    ref = pd.DataFrame([[1, 2, 3], [2, 3, 4]], columns=cols, dtype=float)
+    sets = pd.DataFrame(
+        [real.mean().to_list(), [3, 2, 1], [1, 3, 2]], index=["this", "B", "C"], columns=cols
+    )
+    out = power(real, ref, sets, "this", cols, lower_better=False)
+    assert out["rel_dataset"] == pytest.approx(0.8) and out["rel_rendered"] == 1.0
+    assert out["ceiling"] == pytest.approx(math.sqrt(0.8))
+    # others' mean ranks x 2, y 1.5, colmap-b 2.5; this set ranks x, y, colmap-b: (x, y) is
+    # the one discordant pair of three
+    assert out["tau_photos"] == pytest.approx(1 / 3)
+    # this set: x +1.5, y +0.75 over colmap-b; renders: x -2, y -1; others: x +0.5, y +1
+    assert (out["signs_agree"], out["signs_decided"]) == (0, 2)
+    assert (out["signs_agree_photos"], out["signs_decided_photos"]) == (2, 2)

@@ -14,6 +14,7 @@ from pathlib import Path
 import pandas as pd
 
 from bench.report import nbv
+from bench.report.transfer import verdicts
 from bench.results import (
     CONFIG,
     FIGURE2,
@@ -226,7 +227,15 @@ def _transfer_section(transfer: pd.DataFrame) -> list[str]:
         return []
     shown = [c for c in transfer.columns if not c.startswith("top_")]
     body = [[_num(v) if not isinstance(v, str) else v for v in r] for r in transfer[shown].values]
-    return ["## Transfer: the rendered ranking on each dataset", ""] + _table(shown, body) + [""]
+    said = verdicts(transfer, _transfer_budget(transfer)) if "matched" in transfer else []
+    out = ["## Transfer: the rendered ranking on each dataset", ""] + _table(shown, body) + [""]
+    return out + [f"- {line}" for line in said] + ([""] if said else [])
+
+
+def _transfer_budget(transfer: pd.DataFrame) -> int:
+    """256 when the transfer table has it, else its middle budget."""
+    budgets = sorted(transfer["budget"].unique())
+    return HEADLINE_BUDGET if HEADLINE_BUDGET in budgets else budgets[len(budgets) // 2]
 
 
 def _exclusions(runs: pd.DataFrame, t1: pd.DataFrame, vocab: Vocabulary) -> list[str]:
