@@ -164,6 +164,31 @@ def _why(note, cols: list[str]) -> str:
     return "; ".join(reasons)
 
 
+def _tiers_section(t1: pd.DataFrame) -> list[str]:
+    """Which methods cannot be told apart, per tiered metric at the headline budget
+    (Table 1's `<metric>_tier`: Holm-corrected Wilcoxon tests, docs/protocol.md)."""
+    cols = [c for c in t1.columns if c.endswith("_tier") and t1[c].notna().any()]
+    if not cols:
+        return []
+    budgets = sorted(b for b in t1["budget"].unique() if b > 0)
+    budget = HEADLINE_BUDGET if HEADLINE_BUDGET in budgets else budgets[len(budgets) // 2]
+    at = t1[t1["budget"] == budget]
+    out = [
+        f"## Tiers at B = {budget}: methods that cannot be told apart",
+        "",
+        "Tier 1 is the best method by mean and every method not significantly different "
+        "from it (two-sided Wilcoxon signed-rank tests over the units every method has, "
+        "Holm-corrected at 0.05); the next tier starts at the best method left.",
+        "",
+    ]
+    for col in cols:
+        ranked = at.dropna(subset=[col]).sort_values(col, kind="stable")
+        groups = ranked.groupby(col, sort=True)["method"].agg(", ".join)
+        tiers = "; ".join(f"{int(k)}: {v}" for k, v in groups.items())
+        out.append(f"- `{col.removesuffix('_tier')}`: {tiers}")
+    return out + [""]
+
+
 def _table2_section(t2: pd.DataFrame) -> list[str]:
     """One row per scene and metric at the headline budget (every budget is in the CSV)."""
     if t2.empty:
@@ -274,6 +299,7 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
     out += _run_section(_json(results, MANIFEST), runs) + [""]
     out += _grid_section(runs, _json(results, CONFIG)) + [""]
     out += _table1_section(t1, vocab, "Table 1: means over runs, 95% intervals")
+    out += _tiers_section(t1)
     out += _table2_section(_read(results, TABLE2))
     out += _paired_section(
         _read(results, PAIRED),
