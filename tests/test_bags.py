@@ -64,3 +64,26 @@ def test_a_dataset_run_scores_each_bag_on_its_own_views_and_reuses_them(
     whole = pd.read_csv(out / "runs.csv").query("seed == 0")
     assert len(whole) == 1 and whole["views"].iloc[0] == 6
     assert BAG not in whole or whole[BAG].isna().all()  # no bag: the whole set
+
+
+def test_a_bags_signals_are_those_of_its_views_alone(dataset, tmp_path):
+    from bench.frontend.geometry import IMAGES
+    from bench.frontend.signals import SIGNALS, compute_signals
+    from bench.frontend.stage import front_end
+    from bench.harness.bags import bag_front
+    from bench.harness.config import RunConfig
+
+    cfg, bag = RunConfig(), (0, 2, 3, 5)
+    full = front_end(dataset, cfg.detector, cfg.signals, tmp_path, IMAGES)
+    mine = bag_front(full, bag, cfg.detector, cfg.signals)
+    alone, _ = compute_signals([full.views[i] for i in bag], mine.pools, cfg.detector, cfg.signals)
+    assert [v.name for v in mine.views] == [full.views[i].name for i in bag]
+    for got, want in zip(mine.signals, alone):
+        for s in SIGNALS:
+            np.testing.assert_allclose(getattr(got, s), getattr(want, s), atol=1e-9, err_msg=s)
+    # the views' other neighbours are gone: some cross-view signal differs from the set's
+    assert any(
+        not np.allclose(getattr(mine.signals[k], s), getattr(full.signals[i], s))
+        for k, i in enumerate(bag)
+        for s in ("ambiguity", "parallax", "epipolar")
+    )

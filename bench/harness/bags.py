@@ -18,6 +18,7 @@ space-separated; `views`: its size).
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import cache
 from itertools import combinations
 from pathlib import Path
@@ -29,7 +30,7 @@ from bench.evaluation.relative import MIN_SHARED
 from bench.evaluation.truth import COVISIBLE_DEG, _facing, scene_truth
 from bench.frontend.colmap_model import points_seen, read_model
 from bench.frontend.geometry import RIG
-from bench.frontend.signals import compute_signals
+from bench.frontend.signals import SIGNALS, compute_signals
 from bench.frontend.stage import FrontEnd
 from bench.frontend.views import Source, load_views
 
@@ -37,6 +38,10 @@ BAG = "bag"
 """The `runs.csv` column naming a dataset row's bag: its image names, space-separated."""
 REDRAWS = 100
 """The draws of one bag that may repeat an earlier bag before the bags stop."""
+VIEW_ALONE = ("repeatability_redetect",)
+"""The costly signal that reads one view alone (four perturbed re-detections of it): a
+bag takes the dataset's (`bench.frontend.signals.compute_signals` computes the others
+cheaply, or, as ambiguity, parallax and epipolar, from the other views)."""
 DEFAULT_SIZE, DEFAULT_COUNT = 6, 10
 """The default bag: the sparse regime's 6 views, 10 bags (docs/protocol.md)."""
 
@@ -100,15 +105,24 @@ def bag_names(folder: str, bag: tuple[int, ...]) -> str:
 
 
 def bag_front(full: FrontEnd, bag: tuple[int, ...], det, sig) -> FrontEnd:
-    """The front end of a bag: the dataset's candidates of its views, with the signals
-    computed on its views alone (as `bench.frontend.stage.compute` computes them: on each
-    view downscaled to `det.max_image_size`)."""
+    """The front end of a bag: the dataset's candidates of its views and the signals that
+    read a view alone (`VIEW_ALONE`, the costly re-detection among them) as the dataset's
+    front end computed them, with the others computed on the bag's views alone, as
+    `bench.frontend.stage.compute` computes them (on each view downscaled to
+    `det.max_image_size`); their seconds are the dataset's share per view of the view-alone
+    signals and detection, and the bag's own of the others."""
     views = [full.views[i] for i in bag]
     work = [v.scale_to(det.max_image_size) for v in views]
     pools = [full.pools[i] for i in bag]
     scaled = [c.scaled(sx, sy) for c, (_, sx, sy) in zip(pools, work)]
-    sigs, seconds = compute_signals([v for v, _, _ in work], scaled, det, sig)
-    seconds["detect"] = full.seconds["detect"] * len(bag) / len(full.views)
+    wanted = tuple(s for s in SIGNALS if s not in VIEW_ALONE)
+    sigs, seconds = compute_signals([v for v, _, _ in work], scaled, det, sig, wanted)
+    sigs = [
+        replace(g, **{s: getattr(full.signals[i], s) for s in VIEW_ALONE})
+        for g, i in zip(sigs, bag)
+    ]
+    share = len(bag) / len(full.views)
+    seconds |= {k: full.seconds[k] * share for k in ("detect", *VIEW_ALONE)}
     return FrontEnd(views, pools, sigs, seconds, cached=False)
 
 
