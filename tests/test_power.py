@@ -98,3 +98,28 @@ def test_a_transfer_row_carries_its_power_with_known_values():
     # this set: x +1.5, y +0.75 over colmap-b; renders: x -2, y -1; others: x +0.5, y +1
     assert (out["signs_agree"], out["signs_decided"]) == (0, 2)
     assert (out["signs_agree_photos"], out["signs_decided_photos"]) == (2, 2)
+
+
+def test_table1_tiers_each_budget_apart_and_leave_references_out():
+    from pathlib import Path
+
+    from bench.report.tables import tier_column, with_tiers
+    from bench.results import read_vocabulary
+
+    vocab = read_vocabulary(Path(__file__).resolve().parents[1] / "results" / "published")
+    base = np.random.default_rng(0).uniform(0.4, 0.6, 10)
+    values = {"texture": base, "grid": base, "random": base - 0.3, "oracle": base + 0.3}
+    rows = pd.DataFrame(
+        [
+            {"scene": "s", "seed": k, "method": m, "budget": b, "pairs_auc_10": v[k] * b / 256}
+            for b in (128, 256)
+            for m, v in values.items()
+            for k in range(10)
+        ]
+    )
+    t = pd.DataFrame([{"method": m, "budget": b} for b in (128, 256) for m in values])
+    got = with_tiers(t, rows, vocab)
+    tiers = dict(zip(zip(got["method"], got["budget"]), got[tier_column("pairs_auc_10")]))
+    for b in (128, 256):
+        assert (tiers["texture", b], tiers["grid", b], tiers["random", b]) == (1, 1, 2)
+        assert math.isnan(tiers["oracle", b])  # a reference: shown, never tiered
