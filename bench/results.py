@@ -67,7 +67,7 @@ HASHES = ("prediction_hash", "evaluation_hash")
 ROW_CHECKSUM = "row_checksum"
 """The last column: a hash of the row's other values as written (`row_checksum`)."""
 TEXT_COLUMNS = ("scene", "method", "task", "protocol", "render_key", *HASHES, "status")
-TEXT_COLUMNS += ("failure", "invocation", "ground_truth", "pairs_rule", ROW_CHECKSUM)
+TEXT_COLUMNS += ("failure", "invocation", "ground_truth", "pairs_rule", "bag", ROW_CHECKSUM)
 REQUIRED = (*KEY, "render_key", *HASHES, "status", "failure", "invocation", "wall_ms")
 OLD_METHOD = "policy"
 """The `method` column's name before 0.3.0 (`bench upgrade` renames it)."""

@@ -151,6 +151,24 @@ def _input_arguments(parser: argparse.ArgumentParser) -> None:
         "./results/datasets for several",
     )
     parser.add_argument(
+        "--bag-size",
+        type=int,
+        default=None,
+        metavar="N",
+        help="with --dataset: score random co-visible bags of N images of each dataset, as "
+        "the Image Matching Challenge does (default 6, the sparse regime's rig; 14 matches "
+        "the dense regime; 0: the whole dataset as one bag); a dataset of at most N images is "
+        "one bag; each bag is a seed of its own rows, its images in the `bag` column",
+    )
+    parser.add_argument(
+        "--bags",
+        type=int,
+        default=None,
+        metavar="K",
+        help="with --dataset: the bags per dataset (default 10: two halves of 5 for the "
+        "split-half reliability, docs/protocol.md)",
+    )
+    parser.add_argument(
         "--rendered",
         type=Path,
         action="append",
@@ -333,6 +351,21 @@ def has_pixel_truth(dataset: Path) -> bool:
     return ok
 
 
+def bags_arg(args: argparse.Namespace, datasets: bool) -> tuple[int, int]:
+    """(`--bag-size`, `--bags`), checked; their defaults with a dataset (one bag of the
+    whole dataset where the size is 0)."""
+    from bench.harness.bags import DEFAULT_COUNT, DEFAULT_SIZE
+
+    given = [n for n, v in (("--bag-size", args.bag_size), ("--bags", args.bags)) if v is not None]
+    if given and not datasets:
+        log(f"{' and '.join(given)} ignored without --dataset: rendered scenes have their rigs")
+    size = DEFAULT_SIZE if args.bag_size is None else args.bag_size
+    count = DEFAULT_COUNT if args.bags is None else args.bags
+    if count < 1:
+        raise BenchError(f"--bags must be at least 1, got {count}")
+    return size, (1 if size == 0 else count)
+
+
 def run(args: argparse.Namespace) -> None:
     from bench.failures import errors
     from bench.harness.execute import Cluster, default_workers
@@ -354,10 +387,11 @@ def run(args: argparse.Namespace) -> None:
     regime = args.regime or "sparse"
     if args.regime and datasets:
         log("--regime is ignored with --dataset: a dataset's views are what they are")
+    bag_size, bag_count = bags_arg(args, bool(datasets))
     if datasets:
         if args.seeds is not None:
-            log("--seeds is ignored with --dataset: a dataset is one scene, recorded as seed 0")
-        scenes, seeds = tuple(d.name for d in datasets), (0,)
+            log("--seeds is ignored with --dataset: a dataset's seeds are its bags (--bags)")
+        scenes, seeds = tuple(d.name for d in datasets), tuple(range(bag_count))
         truth = all([has_pixel_truth(d) for d in datasets])  # what the oracle selects by
         kinds = {p: METHODS[p].kind for p in methods if p in METHODS}
         methods = tuple(p for p in methods if truth or kinds.get(p) != GROUND_TRUTH)
@@ -381,6 +415,7 @@ def run(args: argparse.Namespace) -> None:
         protocols=parse_list("--protocols", args.protocols, str, "multiview,twoview"),
         run=run_cfg,
         datasets=tuple(map(str, datasets)),
+        bag_size=bag_size,
     )
     results = args.results or (
         LATEST.with_name(f"dataset-{datasets[0].name}" if len(datasets) == 1 else "datasets")

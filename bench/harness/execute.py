@@ -6,7 +6,8 @@ render (one per geometry its tasks grant); then each unit, which waits for its s
 front end, predicts (`bench.harness.predict`; skipped when it only re-scores a current
 stored prediction) and scores (`bench.harness.evaluate`). Renders stay in the main
 process, so one process renders per machine (Mitsuba's LLVM and CUDA variants use every
-core, or the GPU, on their own). A worker holds one scene at a time (`_scene`). Rows come
+core, or the GPU, on their own). A worker holds one scene at a time (`_scene`; a dataset's
+bag is a scene of its own, `bench.harness.bags`, its rows tagged with the bag). Rows come
 back to the main process, which alone writes `runs.csv`. A method that fails (its policy
 raises or breaks the contract: `PolicyFailed`) is a value, in process as on a worker: the
 unit's rows are recorded as failed, saying what and where, and the grid goes on. A unit
@@ -29,7 +30,7 @@ import os
 import signal
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from bench import BenchError
@@ -41,6 +42,7 @@ from bench.frontend.policies import PolicyFailed
 from bench.frontend.selection import check_budgets
 from bench.frontend.stage import FrontEnd, front_end
 from bench.frontend.views import load_views
+from bench.harness import bags
 from bench.harness.config import RunConfig
 from bench.harness.evaluate import identities
 from bench.harness.methods import runner
@@ -69,6 +71,17 @@ class Plan:
     entries: dict[tuple[str, int], Path]
     work: dict[Unit, Work]
     budgets: tuple[int, ...]
+    bags: dict[tuple[str, int], tuple[int, ...]] = field(default_factory=dict)
+    """The views of a dataset's bag per (scene, seed) (`bench.harness.bags`); a group
+    without one reads every view of its entry."""
+
+    def tagged(self, unit: Unit, rows: list[dict]) -> list[dict]:
+        """A bag's rows with its identity (`bags.BAG`) and size (`views`)."""
+        bag = self.bags.get(unit.group)
+        if bag is None:
+            return rows
+        tag = {bags.BAG: bags.bag_names(str(self.entries[unit.group]), bag), "views": len(bag)}
+        return [r | tag for r in rows]
 
     @property
     def grants(self) -> tuple[str, ...]:
@@ -94,15 +107,19 @@ def _front_ends(entry: Path, cfg: RunConfig, renders: Path, grants) -> dict[str,
     }
 
 
-def _scene(entry: Path, cfg: RunConfig, renders: Path, grants) -> LoadedScene:
-    key = (str(entry), repr(cfg), tuple(grants))
+def _scene(entry: Path, cfg: RunConfig, renders: Path, grants, bag=None) -> LoadedScene:
+    key = (str(entry), repr(cfg), tuple(grants), bag)
     if _HELD.get("key") != key:
         _HELD.clear()  # let the previous scene go before loading the next
         fronts = _front_ends(entry, cfg, renders, grants)
-        # the evaluation side may read the poses: the rig's front end holds them
-        posed = fronts[RIG].views if RIG in fronts else load_views(entry)
-        cams, names = [v.camera for v in posed], [v.name for v in posed]
-        truth = scene_truth(entry, cams, names, next(iter(fronts.values())).pools)
+        if bag is not None and len(bag) < len(next(iter(fronts.values())).views):
+            # a bag's views alone (`bench.harness.bags`); a bag of every view is the entry
+            fronts = bags.bag_fronts(fronts, bag, cfg.detector, cfg.signals)
+            truth = bags.bag_truth(entry, fronts, bag)
+        else:  # the evaluation side may read the poses: the rig's front end holds them
+            posed = fronts[RIG].views if RIG in fronts else load_views(entry)
+            cams, names = [v.camera for v in posed], [v.name for v in posed]
+            truth = scene_truth(entry, cams, names, next(iter(fronts.values())).pools)
         _HELD.update(key=key, scene=LoadedScene(entry, fronts, truth))
     return _HELD["scene"]
 
@@ -138,8 +155,9 @@ def compute_unit(
 
 def unit_task(unit: Unit, plan: Plan, cfg: RunConfig, ws: Workspace, *_after) -> list[dict]:
     """The rows of one unit of a plan (`_after`: what it waits for)."""
-    scene = _scene(plan.entries[unit.group], cfg, ws.renders, plan.grants)
-    return compute_unit(scene, unit, plan.work[unit], cfg, ws)
+    bag = plan.bags.get(unit.group)
+    scene = _scene(plan.entries[unit.group], cfg, ws.renders, plan.grants, bag)
+    return plan.tagged(unit, compute_unit(scene, unit, plan.work[unit], cfg, ws))
 
 
 def failed_rows(entry: Path, unit: Unit, jobs, cfg: RunConfig, why: str) -> list[dict]:
@@ -304,7 +322,8 @@ def _on_dask(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, on_sce
             exc = future.exception()
             if exc is not None:
                 why = f"failed on a worker, retried once: {type(exc).__name__}: {exc}"
-                yield failed_rows(plan.entries[unit.group], unit, plan.work[unit].jobs, cfg, why)
+                failed = failed_rows(plan.entries[unit.group], unit, plan.work[unit].jobs, cfg, why)
+                yield plan.tagged(unit, failed)
             else:
                 yield _result(future)
     finally:

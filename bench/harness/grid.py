@@ -35,6 +35,7 @@ from bench.files import write_text_atomic
 from bench.frontend import plugins
 from bench.frontend.policies import check_methods, learned_weights
 from bench.frontend.views import Source, source_key
+from bench.harness.bags import BAG, bag_names, dataset_bags
 from bench.harness.config import RunConfig
 from bench.harness.evaluate import evaluation_hash
 from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
@@ -101,7 +102,10 @@ class BenchConfig:
     run: RunConfig = field(default_factory=RunConfig)
     datasets: tuple[str, ...] = ()
     """Dataset folders (`bench run --dataset`) instead of rendered scenes: each is one
-    scene, named by its folder, with seed 0."""
+    scene, named by its folder; its seeds are its bags (`bag_size`)."""
+    bag_size: int = 0
+    """The images of a dataset's bag (`bench.harness.bags`); 0: the whole dataset, seed 0.
+    A dataset's seeds are its bags' numbers, up to `max(seeds) + 1` bags."""
 
     def validate(self) -> BenchConfig:
         if self.datasets:
@@ -141,6 +145,10 @@ class BenchConfig:
                 f"the {rigged[0]} task renders its own rig (the scene's planned path): run it "
                 f"alone, --tasks {rigged[0]}"
             )
+        if self.bag_size < 0 or self.bag_size == 1:
+            raise BenchError(
+                f"--bag-size must be 0 (the whole dataset) or at least 2, got {self.bag_size}"
+            )
         if not self.seeds or min(self.seeds) < 0:
             raise BenchError(f"seeds must be non-negative integers, got {list(self.seeds)}")
         if not self.budgets or min(self.budgets) <= 0:
@@ -157,13 +165,27 @@ class BenchConfig:
         """The folder of a dataset scene (None: a rendered scene)."""
         return next((Path(d) for d in self.datasets if Path(d).name == scene), None)
 
+    def bags(self, scene: str) -> dict[int, tuple[int, ...]]:
+        """The bags of a dataset scene by seed (`bench.harness.bags`; none: a rendered scene,
+        or a dataset scored whole)."""
+        folder = self.dataset(scene)
+        if folder is None or not self.bag_size:
+            return {}
+        drawn = dataset_bags(str(folder), self.bag_size, max(self.seeds) + 1)
+        return dict(enumerate(drawn))
+
+    def seeds_of(self, scene: str) -> tuple[int, ...]:
+        """The seeds of a scene: a bagged dataset's are the numbers of the bags it has."""
+        bags = self.bags(scene)
+        return tuple(s for s in self.seeds if s in bags) if bags else self.seeds
+
     def units(self) -> list[Unit]:
         """Every unit of the grid that has a job; a whole-pool method (`all`, `colmap`)
         is one unit per scene and seed, with budget 0."""
         return [
             Unit(sc, sd, m, b)
             for sc in self.scenes
-            for sd in self.seeds
+            for sd in self.seeds_of(sc)
             for m in self.methods
             for b in ((0,) if METHODS[m].whole_pool else self.budgets)
             if self.jobs(m)
@@ -268,6 +290,7 @@ def _current_rows(
                 "computed; computing them again"
             )
         stale |= changed
+        stale |= _other_bag(cfg, df, scene) & ~stale
     for scene in set(df["scene"]) & set(cfg.scenes) - {Path(d).name for d in cfg.datasets}:
         rows = ~stale & (df["scene"] == scene)
         tasked = rows & df["task"].isin(RUNNERS)  # a row of each task against its own rig
@@ -291,6 +314,21 @@ def _current_rows(
         options.reevaluate | (df["evaluation_hash"] != evaluation_hash())
     )
     return df, rescore
+
+
+def _other_bag(cfg: BenchConfig, df: pd.DataFrame, scene: str) -> pd.Series:
+    """The rows of a dataset scene whose bag is not the one its seed draws now (another
+    `--bag-size`, or the whole dataset): computed again, said in one line."""
+    folder, bags = cfg.dataset(scene), cfg.bags(scene)
+    want = {sd: bag_names(str(folder), b) for sd, b in bags.items()}
+    have = df[BAG] if BAG in df else pd.Series(pd.NA, index=df.index)
+    expected = df["seed"].map(want)
+    other = (df["scene"] == scene) & (have.fillna("") != expected.fillna(""))
+    if other.any():
+        log(
+            f"{int(other.sum())} row(s) of {scene} were computed on other bags; computing them again"
+        )
+    return other
 
 
 def _run_in(
@@ -338,7 +376,8 @@ def _run_in(
             stage_s["render"] += time.perf_counter() - t
             bar.set_postfix_str(f"{sc} seed {sd}")
             bar.update()
-    plan = Plan(entries, work, cfg.budgets)
+    bagged = {(sc, sd): b for sc in cfg.scenes for sd, b in cfg.bags(sc).items()}
+    plan = Plan(entries, work, cfg.budgets, {g: b for g, b in bagged.items() if g in entries})
     t_runs = time.perf_counter()
     try:
         with models_replaced(ws.results, options.overwrite) as state:

@@ -15,6 +15,7 @@ import pandas as pd
 
 from bench.failures import outcomes
 from bench.report import nbv
+from bench.report.transfer import verdicts
 from bench.results import (
     CONFIG,
     FIGURE2,
@@ -188,6 +189,31 @@ def _why(note, cols: list[str]) -> str:
     return "; ".join(reasons)
 
 
+def _tiers_section(t1: pd.DataFrame) -> list[str]:
+    """Which methods cannot be told apart, per tiered metric at the headline budget
+    (Table 1's `<metric>_tier`: Holm-corrected Wilcoxon tests, docs/protocol.md)."""
+    cols = [c for c in t1.columns if c.endswith("_tier") and t1[c].notna().any()]
+    if not cols:
+        return []
+    budgets = sorted(b for b in t1["budget"].unique() if b > 0)
+    budget = HEADLINE_BUDGET if HEADLINE_BUDGET in budgets else budgets[len(budgets) // 2]
+    at = t1[t1["budget"] == budget]
+    out = [
+        f"## Tiers at B = {budget}: methods that cannot be told apart",
+        "",
+        "Tier 1 is the best method by mean and every method not significantly different "
+        "from it (two-sided Wilcoxon signed-rank tests over the units every method has, "
+        "Holm-corrected at 0.05); the next tier starts at the best method left.",
+        "",
+    ]
+    for col in cols:
+        ranked = at.dropna(subset=[col]).sort_values(col, kind="stable")
+        groups = ranked.groupby(col, sort=True)["method"].agg(", ".join)
+        tiers = "; ".join(f"{int(k)}: {v}" for k, v in groups.items())
+        out.append(f"- `{col.removesuffix('_tier')}`: {tiers}")
+    return out + [""]
+
+
 def _table2_section(t2: pd.DataFrame) -> list[str]:
     """One row per scene and metric at the headline budget (every budget is in the CSV)."""
     if t2.empty:
@@ -259,7 +285,15 @@ def _transfer_section(transfer: pd.DataFrame) -> list[str]:
         return []
     shown = [c for c in transfer.columns if not c.startswith("top_")]
     body = [[_num(v) if not isinstance(v, str) else v for v in r] for r in transfer[shown].values]
-    return ["## Transfer: the rendered ranking on each dataset", ""] + _table(shown, body) + [""]
+    said = verdicts(transfer, _transfer_budget(transfer)) if "matched" in transfer else []
+    out = ["## Transfer: the rendered ranking on each dataset", ""] + _table(shown, body) + [""]
+    return out + [f"- {line}" for line in said] + ([""] if said else [])
+
+
+def _transfer_budget(transfer: pd.DataFrame) -> int:
+    """256 when the transfer table has it, else its middle budget."""
+    budgets = sorted(transfer["budget"].unique())
+    return HEADLINE_BUDGET if HEADLINE_BUDGET in budgets else budgets[len(budgets) // 2]
 
 
 def _exclusions(runs: pd.DataFrame, t1: pd.DataFrame, vocab: Vocabulary) -> list[str]:
@@ -299,6 +333,7 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
     out += _run_section(_json(results, MANIFEST), runs) + [""]
     out += _grid_section(runs, _json(results, CONFIG)) + [""]
     out += _table1_section(t1, vocab, "Table 1: means over runs, 95% intervals")
+    out += _tiers_section(t1)
     out += _table2_section(_read(results, TABLE2))
     out += _paired_section(
         _read(results, PAIRED),

@@ -53,6 +53,7 @@ import numpy as np
 import pandas as pd
 
 from bench.failures import ERROR, exclusion_rule
+from bench.report.power import tiers
 from bench.report.stats import paired_difference, stratified_interval
 from bench.vocabulary import (
     GROUND_TRUTH,
@@ -209,13 +210,40 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
                     notes.setdefault(note, []).append(m)
         row["note"] = "; ".join(f"{why}: {', '.join(ms)}" for why, ms in notes.items())
         out.append(row)
-    t = pd.DataFrame(out)
+    t = with_tiers(pd.DataFrame(out), rows, vocab)
     if t.empty:
         return t
     order = t.apply(
         lambda r: (r["budget"] if r["budget"] > 0 else math.inf, vocab.order(r["method"])), axis=1
     )
     return t.loc[order.sort_values().index].reset_index(drop=True)
+
+
+def tier_column(metric: str) -> str:
+    """Table 1's column of a metric's tiers."""
+    return f"{metric}_tier"
+
+
+def with_tiers(t: pd.DataFrame, rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
+    """Table 1 with the tiers of each task's first headline metric (`tier_column`): per
+    budget, among the budgeted methods that are no reference, over the (scene, seed) units
+    every one of them has (`bench.report.power.tiers`: Holm-corrected Wilcoxon tests; 1 is
+    the best's tier); empty for the others."""
+    if t.empty:
+        return t
+    references = set(vocab.with_role("reference"))
+    for m in (m for m in vocab.first_headline() if m in rows):
+        counted = solvable(rows, m, vocab)
+        counted = counted[(counted["budget"] > 0) & ~counted["method"].isin(references)]
+        tier = {}
+        for budget, at in counted.groupby("budget"):
+            wide = at.pivot_table(index=["scene", "seed"], columns="method", values=m)
+            wide = wide.dropna(axis=1, how="all").dropna()
+            if wide.shape[1] >= 2 and len(wide):
+                lower = m in vocab.lower_better()
+                tier |= {(k, budget): v for k, v in tiers(wide, lower).items()}
+        t[tier_column(m)] = [tier.get(k, math.nan) for k in zip(t["method"], t["budget"])]
+    return t
 
 
 def _units(rows: pd.DataFrame, budget: int, metric: str) -> tuple[np.ndarray, dict]:

@@ -17,6 +17,15 @@ methods there is no tau: `tau_note` says why instead (with five methods, an exac
 permutation test at 5 % tells only a perfect agreement or reversal from chance, with four
 or three not even that; with six, one discordant pair too).
 
+Beside each tau, its power (`bench.report.power`, docs/protocol.md "Verdicts and their
+power"): the split-half reliability of each side's ranking (`rel_rendered` over the rendered
+(scene, seed) cells, `rel_dataset` over the dataset's bags), their `ceiling`, the
+real-to-real baseline `tau_photos` (the other datasets' mean rank against this one; NaN
+with one dataset), and the signs of each method minus `SIGN_REFERENCE` where both sides
+ran it: `signs_agree` of `signs_decided` between the renders and the dataset, beside
+`signs_agree_photos` of `signs_decided_photos` between the other datasets' mean difference
+and this one's.
+
 Against several rendered folders (one per rig regime, `bench.cli.common.REGIMES`), the rows
 of each carry its views per scene (`rendered_views`), and `matched` marks, per dataset, the
 regime nearest the dataset's view count (ties: the denser): the comparison the README reports.
@@ -31,10 +40,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from bench.report.power import ceiling, real_to_real, sign_agreement, split_half
 from bench.report.tables import headline_frame, solvable
 from bench.results import RUNS, read_runs, read_settings, read_vocabulary
 from bench.vocabulary import Vocabulary
 
+SIGN_REFERENCE = "colmap-b"
+"""Stock COLMAP held to the budget: the signs of `transfer.csv` are each method's minus it."""
 DRAWS = 2000
 MOVERS = 2
 MIN_METHODS = 6
@@ -70,6 +82,49 @@ def _means(frame: pd.DataFrame, metric: str, vocab: Vocabulary) -> pd.DataFrame:
     frame = solvable(frame, metric, vocab)
     rows = frame[(frame["budget"] > 0) & frame[metric].notna()]
     return rows.groupby(["budget", "method"])[metric].mean().unstack("method")
+
+
+def _cells(frame: pd.DataFrame, metric: str, vocab: Vocabulary, budget: int) -> pd.DataFrame:
+    """The values of `metric` at `budget` per (scene, seed) cell and method (`solvable`)."""
+    rows = solvable(frame, metric, vocab)
+    rows = rows[(rows["budget"] == budget) & rows[metric].notna()]
+    return rows.pivot_table(index=["scene", "seed"], columns="method", values=metric)
+
+
+def power(
+    real: pd.DataFrame,
+    ref: pd.DataFrame,
+    sets: pd.DataFrame,
+    dataset: str,
+    methods: list[str],
+    lower_better: bool,
+) -> dict:
+    """The power fields of one comparison (module docstring): `real` and `ref` the cells x
+    methods of the dataset and of the renders, `sets` every dataset's means (sets x
+    methods) at the same budget and metric."""
+    rel_r = split_half(ref.reindex(columns=methods))[1]
+    rel_d = split_half(real.reindex(columns=methods))[1]
+    sets = sets.reindex(columns=methods).dropna(axis=1)
+    base = real_to_real(sets, lower_better).get(dataset, math.nan) if len(sets) > 1 else math.nan
+    out = {
+        "rel_rendered": rel_r,
+        "rel_dataset": rel_d,
+        "ceiling": ceiling(rel_r, rel_d),
+        "tau_photos": base,
+    }
+    if SIGN_REFERENCE in methods:
+        mine = _minus_reference(real.reindex(columns=methods).mean())
+        rendered = _minus_reference(ref.reindex(columns=methods).mean())
+        out["signs_agree"], out["signs_decided"] = sign_agreement(mine, rendered)
+        if SIGN_REFERENCE in sets and len(sets) > 1:
+            others = sets.drop(index=dataset).apply(_minus_reference, axis=1).mean()
+            out["signs_agree_photos"], out["signs_decided_photos"] = sign_agreement(mine, others)
+    return out
+
+
+def _minus_reference(means: pd.Series) -> pd.Series:
+    """Each method's mean minus `SIGN_REFERENCE`'s."""
+    return means.drop(SIGN_REFERENCE) - means[SIGN_REFERENCE]
 
 
 def compare(dataset: pd.Series, rendered: pd.Series, lower_better: bool) -> tuple[dict, list]:
@@ -134,12 +189,19 @@ def transfer(
             if metric not in rows or metric not in theirs:
                 continue
             real, ref = _means(rows, metric, vocab), _means(theirs, metric, vocab)
+            every = {d: _means(r, metric, vocab) for d, r in mine.groupby("scene", sort=False)}
             for budget in real.index.intersection(ref.index):
                 a, b = real.loc[budget].dropna(), ref.loc[budget].dropna()
                 methods = [m for m in a.index if m in b.index]
                 if len(methods) < 3:
                     continue
-                row, rows_ranked = compare(a[methods], b[methods], metric in vocab.lower_better())
+                lower = metric in vocab.lower_better()
+                row, rows_ranked = compare(a[methods], b[methods], lower)
+                sets = pd.DataFrame(
+                    {d: m.loc[budget] for d, m in every.items() if budget in m.index}
+                ).T
+                cells = _cells(rows, metric, vocab, budget), _cells(theirs, metric, vocab, budget)
+                row |= power(*cells, sets, dataset, methods, lower)
                 key = {"dataset": dataset, "rendered_views": views, "metric": metric}
                 key["budget"] = int(budget)
                 summary.append(key | row)
@@ -179,6 +241,38 @@ def said(summary: pd.DataFrame, budget: int) -> list[str]:
             f"{dataset} against the {views}-view regime at B = {budget}, Kendall's tau: "
             + (notes.pop() if len(notes) == 1 and "" not in notes else "; ".join(taus))
         )
+    return lines
+
+
+def verdicts(summary: pd.DataFrame, budget: int) -> list[str]:
+    """Per dataset, one sentence at `budget` on its matched regime: whether the renders
+    predict its ranking as well as the other datasets do (tau against `tau_photos`), with
+    the reliabilities and the ceiling; none where a dataset has no baseline."""
+    if "tau_photos" not in summary:
+        return []
+    lines = []
+    rows = summary[summary["matched"] & (summary["budget"] == budget)]
+    for dataset, group in rows.groupby("dataset", sort=False):
+        parts = []
+        for r in group.itertuples():
+            if math.isnan(r.kendall_tau) or math.isnan(r.tau_photos):
+                continue
+            how = "as well as" if r.kendall_tau >= r.tau_photos else "less well than"
+            inside = r.tau_lo <= r.tau_photos <= r.tau_hi
+            parts.append(
+                f"{how} the other photographs in {r.metric} (tau {r.kendall_tau:.2f} "
+                f"[{r.tau_lo:.2f}, {r.tau_hi:.2f}] against {r.tau_photos:.2f}"
+                + (", within the interval" if inside else "")
+                + f"; reliability {r.rel_rendered:.2f} renders, {r.rel_dataset:.2f} "
+                f"photographs, ceiling {r.ceiling:.2f})"
+            )
+        if parts:
+            views = group["rendered_views"].iloc[0]
+            lines.append(
+                f"{dataset}, B = {budget}: the {views}-view renders predict it "
+                + "; ".join(parts)
+                + "."
+            )
     return lines
 
 

@@ -48,7 +48,7 @@ from bench.report.tables import (
     with_shares,
 )
 from bench.report.transfer import said as transfer_said
-from bench.report.transfer import transfer_regimes
+from bench.report.transfer import transfer_regimes, verdicts
 from bench.results import (
     CONFIG,
     FIGURE2,
@@ -204,7 +204,7 @@ def _write_transfer(df: pd.DataFrame, vocab: Vocabulary, results: Path, rendered
     budget = headline_budget(summary)
     matched = summary["matched"], ranks["matched"]
     figure_transfer(ranks[matched[1]], summary[matched[0]], budget, results / FIGURE_TRANSFER)
-    for line in transfer_said(summary, budget):
+    for line in transfer_said(summary, budget) + verdicts(summary, budget):
         log(f"{results / TRANSFER}: {line}")
 
 

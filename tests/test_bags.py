@@ -1,0 +1,89 @@
+"""Bags: random co-visible subsets of a dataset's images, each scored as a scene of its own
+(`bench.harness.bags`)."""
+
+from __future__ import annotations
+
+from itertools import combinations
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.sparse.csgraph import connected_components
+
+from bench.cli import main
+from bench.evaluation.export import export_dataset
+from bench.harness.bags import BAG, draw_bags
+
+
+def test_bags_on_a_chain_are_its_runs_of_consecutive_views_each_once():
+    chain = {(0, 1), (1, 2), (2, 3), (3, 4)}
+    bags = draw_bags(5, chain, 3, 10)
+    assert sorted(bags) == [(0, 1, 2), (1, 2, 3), (2, 3, 4)]  # every connected 3 of 5, once
+    assert draw_bags(5, chain, 3, 10) == bags  # seeded
+
+
+def test_a_bag_as_large_as_the_set_is_the_set_and_unreachable_sizes_give_none():
+    assert draw_bags(4, {(0, 1)}, 4, 10) == [(0, 1, 2, 3)]
+    assert draw_bags(4, {(0, 1)}, 0, 10) == [(0, 1, 2, 3)]
+    assert draw_bags(4, {(0, 1), (2, 3)}, 3, 10) == []
+
+
+def test_every_bag_is_connected_and_distinct_on_a_random_graph():
+    rng = np.random.default_rng(3)
+    links = {p for p in combinations(range(12), 2) if rng.random() < 0.25}
+    bags = draw_bags(12, links, 5, 20)
+    assert len(bags) == 20 and len(set(bags)) == 20
+    for bag in bags:
+        adj = np.array([[(a, b) in links or (b, a) in links for b in bag] for a in bag])
+        assert len(bag) == 5 and connected_components(adj, directed=False)[0] == 1
+
+
+@pytest.fixture(scope="module")
+def dataset(medium_entry, tmp_path_factory):
+    return export_dataset(medium_entry("table"), tmp_path_factory.mktemp("bags") / "table-ds")
+
+
+def test_a_dataset_run_scores_each_bag_on_its_own_views_and_reuses_them(
+    dataset, renders_dir, tmp_path, capsys
+):
+    out = tmp_path / "r"
+    argv = ["run", "--dataset", str(dataset), "--methods", "texture", "--budget", "64"]
+    argv += ["--tasks", "pairs", "--protocols", "multiview", "--workers", "1"]
+    argv += ["--renders", str(renders_dir), "--results", str(out)]
+    assert main([*argv, "--bag-size", "4", "--bags", "2"]) == 0
+    rows = pd.read_csv(out / "runs.csv")
+    assert sorted(rows["seed"]) == [0, 1] and (rows["views"] == 4).all()
+    bags = [b.split() for b in rows[BAG]]
+    assert all(len(b) == 4 for b in bags) and bags[0] != bags[1]
+    assert (rows["pairs_scored"] <= 6).all()  # the pairs of 4 views, not of the set's 6
+    capsys.readouterr()
+    assert main([*argv, "--bag-size", "4", "--bags", "2"]) == 0
+    assert "2 of 2 rows already" in capsys.readouterr().err
+    assert main([*argv, "--bag-size", "0"]) == 0  # the whole set: its rows computed again
+    assert "computed on other bags" in capsys.readouterr().err
+    whole = pd.read_csv(out / "runs.csv").query("seed == 0")
+    assert len(whole) == 1 and whole["views"].iloc[0] == 6
+    assert BAG not in whole or whole[BAG].isna().all()  # no bag: the whole set
+
+
+def test_a_bags_signals_are_those_of_its_views_alone(dataset, tmp_path):
+    from bench.frontend.geometry import IMAGES
+    from bench.frontend.signals import SIGNALS, compute_signals
+    from bench.frontend.stage import front_end
+    from bench.harness.bags import bag_front
+    from bench.harness.config import RunConfig
+
+    cfg, bag = RunConfig(), (0, 2, 3, 5)
+    full = front_end(dataset, cfg.detector, cfg.signals, tmp_path, IMAGES)
+    mine = bag_front(full, bag, cfg.detector, cfg.signals)
+    alone, _ = compute_signals([full.views[i] for i in bag], mine.pools, cfg.detector, cfg.signals)
+    assert [v.name for v in mine.views] == [full.views[i].name for i in bag]
+    for got, want in zip(mine.signals, alone):
+        for s in SIGNALS:
+            np.testing.assert_allclose(getattr(got, s), getattr(want, s), atol=1e-9, err_msg=s)
+    # the views' other neighbours are gone: some cross-view signal differs from the set's
+    assert any(
+        not np.allclose(getattr(mine.signals[k], s), getattr(full.signals[i], s))
+        for k, i in enumerate(bag)
+        for s in ("ambiguity", "parallax", "epipolar")
+    )

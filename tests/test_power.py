@@ -1,0 +1,125 @@
+"""Reliability, ceiling, real-to-real baseline, sign agreement and tiers on hand-made cases
+with known answers (`bench.report.power`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench.report.power import (
+    ceiling,
+    half_splits,
+    holm,
+    real_to_real,
+    sign_agreement,
+    spearman_brown,
+    split_half,
+    tiers,
+)
+
+
+def test_spearman_brown_and_the_ceiling():
+    assert spearman_brown(0.5) == pytest.approx(2 / 3)
+    assert spearman_brown(1.0) == 1.0 and spearman_brown(0.0) == 0.0
+    assert math.isnan(spearman_brown(-1.0))
+    assert ceiling(0.64, 1.0) == pytest.approx(0.8)
+    assert math.isnan(ceiling(0.5, -0.1))
+
+
+def test_half_splits_enumerate_each_distinct_split_once():
+    assert len(half_splits(4)) == 3  # {0,1}|{2,3}, {0,2}|{1,3}, {0,3}|{1,2}
+    assert len(half_splits(5)) == 10  # C(5, 2): the halves differ in size
+    assert len(half_splits(30)) == 200  # too many: random ones
+    assert all(m.sum() == 15 for m in half_splits(30))
+
+
+def test_split_half_of_four_units_has_its_known_reliability():
+    # the three splits' halves give tau-b 0.5, 1 and 0.5: r = 2/3, reliability 0.8
+    values = pd.DataFrame(
+        [[3, 2, 1], [3, 1, 2], [3, 2, 1], [2, 3, 1]], columns=["x", "y", "z"], dtype=float
+    )
+    r, rel = split_half(values)
+    assert r == pytest.approx(2 / 3) and rel == pytest.approx(0.8)
+    same = pd.DataFrame([[3, 2, 1], [6, 5, 4]], columns=["x", "y", "z"], dtype=float)
+    assert split_half(same) == (1.0, 1.0)
+    assert all(math.isnan(v) for v in split_half(same.iloc[:1]))
+
+
+def test_real_to_real_ranks_the_other_sets_against_each():
+    means = pd.DataFrame(
+        [[3, 2, 1], [3, 2, 1], [3, 1, 2]], index=["A", "B", "C"], columns=["a", "b", "c"]
+    )
+    base = real_to_real(means.astype(float), lower_better=False)
+    assert base["C"] == pytest.approx(1 / 3)  # others rank a, b, c; C ranks a, c, b
+    assert base["A"] == pytest.approx(2 / math.sqrt(6))  # others: a 1, b 2.5, c 2.5 (a tie)
+    flipped = real_to_real(-means.astype(float), lower_better=True)
+    assert flipped.to_dict() == pytest.approx(base.to_dict())
+
+
+def test_sign_agreement_counts_the_decided_methods_only():
+    a = pd.Series({"m1": 0.2, "m2": -0.1, "m3": 0.0, "m4": 0.3})
+    b = pd.Series({"m1": 0.1, "m2": 0.1, "m3": 0.5, "m4": 0.2})
+    assert sign_agreement(a, b) == (2, 3)  # m3 has no sign on one side
+
+
+def test_holm_adjusts_step_down_and_keeps_the_order():
+    assert holm([0.01, 0.04, 0.03]) == pytest.approx([0.03, 0.06, 0.06])
+
+
+def test_tiers_join_methods_that_cannot_be_told_apart():
+    rng = np.random.default_rng(0)
+    base = rng.uniform(0.4, 0.6, 10)
+    values = pd.DataFrame({"a": base, "b": base, "c": base - 0.3})
+    # a and b never differ (p 1); c is below both in all ten units (exact p 2/1024, x3 Holm)
+    assert tiers(values, lower_better=False).to_dict() == {"a": 1, "b": 1, "c": 2}
+    assert tiers(-values, lower_better=True).to_dict() == {"a": 1, "b": 1, "c": 2}
+    few = values.iloc[:4]  # four units: the smallest two-sided p is 1/8, never below 0.05
+    assert set(tiers(few, lower_better=False)) == {1}
+
+
+def test_a_transfer_row_carries_its_power_with_known_values():
+    from bench.report.transfer import power
+
+    cols = ["x", "y", "colmap-b"]
+    real = pd.DataFrame([[3, 2, 1], [3, 1, 2], [3, 2, 1], [2, 3, 1]], columns=cols, dtype=float)
+    ref = pd.DataFrame([[1, 2, 3], [2, 3, 4]], columns=cols, dtype=float)
+    sets = pd.DataFrame(
+        [real.mean().to_list(), [3, 2, 1], [1, 3, 2]], index=["this", "B", "C"], columns=cols
+    )
+    out = power(real, ref, sets, "this", cols, lower_better=False)
+    assert out["rel_dataset"] == pytest.approx(0.8) and out["rel_rendered"] == 1.0
+    assert out["ceiling"] == pytest.approx(math.sqrt(0.8))
+    # others' mean ranks x 2, y 1.5, colmap-b 2.5; this set ranks x, y, colmap-b: (x, y) is
+    # the one discordant pair of three
+    assert out["tau_photos"] == pytest.approx(1 / 3)
+    # this set: x +1.5, y +0.75 over colmap-b; renders: x -2, y -1; others: x +0.5, y +1
+    assert (out["signs_agree"], out["signs_decided"]) == (0, 2)
+    assert (out["signs_agree_photos"], out["signs_decided_photos"]) == (2, 2)
+
+
+def test_table1_tiers_each_budget_apart_and_leave_references_out():
+    from pathlib import Path
+
+    from bench.report.tables import tier_column, with_tiers
+    from bench.results import read_vocabulary
+
+    vocab = read_vocabulary(Path(__file__).resolve().parents[1] / "results" / "published")
+    base = np.random.default_rng(0).uniform(0.4, 0.6, 10)
+    values = {"texture": base, "grid": base, "random": base - 0.3, "oracle": base + 0.3}
+    rows = pd.DataFrame(
+        [
+            {"scene": "s", "seed": k, "method": m, "budget": b, "pairs_auc_10": v[k] * b / 256}
+            for b in (128, 256)
+            for m, v in values.items()
+            for k in range(10)
+        ]
+    )
+    t = pd.DataFrame([{"method": m, "budget": b} for b in (128, 256) for m in values])
+    got = with_tiers(t, rows, vocab)
+    tiers = dict(zip(zip(got["method"], got["budget"]), got[tier_column("pairs_auc_10")]))
+    for b in (128, 256):
+        assert (tiers["texture", b], tiers["grid", b], tiers["random", b]) == (1, 1, 2)
+        assert math.isnan(tiers["oracle", b])  # a reference: shown, never tiered
