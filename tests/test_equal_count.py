@@ -84,6 +84,10 @@ def test_a_unit_selects_exactly_the_peers_count_per_view(medium_entry, tmp_path)
         want = [len(p[f"keypoints_{v}"]) for v in range(views)]
         got = [len(s[f"selection_{v}"]) for v in range(views)]
     assert got == want and any(n != BUDGET for n in want)
+    rows = pd.read_csv(tmp_path / "runs.csv").set_index("method")
+    kpv = rows["keypoints_per_view"]
+    assert kpv["cross-view@colmap-soft-b"] == pytest.approx(np.mean(want))
+    assert kpv["cross-view@colmap-soft-b"] == pytest.approx(kpv["colmap-soft-b"])
     assert (tmp_path / TABLE1_EQUAL).is_file()
 
 

@@ -7,11 +7,15 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import numpy as np
+
 from bench.backend.equal_count import EQUAL, equal_selection, peer_counts
 from bench.backend.matching import matcher
 from bench.frontend.policies import PolicyInput
 from bench.frontend.views import Source
+from bench.harness.evaluate import selection_shared
 from bench.harness.predict import store_selection
+from bench.results import PREDICTION
 from bench.vocabulary import METHODS, implemented_by
 
 
@@ -36,4 +40,13 @@ def store_equal(scene, unit, jobs, cfg, ws, record) -> None:
     store_selection(select)(scene, unit, jobs, cfg, ws, record)
 
 
-implemented_by(list(EQUAL), store_equal)  # its rows' code hash starts here too
+def equal_shared(scene, unit, record, grant, folder):
+    """`selection_shared` (`bench.harness.evaluate.Shared`) with the mean number of keypoints
+    per view that the unit selected: its counts differ from B, unlike a policy's."""
+    shared, seconds, poses = selection_shared(scene, unit, record, grant, folder)
+    with np.load(folder / f"{PREDICTION}-{grant}.npz") as arrays:
+        sizes = [len(arrays[f"selection_{v}"]) for v in range(len(record["names"]))]
+    return shared | {"keypoints_per_view": float(np.mean(sizes))}, seconds, poses
+
+
+implemented_by(list(EQUAL), store_equal, equal_shared)  # its rows' code hashes start here too
