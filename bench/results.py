@@ -109,6 +109,8 @@ TABLES = (
 )
 """The report's tables (`bench.report.tables`; Table 3, of the nbv task: `bench.report.nbv`)."""
 TABLE1, TABLE1_TWOVIEW, TABLE2, PAIRED, PAIRED_SFM, TABLE_SCENES, FRONTEND_COST, TABLE3 = TABLES
+# The equal-keypoint comparison (`bench.report.tables.equal_keypoints`), where it ran.
+TABLE1_EQUAL = "table1_equal.csv"
 FIGURES = ("figure2", "figure3", "figure_budget", "figure_views")
 """The report's figures, without their suffix (`.png`; Figure 3 also `.pdf`)."""
 FIGURE2, FIGURE3, FIGURE_BUDGET, FIGURE_VIEWS = FIGURES

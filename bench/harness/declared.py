@@ -7,13 +7,24 @@ from outside is declared by a policy module or an entry point, `bench.frontend.p
 from __future__ import annotations
 
 from bench.acquisition import choosers
-from bench.backend import peers
+from bench.backend import equal_count, peers
 from bench.evaluation import next_views, oracle
-from bench.frontend import feedback, policies
+from bench.frontend import feedback, policies, tracks
 from bench.harness import nbv, tasks
 from bench.vocabulary import SETTINGS, Vocabulary
 
-DECLARED_IN = (policies, feedback, peers, oracle, choosers, next_views, tasks, nbv)
+DECLARED_IN = (
+    policies,
+    feedback,
+    tracks,
+    peers,
+    equal_count,
+    oracle,
+    choosers,
+    next_views,
+    tasks,
+    nbv,
+)
 """The modules that declare the package's methods, tasks and metrics."""
 
 

@@ -18,9 +18,11 @@ from dataclasses import dataclass
 
 from bench import BenchError
 from bench.acquisition import choosers
+from bench.backend.equal_count import EQUAL_COUNT
 from bench.evaluation import next_views
 from bench.harness import nbv
 from bench.harness.declared import package_vocabulary
+from bench.harness.equal import equal_shared, store_equal
 from bench.harness.evaluate import Shared, evaluate, own_pipeline_shared, selection_shared
 from bench.harness.predict import (
     Store,
@@ -81,6 +83,7 @@ register_kind(PER_VIEW, KindRunner(store_selection(policy_selection), selection_
 register_kind(MULTI_VIEW, KindRunner(store_selection(policy_selection), selection_shared, True))
 register_kind(GROUND_TRUTH, KindRunner(store_selection(oracle_selection), selection_shared))
 register_kind(OWN_PIPELINE, KindRunner(store_own_pipeline, own_pipeline_shared))
+register_kind(EQUAL_COUNT, KindRunner(store_equal, equal_shared))
 register_kind(
     choosers.CHOOSER, KindRunner(nbv.store_trajectory(nbv.chooser_pick), score=nbv.nbv_rows)
 )

@@ -28,6 +28,7 @@ from bench.results import (
     PAIRED_SFM,
     RUNS,
     TABLE1,
+    TABLE1_EQUAL,
     TABLE2,
     TRANSFER,
     png,
@@ -280,6 +281,44 @@ def _paired_section(
     return [f"## {title}", ""] + _table(header, body) + [""]
 
 
+def _equal_section(equal: pd.DataFrame) -> list[str]:
+    """Table 1e: each equal-count method against its peer at the same keypoints per view,
+    pooled, every budget and metric; its first sentence, the headline budget's paired
+    differences in the table's first metric (the sfm task's mAA)."""
+    rows = equal[equal["scene"].isin(POOLED)] if not equal.empty else equal
+    if rows.empty:
+        return []
+    first = rows["metric"].iloc[0]
+    head = rows[(rows["budget"] == HEADLINE_BUDGET) & (rows["metric"] == first)]
+    said = "; ".join(
+        f"`{r['method']}` {_interval(r, 'mean_diff', 'lo', 'hi', 'note')} against "
+        f"`{r['peer']}` ({_num(r['method_kpv'])} and {_num(r['peer_kpv'])} keypoints per view)"
+        for _, r in head.iterrows()
+    )
+    out = ["## Table 1e: at equal keypoints per view (peers that hold more than B)", ""]
+    if said:
+        out += [
+            f"At the peer's own count in each view, {first} at {HEADLINE_BUDGET}, paired "
+            f"difference [95%]: {said}.",
+            "",
+        ]
+    header = ["method", "peer", "budget", "metric", "keypoints/view", "n", "difference", "w/t/l"]
+    body = [
+        [
+            f"`{r['method']}`",
+            f"`{r['peer']}`",
+            _num(r["budget"]),
+            str(r["metric"]),
+            f"{_num(r['method_kpv'])} / {_num(r['peer_kpv'])}",
+            _num(r["n"]),
+            _interval(r, "mean_diff", "lo", "hi", "note"),
+            f"{_num(r['wins'])}/{_num(r['ties'])}/{_num(r['losses'])}",
+        ]
+        for _, r in rows.iterrows()
+    ]
+    return out + _table(header, body) + [""]
+
+
 def _transfer_section(transfer: pd.DataFrame) -> list[str]:
     if transfer.empty:
         return []
@@ -334,6 +373,7 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
     out += _grid_section(runs, _json(results, CONFIG)) + [""]
     out += _table1_section(t1, vocab, "Table 1: means over runs, 95% intervals")
     out += _tiers_section(t1)
+    out += _equal_section(_read(results, TABLE1_EQUAL))
     out += _table2_section(_read(results, TABLE2))
     out += _paired_section(
         _read(results, PAIRED),

@@ -56,6 +56,7 @@ from bench.failures import ERROR, exclusion_rule
 from bench.report.power import tiers
 from bench.report.stats import paired_difference, stratified_interval
 from bench.vocabulary import (
+    EQUAL_COUNT,
     GROUND_TRUTH,
     HEADLINE,
     HEADLINE_POLICY,
@@ -63,6 +64,7 @@ from bench.vocabulary import (
     REFERENCE_MAPS,
     UNIT_KEY,
     Vocabulary,
+    equal_parts,
 )
 
 UNIT = list(UNIT_KEY)
@@ -415,3 +417,28 @@ def frontend_cost(df: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
         out.append(row)
     t = pd.DataFrame(out)
     return t.iloc[t["method"].map(vocab.order).argsort(kind="stable")].reset_index(drop=True)
+
+
+def equal_keypoints(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
+    """`table1_equal.csv`: every equal-count method (`<policy>@<peer>`, a per-view policy
+    at the peer's own keypoint count in each view, `bench.backend.equal_count`) against its
+    peer, per scene and pooled, per budget, in the summary metrics of the tasks the peers
+    run, with the paired difference (`_paired`) and both methods' mean keypoints per view
+    (`rows`: `headline_frame`); empty without such a method and its peer."""
+    present = set(pd.unique(rows["method"]))
+    pairs = [
+        (m, equal_parts(m)[1])
+        for m in vocab.with_kind(EQUAL_COUNT)
+        if m in present and equal_parts(m)[1] in present
+    ]
+    metrics = [m for n, t in vocab.tasks.items() if t.peers for m in vocab.summary_metrics(n)]
+    if not pairs or not metrics:
+        return pd.DataFrame()
+    out = _paired(rows, pairs, metrics, vocab)
+    task = vocab.posefree_task
+    count = vocab.column(task, "keypoints_per_view") if task else ""
+    if count in rows:
+        kpv = rows.groupby(["method", "budget"])[count].mean()
+        for side, col in (("method", "method_kpv"), ("baseline", "peer_kpv")):
+            out[col] = [kpv.get((m, b), math.nan) for m, b in zip(out[side], out["budget"])]
+    return out.rename(columns={"baseline": "peer"})

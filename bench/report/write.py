@@ -3,8 +3,8 @@
 reconstructs, and nothing here imports the stages that do.
 
 Written files: `table1.csv` (headline task and protocol), `table1_twoview.csv`,
-`table2.csv`, `paired.csv`, `paired_sfm.csv`, `table_scenes.csv`, `frontend_cost.csv`
-(`bench.report.tables`), `figure3.png/.pdf`, `figure_budget.png` (with several budgets)
+`table2.csv`, `paired.csv`, `paired_sfm.csv`, `table_scenes.csv`, `frontend_cost.csv`,
+`table1_equal.csv` where equal-count methods ran with their peer (`bench.report.tables`), `figure3.png/.pdf`, `figure_budget.png` (with several budgets)
 and `figure2.png` (`bench.report.figures`), `table3.csv` and `figure_views.png` with rows
 of the next-views task (`bench.report.nbv`), and last the folder's page, `README.md`
 (`bench.report.page`). A results folder of datasets also gets
@@ -37,6 +37,7 @@ from bench.report.figures import (
 from bench.report.nbv import figure_views, table3
 from bench.report.page import results_page
 from bench.report.tables import (
+    equal_keypoints,
     frontend_cost,
     headline_frame,
     paired,
@@ -64,6 +65,7 @@ from bench.results import (
     PAIRED_SFM,
     RUNS,
     TABLE1,
+    TABLE1_EQUAL,
     TABLE1_TWOVIEW,
     TABLE2,
     TABLE3,
@@ -139,6 +141,7 @@ def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> list[pd.
         TABLE_SCENES: table_scenes(frame, vocab) if len(frame) else pd.DataFrame(),
         FRONTEND_COST: frontend_cost(df, vocab),
         TABLE3: table3(df, vocab),
+        TABLE1_EQUAL: equal_keypoints(frame, vocab),
     }
     _write_tables(results, tables)
     return [tables[TABLE1], tables[TABLE1_TWOVIEW]]
@@ -208,7 +211,7 @@ def _write_transfer(df: pd.DataFrame, vocab: Vocabulary, results: Path, rendered
         log(f"{results / TRANSFER}: {line}")
 
 
-PUBLISHED_FILES = (RUNS, CONFIG, VOCABULARY, MANIFEST, GALLERY, *TABLES)
+PUBLISHED_FILES = (RUNS, CONFIG, VOCABULARY, MANIFEST, GALLERY, *TABLES, TABLE1_EQUAL)
 FIGURE_FILES = (*map(png, (FIGURE2, FIGURE3, FIGURE_BUDGET, FIGURE_VIEWS)), f"{FIGURE3}.pdf")
 
 
