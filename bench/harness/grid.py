@@ -22,6 +22,7 @@ import subprocess
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
+from functools import partial
 from importlib.metadata import packages_distributions, version
 from pathlib import Path
 
@@ -41,7 +42,7 @@ from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
 from bench.harness.predict import prediction_hash
 from bench.harness.tasks import RUNNERS
 from bench.render.config import RenderConfig
-from bench.render.entry import entry_meta, entry_name, render_scene
+from bench.render.entry import entry_meta, entry_name, render_scene, render_scenes
 from bench.results import (
     DAMAGED,
     MANIFEST,
@@ -330,14 +331,9 @@ def _run_in(
     todo += [f"{n_again} rows to score again from their stored predictions"] if n_again else []
     log(f"{len(done)} of {len(done) + n_rows} rows already in {ws.runs_csv}; " + ", ".join(todo))
     groups = sorted({u.group for u in work}, key=lambda g: (cfg.scenes.index(g[0]), g[1]))
-    entries = {}
-    with progress("render", len(groups), "scene") as bar:
-        for sc, sd in groups:
-            t = time.perf_counter()
-            entries[sc, sd] = cfg.dataset(sc) or render_scene(sc, sd, cfg.render(), ws.renders)
-            stage_s["render"] += time.perf_counter() - t
-            bar.set_postfix_str(f"{sc} seed {sd}")
-            bar.update()
+    wall = {"render": time.perf_counter()}
+    entries = _rendered(cfg, ws, groups, options.cluster, stage_s)
+    wall["render"] = time.perf_counter() - wall["render"]
     plan = Plan(entries, work, cfg.budgets)
     t_runs = time.perf_counter()
     with models_replaced(ws.results, options.overwrite) as state:
@@ -348,15 +344,21 @@ def _run_in(
                 keep_runs(ws.runs_csv, done)  # the rows computed again go first
                 state["bound"] = True
             append_runs(ws.runs_csv, [r | {"invocation": invocation["id"]} for r in new], vocab)
-    stage_s["runs_wall"] = time.perf_counter() - t_runs
+    stage_s["runs_wall"] = wall["runs"] = time.perf_counter() - t_runs
     out = read_runs(ws.runs_csv)
-    invocation |= {"rows": n_rows, "seconds": {"total": time.perf_counter() - t_start, **stage_s}}
+    invocation |= {
+        "rows": n_rows,
+        "seconds": {"total": time.perf_counter() - t_start, **stage_s},
+        "wall": wall | {"total": time.perf_counter() - t_start},
+        "cluster": _cluster_record(options.cluster),
+    }
     write_manifest(ws, cfg, invocation, out)  # before the report: its page shows the run
     if report is not None:
         t = time.perf_counter()
         report(out, ws.results, ws.renders)
-        invocation["seconds"]["report"] = time.perf_counter() - t
+        invocation["seconds"]["report"] = invocation["wall"]["report"] = time.perf_counter() - t
         invocation["seconds"]["total"] = time.perf_counter() - t_start
+        invocation["wall"]["total"] = invocation["seconds"]["total"]
         write_manifest(ws, cfg, invocation, out)
     ours = in_grid(cfg, out)
     said = [failures(ours), exclusions(ours, Vocabulary.current(), bool(cfg.datasets))]
@@ -367,6 +369,35 @@ def _run_in(
         + f"; results in {ws.results}"
     )
     return out
+
+
+def _rendered(
+    cfg: BenchConfig, ws: Workspace, groups: list, cluster: Cluster, stage_s: dict
+) -> dict[tuple[str, int], Path]:
+    """The render entry (or dataset folder) of each (scene, seed), in `groups`' order: the
+    scenes rendered side by side, one process per worker of a local cluster
+    (`bench.render.entry.render_scenes`); their seconds summed into `stage_s["render"]`."""
+    entries = {g: cfg.dataset(g[0]) for g in groups if cfg.dataset(g[0])}
+    scenes = [g for g in groups if g not in entries]
+    side_by_side = cluster.workers if cluster.scheduler is None else 1
+    render = partial(render_scene, cfg=cfg.render(), renders_dir=ws.renders)
+    if scenes:
+        entry_name(*scenes[0], cfg.render(), ws.renders)  # the variant resolved and said here
+    with progress("render", len(groups), "scene") as bar:
+        bar.update(len(entries))
+        for (sc, sd), entry, seconds in render_scenes(scenes, render, side_by_side):
+            entries[sc, sd] = entry
+            stage_s["render"] += seconds
+            bar.set_postfix_str(f"{sc} seed {sd}")
+            bar.update()
+    return {g: entries[g] for g in groups}
+
+
+def _cluster_record(cluster: Cluster) -> dict:
+    """What ran the units: the workers (a local cluster's; 1: this process) or the
+    scheduler's address, and this machine's cores."""
+    workers = cluster.workers if cluster.scheduler is None else cluster.scheduler
+    return {"workers": workers, "cores": os.cpu_count()}
 
 
 def in_grid(cfg: BenchConfig, rows: pd.DataFrame) -> pd.DataFrame:
@@ -451,8 +482,10 @@ def module_versions(modules: tuple[str, ...]) -> dict[str, str]:
 
 def write_manifest(ws: Workspace, cfg: BenchConfig, invocation: dict, rows: pd.DataFrame) -> None:
     """Versions, variant, host, settings and the invocations that computed the rows of
-    `runs.csv`: each with its commit and seconds per stage, kept while it owns a row (a rerun
-    that computes nothing adds nothing), and their sum."""
+    `runs.csv`: each with its commit, seconds per stage (`seconds`: the rows' stages summed
+    over the workers, and the render stage's scenes), wall seconds per phase (`wall`:
+    render, runs, report, total) and what ran it (`cluster`: workers, cores), kept while it
+    owns a row (a rerun that computes nothing adds nothing), and their sums."""
     path = ws.results / MANIFEST
     try:
         earlier = json.loads(path.read_text()).get("invocations", [])
@@ -469,9 +502,12 @@ def write_manifest(ws: Workspace, cfg: BenchConfig, invocation: dict, rows: pd.D
     for inv in kept:
         inv["rows_now"] = int((rows["invocation"] == inv["id"]).sum())
     total: dict[str, float] = {}
+    wall: dict[str, float] = {}
     for inv in kept:
         for k, v in inv["seconds"].items():
             total[k] = total.get(k, 0.0) + v
+        for k, v in inv.get("wall", {}).items():  # an invocation before the wall was kept has none
+            wall[k] = wall.get(k, 0.0) + v
     entries = [ws.renders / k for k in rows["render_key"].unique()]
     metas = [entry_meta(e) for e in entries if Source.kind(e) == "render"]
     manifest = {
@@ -484,6 +520,7 @@ def write_manifest(ws: Workspace, cfg: BenchConfig, invocation: dict, rows: pd.D
         "git_commit": sorted({inv["git_commit"] for inv in kept}),
         "invocations": kept,
         "seconds": total,
+        "wall": wall,
         "render_entries": sorted(e.name for e in entries),
     }
     write_text_atomic(path, json.dumps(manifest, indent=1))
