@@ -32,7 +32,7 @@ import pandas as pd
 from bench import ROOT, BenchError
 from bench.console import log, progress
 from bench.failures import ERROR, exclusions, failures
-from bench.files import write_text_atomic
+from bench.files import entry_problem, write_text_atomic
 from bench.frontend import plugins
 from bench.frontend.policies import check_methods, learned_weights
 from bench.frontend.views import Source, source_key
@@ -375,14 +375,19 @@ def _rendered(
     cfg: BenchConfig, ws: Workspace, groups: list, cluster: Cluster, stage_s: dict
 ) -> dict[tuple[str, int], Path]:
     """The render entry (or dataset folder) of each (scene, seed), in `groups`' order: the
-    scenes rendered side by side, one process per worker of a local cluster
-    (`bench.render.entry.render_scenes`); their seconds summed into `stage_s["render"]`."""
+    scenes whose entry is missing or damaged rendered side by side, one process per worker
+    of a local cluster (`bench.render.entry.render_scenes`); their seconds summed into
+    `stage_s["render"]`. A whole entry (every file's checksum verified) is taken here."""
+    t = time.perf_counter()
     entries = {g: cfg.dataset(g[0]) for g in groups if cfg.dataset(g[0])}
+    for g in groups:
+        entry = ws.renders / entry_name(*g, cfg.render(), ws.renders) if g not in entries else None
+        if entry is not None and entry.is_dir() and entry_problem(entry) is None:
+            entries[g] = entry
+    stage_s["render"] += time.perf_counter() - t
     scenes = [g for g in groups if g not in entries]
     side_by_side = cluster.workers if cluster.scheduler is None else 1
     render = partial(render_scene, cfg=cfg.render(), renders_dir=ws.renders)
-    if scenes:
-        entry_name(*scenes[0], cfg.render(), ws.renders)  # the variant resolved and said here
     with progress("render", len(groups), "scene") as bar:
         bar.update(len(entries))
         for (sc, sd), entry, seconds in render_scenes(scenes, render, side_by_side):
