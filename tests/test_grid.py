@@ -102,6 +102,11 @@ def test_quick_run_writes_every_file_with_documented_columns(quick_results):
     keys = {"versions", "variant", "host", "settings", "grid", "git_commit", "seconds"}
     assert keys | {"invocations"} <= set(manifest)
     assert manifest["seconds"]["total"] > 0 and "render" in manifest["seconds"]
+    (invocation,) = manifest["invocations"]
+    assert invocation["cluster"] == {"workers": 1, "cores": os.cpu_count()}
+    wall = invocation["wall"]
+    assert set(wall) == {"render", "runs", "report", "total"} and wall == manifest["wall"]
+    assert 0 < wall["render"] + wall["runs"] + wall["report"] <= wall["total"]
     for run in ("adaptive-b64", "all-b0", "oracle-b64/twoview"):
         assert (quick_results / "models" / "table-s0" / run / "points3D.txt").is_file()
     # every job's model in its own folder (sfm's two protocols once shared one)

@@ -79,6 +79,7 @@ def test_the_page_bench_run_writes_is_complete(every_task):
     run = page.split("## Grid")[0]
     assert "n/a" not in run, run  # the run's commit, variant, machine and versions
     assert "Seconds per stage" in run and "runs_wall" in run
+    assert "Wall seconds per phase" in run and "| workers | cores |" in run
 
 
 TASKS, PROTOCOLS = ("tri", "sfm", "pairs"), ("multiview", "twoview")

@@ -4,10 +4,14 @@ cluster of N single-threaded worker processes, or an existing cluster by address
 Units of work, with their dependencies: the front end of each (scene, seed), after its
 render (one per geometry its tasks grant); then each unit, which waits for its scene's
 front end, predicts (`bench.harness.predict`; skipped when it only re-scores a current
-stored prediction) and scores (`bench.harness.evaluate`). Renders stay in the main
-process, so one process renders per machine (Mitsuba's LLVM and CUDA variants use every
-core, or the GPU, on their own). A worker holds one scene at a time (`_scene`; a dataset's
-bag is a scene of its own, `bench.harness.bags`, its rows tagged with the bag). Rows come
+stored prediction) and scores (`bench.harness.evaluate`). Renders come first, from the main
+process: with N local workers, N scenes side by side, each in a process of its own
+(`bench.render.entry.render_scenes`: Mitsuba's LLVM variant uses every core and the CUDA
+variant the GPU, and the developing step of one scene runs while another is traced).
+Each worker process holds one thread per library (`one_thread_per_library`). Units are
+submitted scene by scene, the costliest of each scene first (`largest_first`). A worker
+holds one scene at a time (`_scene`; a dataset's bag is a scene of its own,
+`bench.harness.bags`, its rows tagged with the bag). Rows come
 back to the main process, which alone writes `runs.csv`. A method that fails (its policy
 raises or breaks the contract: `PolicyFailed`) is a value, in process as on a worker: the
 unit's rows are recorded as failed, saying what and where, and the grid goes on. A unit
@@ -28,6 +32,7 @@ from __future__ import annotations
 import math
 import os
 import signal
+import sys
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -49,7 +54,7 @@ from bench.harness.methods import runner
 from bench.harness.predict import LoadedScene, has_prediction, predict
 from bench.harness.tasks import RUNNERS
 from bench.results import Workspace
-from bench.vocabulary import Job, Unit
+from bench.vocabulary import GROUND_TRUTH, METHODS, MULTI_VIEW, OWN_PIPELINE, Job, Unit
 
 _HELD: dict = {}
 """The one scene this process holds."""
@@ -190,6 +195,29 @@ def execute(
     yield from _on_dask(plan, cfg, ws, cluster, on_scene)
 
 
+def unit_size(unit: Unit, work: Work) -> tuple:
+    """A unit's expected cost, as a sort key (larger: costlier), from what it is: a
+    whole-pool unit (`all`, stock COLMAP), then a stock-COLMAP peer and the ground-truth
+    selection (each runs a pipeline of its own, or reads every candidate's track), then
+    the feedback loop (matches each round), then the rest; within each, by budget and jobs.
+    (Measured on the published dense rows: `all` 40 s a unit, `colmap` 42 s, the COLMAP
+    peers 20-27 s, the oracle 24-30 s, the loop 3-12 s, the other policies 1-7 s.)"""
+    method = METHODS[unit.method]
+    heavy = {OWN_PIPELINE: 2, GROUND_TRUTH: 2, MULTI_VIEW: 1}.get(method.kind, 0)
+    return (3 if method.whole_pool else heavy, unit.budget, len(work.jobs))
+
+
+def largest_first(plan: Plan) -> list[Unit]:
+    """The units of a plan, scene by scene as the plan holds them (a worker keeps the
+    scene it holds: `_scene`), the costliest of each scene first (`unit_size`), so that
+    the run does not end waiting on one large unit started last."""
+    groups = list(plan.entries)
+    return sorted(
+        plan.work,
+        key=lambda u: (groups.index(u.group), tuple(-x for x in unit_size(u, plan.work[u]))),
+    )
+
+
 def _as_value(task, *args):
     """Run a task on a worker; bad input (a `BenchError`, deterministic) comes back as a
     value, so it is neither retried nor printed with a worker's traceback."""
@@ -230,20 +258,38 @@ def _local_cluster(workers: int):
         signal.signal(signal.SIGINT, previous)
 
 
-def _term_ignored():
-    """A worker plugin: SIGTERM ignored in the worker process, as Ctrl-C is, so that a
-    signal to the whole process group (`timeout`, systemd) reaches this process alone,
-    which stops the workers. Set after importing pycolmap, whose import installs glog's
-    failure signal handler (SIGTERM included: it printed each worker's native stack)."""
+def one_thread_per_library() -> None:
+    """Hold this process to one thread in each library that starts its own pool: OpenCV
+    (its pool has one thread per core otherwise), and BLAS, OpenMP (COLMAP) and torch,
+    whose pools Dask's nanny already sizes to one (`OMP_NUM_THREADS`, `OPENBLAS_NUM_THREADS`
+    and `MKL_NUM_THREADS` set before a worker starts; torch reads the first). N workers
+    then run N threads on N cores, not N times the cores."""
+    import cv2
+
+    cv2.setNumThreads(1)
+    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[name] = "1"  # for a library loaded later, and for a worker not nannied
+    torch = sys.modules.get("torch")  # imported only by the learned methods
+    if torch is not None:
+        torch.set_num_threads(1)
+
+
+def _worker_setup():
+    """A worker plugin: one thread per library (`one_thread_per_library`), and SIGTERM
+    ignored in the worker process, as Ctrl-C is, so that a signal to the whole process
+    group (`timeout`, systemd) reaches this process alone, which stops the workers. Set
+    after importing pycolmap, whose import installs glog's failure signal handler (SIGTERM
+    included: it printed each worker's native stack)."""
     from distributed import WorkerPlugin
 
-    class TermIgnored(WorkerPlugin):
+    class WorkerSetup(WorkerPlugin):
         def setup(self, worker):
             import pycolmap  # noqa: F401
 
+            one_thread_per_library()
             signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
-    return TermIgnored()
+    return WorkerSetup()
 
 
 def check_scheduler(address: str) -> None:
@@ -286,7 +332,7 @@ def _on_dask(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, on_sce
     client = Client(cluster.scheduler or local, timeout="10s")
     try:
         if local is not None:
-            client.register_plugin(_term_ignored(), name="bench-term-ignored")
+            client.register_plugin(_worker_setup(), name="bench-worker-setup")
         shared = client.scatter(plan, broadcast=True)  # sent once, not with every unit
         fronts = {
             client.submit(
@@ -295,6 +341,7 @@ def _on_dask(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, on_sce
             for group, entry in plan.entries.items()
         }
         by_group = {g: f for f, g in fronts.items()}
+        order = largest_first(plan)
         pending = {
             client.submit(
                 _as_value,
@@ -306,8 +353,9 @@ def _on_dask(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, on_sce
                 by_group[unit.group],
                 retries=1,
                 pure=False,
+                priority=len(order) - k,  # Dask runs the higher first
             ): unit
-            for unit in plan.work
+            for k, unit in enumerate(order)
         }
         for future in as_completed([*fronts, *pending]):
             if future in fronts:

@@ -22,6 +22,7 @@ import subprocess
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
+from functools import partial
 from importlib.metadata import packages_distributions, version
 from pathlib import Path
 
@@ -31,7 +32,7 @@ import pandas as pd
 from bench import ROOT, BenchError
 from bench.console import log, progress
 from bench.failures import ERROR, exclusions, failures, outcomes
-from bench.files import write_text_atomic
+from bench.files import entry_problem, write_text_atomic
 from bench.frontend import plugins
 from bench.frontend.policies import check_methods, learned_weights
 from bench.frontend.views import Source, source_key
@@ -42,7 +43,7 @@ from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
 from bench.harness.predict import prediction_hash
 from bench.harness.tasks import RUNNERS
 from bench.render.config import RenderConfig
-from bench.render.entry import entry_meta, entry_name, render_scene
+from bench.render.entry import entry_meta, entry_name, render_scene, render_scenes
 from bench.results import (
     DAMAGED,
     MANIFEST,
@@ -368,14 +369,9 @@ def _run_in(
     todo += [f"{n_again} rows to score again from their stored predictions"] if n_again else []
     log(f"{len(done)} of {len(done) + n_rows} rows already in {ws.runs_csv}; " + ", ".join(todo))
     groups = sorted({u.group for u in work}, key=lambda g: (cfg.scenes.index(g[0]), g[1]))
-    entries = {}
-    with progress("render", len(groups), "scene", shown=not cfg.datasets) as bar:
-        for sc, sd in groups:
-            t = time.perf_counter()
-            entries[sc, sd] = cfg.dataset(sc) or render_scene(sc, sd, cfg.render(), ws.renders)
-            stage_s["render"] += time.perf_counter() - t
-            bar.set_postfix_str(f"{sc} seed {sd}")
-            bar.update()
+    wall = {"render": time.perf_counter()}
+    entries = _rendered(cfg, ws, groups, options.cluster, stage_s)
+    wall["render"] = time.perf_counter() - wall["render"]
     bagged = {(sc, sd): b for sc in cfg.scenes for sd, b in cfg.bags(sc).items()}
     plan = Plan(entries, work, cfg.budgets, {g: b for g, b in bagged.items() if g in entries})
     t_runs = time.perf_counter()
@@ -390,20 +386,25 @@ def _run_in(
                 rows = [r | {"invocation": invocation["id"]} for r in new]
                 append_runs(ws.runs_csv, rows, vocab)
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the rows written keep their seconds
-        stage_s["runs_wall"] = time.perf_counter() - t_runs
-        _interrupted(
-            ws, cfg, invocation | {"seconds": {"total": time.perf_counter() - t_start}}, stage_s
-        )
+        stage_s["runs_wall"] = wall["runs"] = time.perf_counter() - t_runs
+        seconds = {"total": time.perf_counter() - t_start}
+        _interrupted(ws, cfg, invocation | {"seconds": seconds, "wall": wall}, stage_s)
         raise
-    stage_s["runs_wall"] = time.perf_counter() - t_runs
+    stage_s["runs_wall"] = wall["runs"] = time.perf_counter() - t_runs
     out = read_runs(ws.runs_csv)
-    invocation |= {"rows": n_rows, "seconds": {"total": time.perf_counter() - t_start, **stage_s}}
+    invocation |= {
+        "rows": n_rows,
+        "seconds": {"total": time.perf_counter() - t_start, **stage_s},
+        "wall": wall | {"total": time.perf_counter() - t_start},
+        "cluster": _cluster_record(options.cluster),
+    }
     write_manifest(ws, cfg, invocation, out)  # before the report: its page shows the run
     if report is not None:
         t = time.perf_counter()
         report(out, ws.results, ws.renders)
-        invocation["seconds"]["report"] = time.perf_counter() - t
+        invocation["seconds"]["report"] = invocation["wall"]["report"] = time.perf_counter() - t
         invocation["seconds"]["total"] = time.perf_counter() - t_start
+        invocation["wall"]["total"] = invocation["seconds"]["total"]
         write_manifest(ws, cfg, invocation, out)
     ours = in_grid(cfg, out)
     said = [
@@ -432,6 +433,40 @@ def _interrupted(ws: Workspace, cfg: BenchConfig, invocation: dict, stage_s: dic
     n = int((rows["invocation"] == invocation["id"]).sum())
     invocation["seconds"] |= stage_s
     write_manifest(ws, cfg, invocation | {"rows": n, "interrupted": True}, rows)
+
+
+def _rendered(
+    cfg: BenchConfig, ws: Workspace, groups: list, cluster: Cluster, stage_s: dict
+) -> dict[tuple[str, int], Path]:
+    """The render entry (or dataset folder) of each (scene, seed), in `groups`' order: the
+    scenes whose entry is missing or damaged rendered side by side, one process per worker
+    of a local cluster (`bench.render.entry.render_scenes`); their seconds summed into
+    `stage_s["render"]`. A whole entry (every file's checksum verified) is taken here."""
+    t = time.perf_counter()
+    entries = {g: cfg.dataset(g[0]) for g in groups if cfg.dataset(g[0])}
+    for g in groups:
+        entry = ws.renders / entry_name(*g, cfg.render(), ws.renders) if g not in entries else None
+        if entry is not None and entry.is_dir() and entry_problem(entry) is None:
+            entries[g] = entry
+    stage_s["render"] += time.perf_counter() - t
+    scenes = [g for g in groups if g not in entries]
+    side_by_side = cluster.workers if cluster.scheduler is None else 1
+    render = partial(render_scene, cfg=cfg.render(), renders_dir=ws.renders)
+    with progress("render", len(groups), "scene", shown=not cfg.datasets) as bar:
+        bar.update(len(entries))
+        for (sc, sd), entry, seconds in render_scenes(scenes, render, side_by_side):
+            entries[sc, sd] = entry
+            stage_s["render"] += seconds
+            bar.set_postfix_str(f"{sc} seed {sd}")
+            bar.update()
+    return {g: entries[g] for g in groups}
+
+
+def _cluster_record(cluster: Cluster) -> dict:
+    """What ran the units: the workers (a local cluster's; 1: this process) or the
+    scheduler's address, and this machine's cores."""
+    workers = cluster.workers if cluster.scheduler is None else cluster.scheduler
+    return {"workers": workers, "cores": os.cpu_count()}
 
 
 def in_grid(cfg: BenchConfig, rows: pd.DataFrame) -> pd.DataFrame:
@@ -518,8 +553,10 @@ def module_versions(modules: tuple[str, ...]) -> dict[str, str]:
 
 def write_manifest(ws: Workspace, cfg: BenchConfig, invocation: dict, rows: pd.DataFrame) -> None:
     """Versions, variant, host, settings and the invocations that computed the rows of
-    `runs.csv`: each with its commit and seconds per stage, kept while it owns a row (a rerun
-    that computes nothing adds nothing), and their sum."""
+    `runs.csv`: each with its commit, seconds per stage (`seconds`: the rows' stages summed
+    over the workers, and the render stage's scenes), wall seconds per phase (`wall`:
+    render, runs, report, total) and what ran it (`cluster`: workers, cores), kept while it
+    owns a row (a rerun that computes nothing adds nothing), and their sums."""
     path = ws.results / MANIFEST
     try:
         earlier = json.loads(path.read_text()).get("invocations", [])
@@ -536,9 +573,12 @@ def write_manifest(ws: Workspace, cfg: BenchConfig, invocation: dict, rows: pd.D
     for inv in kept:
         inv["rows_now"] = int((rows["invocation"] == inv["id"]).sum())
     total: dict[str, float] = {}
+    wall: dict[str, float] = {}
     for inv in kept:
         for k, v in inv["seconds"].items():
             total[k] = total.get(k, 0.0) + v
+        for k, v in inv.get("wall", {}).items():  # an invocation before the wall was kept has none
+            wall[k] = wall.get(k, 0.0) + v
     entries = [ws.renders / k for k in rows["render_key"].unique()]
     metas = [entry_meta(e) for e in entries if Source.kind(e) == "render"]
     manifest = {
@@ -551,6 +591,7 @@ def write_manifest(ws: Workspace, cfg: BenchConfig, invocation: dict, rows: pd.D
         "git_commit": sorted({inv["git_commit"] for inv in kept}),
         "invocations": kept,
         "seconds": total,
+        "wall": wall,
         "render_entries": sorted(e.name for e in entries),
     }
     write_text_atomic(path, json.dumps(manifest, indent=1))

@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import time
+from collections.abc import Callable, Iterator
 from fractions import Fraction
-from functools import cache
+from functools import cache, partial
 from importlib.metadata import version
 from pathlib import Path
 
@@ -135,9 +137,9 @@ def _resolved(
         raise BenchError(f"seed must be a non-negative integer, got {seed!r}")
     spec = load_spec(name)  # an unknown scene is one line, before the variant's
     variant, why = resolve_variant(cfg.variant, Path(renders_dir))
-    if why not in _announced:  # once per process
-        log(why)
+    if why not in _announced:  # once per process (the calling one: `render_scenes`)
         _announced.add(why)
+        log(why)
     return spec, variant, f"{name}-s{seed}-{render_key(spec, seed, cfg, variant)}"
 
 
@@ -184,6 +186,7 @@ def render_scene(
         with files.atomic_dir(entry) as tmp:
             seconds, names = [], None
             for v, u in enumerate(path_positions(cfg.views)):
+                _stop_point()
                 view = (
                     renders_dir
                     / "views"
@@ -222,3 +225,88 @@ def render_scene(
                 },
             )
     return entry
+
+
+Scene = tuple[str, int]  # a scene and seed
+
+
+_state = {"busy": False, "stop": False}  # a rendering process's: rendering, told to stop
+
+
+def _timed(render: Callable[[str, int], Path], scene: Scene) -> tuple[Scene, Path, float]:
+    t = time.perf_counter()
+    _state["busy"] = True
+    try:
+        return scene, render(*scene), time.perf_counter() - t
+    finally:
+        _state["busy"] = False
+
+
+def _stop(signum, frame):
+    """SIGTERM in a rendering process: it leaves at once when idle; while it renders, it
+    finishes the view under way and leaves before the next (`_stop_point`), since an
+    exception raised inside Mitsuba's call leaves its state broken and the process hung."""
+    if not _state["busy"]:
+        raise SystemExit(128 + signum)
+    _state["stop"] = True
+
+
+def _stop_point() -> None:
+    """Where a rendering process told to stop leaves: between views, its locks and
+    temporary folders removed on the way out."""
+    if _state["stop"]:
+        raise SystemExit(128 + signal.SIGTERM)
+
+
+def _render_process(told: set[str]) -> None:
+    """A rendering process's start: it leaves the calling process's group, so that a
+    signal to the group (Ctrl-C from a terminal, `timeout`, systemd) reaches the calling
+    process alone, which stops this one with SIGTERM (`_stop`; Mitsuba catches Ctrl-C
+    while it renders and returns the image cut short); it replaces glog's SIGTERM handler,
+    which pycolmap's import installs (it prints the native stack); and it does not
+    announce again the variant the calling process `told`."""
+    os.setpgrp()
+    try:
+        import pycolmap  # noqa: F401
+    except ImportError:
+        pass
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _stop)
+    _announced.update(told)
+
+
+def render_scenes(
+    scenes: list[Scene], render: Callable[[str, int], Path], processes: int
+) -> Iterator[tuple[Scene, Path, float]]:
+    """(scene, its entry, seconds) for each scene as its entry is ready (`render`:
+        `render_scene` with its settings bound, picklable), `processes` scenes at a time, side
+        by side, each in a process of its own (Mitsuba holds one scene per process; threads
+        rendering at once break it): while one path-traces a view (the LLVM variant on every
+        core, or the GPU, which takes several processes' views at once), another develops,
+        checks and writes its own (`bench.render.develop`, ground truth, files). What a view
+        holds does not depend on the order: its noise is seeded by its place on the path
+        (`bench.render.mitsuba.noise_seed`) and every cache entry is written under its own
+        lock, so the entries are the same files. The variant a process announces
+    (`_announced`) is not announced again by the rendering processes. One process renders
+    in this one, as before.
+        On an interrupt, or an error, the rendering processes are stopped at once: an entry,
+        and each view's, is complete or absent (`bench.files.atomic_dir`)."""
+    if processes <= 1 or len(scenes) <= 1:
+        yield from (_timed(render, s) for s in scenes)
+        return
+    import multiprocessing
+
+    spawn = multiprocessing.get_context("spawn")  # no copy of this process's state
+    pool = spawn.Pool(
+        min(processes, len(scenes)), initializer=_render_process, initargs=(set(_announced),)
+    )
+    try:
+        yield from pool.imap_unordered(partial(_timed, render), scenes)
+    except BaseException:  # an interrupt, an error, or the caller stopped early
+        pool.terminate()  # SIGTERM: each process cleans up and leaves
+        raise
+    else:
+        pool.close()
+    finally:
+        pool.join()
+        del pool  # collected now, not at exit (which would warn of its semaphores)

@@ -109,7 +109,28 @@ def _run_section(manifest: dict, runs: pd.DataFrame) -> list[str]:
     if seconds:
         out += ["", "Seconds per stage (summed over the invocations that computed these rows):", ""]
         out += _table(list(seconds), [[_num(round(v)) for v in seconds.values()]])
-    return out
+    return out + _wall_section(manifest)
+
+
+def _wall_section(manifest: dict) -> list[str]:
+    """Each invocation's wall seconds per phase beside the workers and cores that ran it
+    (`benchmarks/profile.py` gives the whole profile)."""
+    timed = [i for i in manifest.get("invocations", []) if isinstance(i, dict) and i.get("wall")]
+    if not timed:
+        return []
+    phases = list(dict.fromkeys(k for i in timed for k in i["wall"]))
+    rows = [
+        [
+            str(i.get("id", "n/a")),
+            str(i.get("cluster", {}).get("workers", "n/a")),
+            str(i.get("cluster", {}).get("cores", "n/a")),
+            _num(i.get("rows")),
+            *(_num(round(i["wall"][k])) if k in i["wall"] else "n/a" for k in phases),
+        ]
+        for i in timed
+    ]
+    out = ["", "Wall seconds per phase, per invocation, with the workers and cores it ran on:", ""]
+    return out + _table(["invocation", "workers", "cores", "rows", *phases], rows)
 
 
 def _grid_section(runs: pd.DataFrame, config: dict) -> list[str]:
