@@ -13,6 +13,7 @@ from bench.report.power import (
     ceiling,
     half_splits,
     holm,
+    lengthening,
     real_to_real,
     sign_agreement,
     spearman_brown,
@@ -27,6 +28,9 @@ def test_spearman_brown_and_the_ceiling():
     assert math.isnan(spearman_brown(-1.0))
     assert ceiling(0.64, 1.0) == pytest.approx(0.8)
     assert math.isnan(ceiling(0.5, -0.1))
+    assert lengthening(0.5, 0.8) == pytest.approx(4.0)  # 4 x the units: 4r/(1+3r) = 0.8
+    assert spearman_brown(1 / 3) == pytest.approx(0.5)  # doubling 1/3 gives 0.5
+    assert lengthening(1 / 3, 0.5) == pytest.approx(2.0)
 
 
 def test_half_splits_enumerate_each_distinct_split_once():
