@@ -13,6 +13,7 @@ from bench.report.power import (
     ceiling,
     half_splits,
     holm,
+    lengthening,
     real_to_real,
     sign_agreement,
     spearman_brown,
@@ -27,6 +28,9 @@ def test_spearman_brown_and_the_ceiling():
     assert math.isnan(spearman_brown(-1.0))
     assert ceiling(0.64, 1.0) == pytest.approx(0.8)
     assert math.isnan(ceiling(0.5, -0.1))
+    assert lengthening(0.5, 0.8) == pytest.approx(4.0)  # 4 x the units: 4r/(1+3r) = 0.8
+    assert spearman_brown(1 / 3) == pytest.approx(0.5)  # doubling 1/3 gives 0.5
+    assert lengthening(1 / 3, 0.5) == pytest.approx(2.0)
 
 
 def test_half_splits_enumerate_each_distinct_split_once():
@@ -123,3 +127,22 @@ def test_table1_tiers_each_budget_apart_and_leave_references_out():
     for b in (128, 256):
         assert (tiers["texture", b], tiers["grid", b], tiers["random", b]) == (1, 1, 2)
         assert math.isnan(tiers["oracle", b])  # a reference: shown, never tiered
+
+
+def test_the_verdict_says_whether_the_renders_predict_a_set_as_well_as_the_photographs():
+    from bench.report.transfer import verdicts
+
+    row = dict(dataset="d", rendered_views=6, matched=True, budget=256, tau_lo=0.1, tau_hi=0.8)
+    row |= dict(rel_rendered=0.9, rel_dataset=0.8, ceiling=math.sqrt(0.72))
+    summary = pd.DataFrame(
+        [
+            row | dict(metric="sfm_maa", kendall_tau=0.5, tau_photos=0.3),
+            row | dict(metric="pairs_auc_10", kendall_tau=0.5, tau_photos=0.9),
+            row | dict(matched=False, metric="sfm_maa", kendall_tau=0.0, tau_photos=0.3),
+        ]
+    )
+    (line,) = verdicts(summary, 256)
+    assert line.startswith("d, B = 256: the 6-view renders predict it as well as the other")
+    assert "sfm_maa (tau 0.50 [0.10, 0.80] against 0.30, within the interval;" in line
+    assert "less well than the other photographs in pairs_auc_10 (tau 0.50" in line
+    assert "against 0.90; reliability 0.90 renders, 0.80 photographs, ceiling 0.85)" in line

@@ -9,6 +9,8 @@ A ranking is the methods' means at one budget and metric over a set of units (re
   most `SPLITS`, else `SPLITS` random ones, seed 0); r is the mean over splits of Kendall's
   tau-b between the halves' means; the reliability of the whole is Spearman-Brown's
   2r / (1 + r) (`spearman_brown`).
+* `lengthening`: how many times more units a ranking needs to reach a reliability (the
+  Spearman-Brown prophecy).
 * `ceiling`: sqrt(rel_1 x rel_2), the largest correlation two rankings of these
   reliabilities can reach (Spearman's correction for attenuation); NaN unless both are
   positive.
@@ -47,6 +49,15 @@ def tau(x, y) -> float:
 def spearman_brown(r: float) -> float:
     """The reliability of a whole from the correlation r of its two halves: 2r / (1 + r)."""
     return 2 * r / (1 + r) if r > -1 else math.nan
+
+
+def lengthening(rel: float, target: float) -> float:
+    """How many times more units a ranking of reliability `rel` needs to reach `target`
+    (the Spearman-Brown prophecy solved for its factor: target (1 - rel) / (rel (1 -
+    target))); NaN unless 0 < rel and target < 1."""
+    if not 0 < rel or not target < 1 or math.isnan(rel):
+        return math.nan
+    return target * (1 - rel) / (rel * (1 - target))
 
 
 def ceiling(rel_a: float, rel_b: float) -> float:
