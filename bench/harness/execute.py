@@ -64,11 +64,15 @@ class Work:
 
 @dataclass(frozen=True)
 class Plan:
-    """The work of a run: render entry per (scene, seed), work per unit, the budgets."""
+    """The work of a run: render entry per (scene, seed) and work per unit."""
 
     entries: dict[tuple[str, int], Path]
     work: dict[Unit, Work]
-    budgets: tuple[int, ...]
+
+    @property
+    def budgets(self) -> tuple[int, ...]:
+        """The budgets of its units (the grid's, carried by each unit alone)."""
+        return tuple(sorted({u.budget for u in self.work if u.budget > 0}))
 
     @property
     def grants(self) -> tuple[str, ...]:

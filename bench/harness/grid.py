@@ -338,7 +338,7 @@ def _run_in(
             stage_s["render"] += time.perf_counter() - t
             bar.set_postfix_str(f"{sc} seed {sd}")
             bar.update()
-    plan = Plan(entries, work, cfg.budgets)
+    plan = Plan(entries, work)
     t_runs = time.perf_counter()
     try:
         with models_replaced(ws.results, options.overwrite) as state:
