@@ -14,6 +14,7 @@ folder (predictions, then scores), `report` makes the tables and figures from a 
 folder alone, and `cli` is the command line.
 """
 
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -21,9 +22,10 @@ ROOT = Path(__file__).resolve().parent.parent
 
 DISTRIBUTION = "kpbudget-bench"
 """The distribution's name on a package index (the import package is `bench`)."""
-__version__ = "0.4.0"
-"""The one place the version is written: pyproject.toml reads it (`[tool.setuptools.dynamic]`),
-`bench --version` prints it, and CHANGELOG.md's newest heading and the README name it."""
+try:
+    __version__ = version(DISTRIBUTION)
+except PackageNotFoundError:  # running from a source tree that was not installed
+    __version__ = "0+unknown"
 
 
 class BenchError(Exception):

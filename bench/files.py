@@ -35,17 +35,6 @@ def content_key(obj, n: int = 12) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:n]
 
 
-def source_hash(*code) -> str:
-    """Hash of the given modules, classes and functions as syntax: a docstring, a comment
-    or the layout changes nothing (`bench.codehash.object_digest`)."""
-    from bench.codehash import object_digest
-
-    h = hashlib.sha256()
-    for obj in code:
-        h.update(object_digest(obj).encode())
-    return h.hexdigest()[:12]
-
-
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)

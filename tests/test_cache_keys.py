@@ -13,8 +13,7 @@ import textwrap
 import pytest
 
 from bench import BenchError
-from bench.codehash import code_hash, covered
-from bench.files import source_hash
+from bench.codehash import code_hash, covered, object_digest
 
 SHARED = '''
 """Helpers of the synthetic stage."""
@@ -137,13 +136,13 @@ def test_a_cut_function_belongs_to_its_own_hash(pkg):
     assert code_hash([stage.method_a]) != own
 
 
-def test_source_hash_ignores_docstrings_and_comments(pkg):
+def test_a_digest_ignores_docstrings_and_comments(pkg):
     stage, edit = pkg
-    before = source_hash(stage)
+    before = object_digest(stage)
     edit("stage", '"""Runs."""', '"""Runs the stage (a longer docstring)."""  # and a comment')
-    assert source_hash(stage) == before
+    assert object_digest(stage) == before
     edit("stage", "return x + 1", "return x + 10")
-    assert source_hash(stage) != before
+    assert object_digest(stage) != before
 
 
 def test_the_shared_prediction_code_is_derived_and_leaves_the_methods_and_scoring_out():

@@ -200,12 +200,13 @@ def test_select_says_what_it_replaces_and_what_falls_short(dataset, tmp_path, ca
     out = tmp_path / "out"
     select_to_database(SelectRequest(dataset / "images", "texture", 64, overlays=True), out)
     capsys.readouterr()
-    pool = 10**5  # above every pool: each image holds all of its candidates
-    select_to_database(SelectRequest(dataset / "images", "texture", pool), out)
+    pool = 10**5  # above every pool: refused, as `bench run` refuses it
+    with pytest.raises(BenchError, match="budget 100000 exceeds every candidate pool of the 6"):
+        select_to_database(SelectRequest(dataset / "images", "texture", pool), out)
+    select_to_database(SelectRequest(dataset / "images", "texture", 64), out)
     err = capsys.readouterr().err
-    assert f"replacing {out / 'database.db'}" in err
-    assert "6 of 6 image(s) have fewer candidates than the budget 100000 per image" in err
-    assert "100000 per image (fewer in 6 of them: " in err
+    said = f"{out / 'database.db'} already existed: kept as {out / 'database.1.db'}"
+    assert said in err and (out / "database.1.db").is_file()
     assert not (out / "overlays").exists()  # the earlier run's overlays do not linger
     (tmp_path / "file").write_text("x")
     argv = ["select", "--images", str(dataset / "images"), "--out", str(tmp_path / "file")]

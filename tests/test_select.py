@@ -238,6 +238,7 @@ def test_sigterm_stops_select_in_one_line(tmp_path):
     )
     cmd = [sys.executable, "-m", "bench", "select", "--images", str(photos(tmp_path / "im"))]
     cmd += ["--out", str(tmp_path / "o"), "--policy", "sleepy", "--policy-module", str(module)]
+    cmd += ["--budget", "40"]  # within the pools (a budget above every pool is refused)
     proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, start_new_session=True)
     deadline = time.monotonic() + 60
     while not mark.exists() and time.monotonic() < deadline:

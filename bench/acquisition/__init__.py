@@ -1,4 +1,4 @@
-"""Stage 5, active acquisition: which view to capture next (the `nbv` task). In: the views
+"""Active acquisition: which view to capture next (the `nbv` task). In: the views
 captured so far (images, calibration and rig poses of the planned capture path), each
 one's candidate pool, signals and selection, the verified matches, the known-pose
 reconstruction made from them, and the candidate poses of the path (poses and

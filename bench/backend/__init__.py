@@ -1,4 +1,4 @@
-"""Stage 4, the reconstruction back end (COLMAP). In: per view the selected keypoints,
+"""The reconstruction back end (COLMAP). In: per view the selected keypoints,
 their descriptors and the calibration (never ground truth). Out: tentative and verified
 matches per pair and a COLMAP model, or the reason there is none.
 

@@ -1,4 +1,4 @@
-"""Stage 9, the `bench` command line. In: the user's arguments. Out: calls to the stages,
+"""The `bench` command line. In: the user's arguments. Out: calls to the stages,
 and every error as one line with a non-zero exit.
 
 One module per command (`HELP`, `DESCRIPTION`, `add_arguments`, `run`); the shared

@@ -105,6 +105,22 @@ def add_config_args(parser: argparse.ArgumentParser, cls: type, quick=None, choi
         )
 
 
+def render_config(args: argparse.Namespace):
+    """The render settings of `bench render`, `export` and `gallery`, checked."""
+    from bench.render.config import RenderConfig
+
+    return checked_views(config_from_args(RenderConfig, args).validate())
+
+
+def checked_views(render):
+    """`render`, refused in one line above `MAX_VIEWS` views (100000 started rendering)."""
+    from bench.render.config import MAX_VIEWS
+
+    if render.views > MAX_VIEWS:
+        raise BenchError(f"views must be from 2 to {MAX_VIEWS}, got {render.views}")
+    return render
+
+
 def config_from_args(cls: type, args: argparse.Namespace):
     return cls(
         **{f.name: getattr(args, f.name) for f in dataclasses.fields(cls) if hasattr(args, f.name)}

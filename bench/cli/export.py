@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from bench.cli.common import add_config_args, config_from_args, folder, renders_arg
+from bench.cli.common import add_config_args, folder, render_config, renders_arg
 from bench.render.config import VARIANTS, RenderConfig
 
 HELP = "write a rendered scene as a dataset in the COLMAP layout (for `bench run --dataset`)"
@@ -27,6 +27,6 @@ def run(args: argparse.Namespace) -> None:
     from bench.evaluation.export import check_target, export_dataset
     from bench.render.entry import render_scene
 
-    cfg = config_from_args(RenderConfig, args).validate()
+    cfg = render_config(args)
     check_target(args.out)  # one line, before the renderer says which variant it uses
     print(export_dataset(render_scene(args.scene, args.seed, cfg, args.renders), args.out))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from bench.cli.common import LATEST, add_config_args, config_from_args, renders_arg
+from bench.cli.common import LATEST, add_config_args, render_config, renders_arg
 from bench.render.config import VARIANTS, RenderConfig
 
 HELP = "render (or reuse) every scene and write a contact sheet of all views"
@@ -33,6 +33,6 @@ def run(args: argparse.Namespace) -> None:
     from bench.render.gallery import write_gallery
     from bench.scenes.spec import scene_names
 
-    cfg = config_from_args(RenderConfig, args).validate()
+    cfg = render_config(args)
     entries = {name: render_scene(name, args.seed, cfg, args.renders) for name in scene_names()}
     print(write_gallery(entries, args.out))

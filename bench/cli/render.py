@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from bench.cli.common import add_config_args, config_from_args, renders_arg
+from bench.cli.common import add_config_args, render_config, renders_arg
 from bench.render.config import VARIANTS, RenderConfig
 
 HELP = f"render one scene ({RenderConfig.views} views by default + ground truth) into the cache"
@@ -28,5 +28,5 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> None:
     from bench.render.entry import render_scene
 
-    cfg = config_from_args(RenderConfig, args).validate()
+    cfg = render_config(args)
     print(render_scene(args.scene, args.seed, cfg, args.renders, force=args.force))

@@ -16,6 +16,7 @@ from bench.cli.common import (
     REGIMES,
     add_config_args,
     apply_settings,
+    checked_views,
     field_docs,
     parse_list,
     published_snapshots,
@@ -295,7 +296,7 @@ def run_config(args: argparse.Namespace):
         for f in dataclasses.fields(RenderConfig)
         if getattr(args, f.name) is not None
     }
-    render = dataclasses.replace(render, **overrides)
+    render = checked_views(dataclasses.replace(render, **overrides))
     if args.dataset:  # a dataset's images are what they are: nothing renders
         given = [f"--{k.replace('_', '-')}" for k in overrides] + ["--scenes"] * (
             args.scenes is not None
@@ -322,6 +323,8 @@ def datasets_arg(paths: list[Path]) -> tuple[Path, ...]:
 
     out = []
     for path in map(Path, paths):
+        if not path.exists():
+            raise BenchError(f"{path} does not exist")
         if Source.kind(path) == "render":
             raise BenchError(
                 f"{path} is a render entry; --dataset takes DIR with images/ and sparse/"

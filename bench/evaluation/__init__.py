@@ -1,4 +1,4 @@
-"""Stage 6, evaluation: the only stage that reads ground truth. In: a render entry's
+"""Evaluation: the only stage that reads ground truth. In: a render entry's
 ground-truth layers, the candidate pools, the selections and the back end's result.
 Out: one run's metrics (formulas in `metrics`).
 

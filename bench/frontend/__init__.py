@@ -1,4 +1,4 @@
-"""Stage 3, the front end: what a real front end sees, and the feature policies.
+"""The front end: what a real front end sees, and the feature policies.
 In: a render entry's images and calibration (never its ground truth). Out: per view a
 candidate pool with five quality signals, and each policy's selection of B candidates.
 

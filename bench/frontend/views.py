@@ -125,8 +125,6 @@ class Source:
     def of(path: Path) -> Source:
         """A render entry, or a dataset folder with `images/` and `sparse/`."""
         path = Path(path)
-        if not path.exists():
-            raise BenchError(f"{path} does not exist")
         if Source.kind(path) == "render":
             problem = entry_problem(path)
             if problem:

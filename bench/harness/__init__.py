@@ -1,4 +1,4 @@
-"""Stage 7, the harness. In: the benchmark grid (scenes, seeds, policies, budgets, tasks,
+"""The harness. In: the benchmark grid (scenes, seeds, policies, budgets, tasks,
 protocols) and the run configuration. Out: a results folder: `runs.csv`, the stored
 predictions and models, `config.json`, `vocabulary.json` and `manifest.json`.
 

@@ -1,6 +1,6 @@
 """The package's declarations in one place: importing this module imports every module
-that declares a method, a task or a metric (`DECLARED_IN`), so `package_vocabulary` and
-`package_settings` hold all of them (`bench.vocabulary` holds the registries; a method
+that declares a method, a task or a metric (`DECLARED_IN`), so `package_vocabulary`
+holds all of them (`bench.vocabulary` holds the registries; a method
 from outside is declared by a policy module or an entry point, `bench.frontend.plugins`).
 """
 
@@ -11,7 +11,7 @@ from bench.backend import equal_count, peers
 from bench.evaluation import next_views, oracle
 from bench.frontend import feedback, policies, tracks
 from bench.harness import nbv, tasks
-from bench.vocabulary import SETTINGS, Vocabulary
+from bench.vocabulary import Vocabulary
 
 DECLARED_IN = (
     policies,
@@ -32,8 +32,3 @@ def package_vocabulary() -> Vocabulary:
     """Every method, task and metric declared in this process: the package's and those
     of the policy modules loaded."""
     return Vocabulary.current()
-
-
-def package_settings() -> dict[str, type]:
-    """The dataclass of each declared method's own settings (`bench.vocabulary.SETTINGS`)."""
-    return SETTINGS

@@ -71,11 +71,10 @@ class Work:
 
 @dataclass(frozen=True)
 class Plan:
-    """The work of a run: render entry per (scene, seed), work per unit, the budgets."""
+    """The work of a run: render entry per (scene, seed) and work per unit."""
 
     entries: dict[tuple[str, int], Path]
     work: dict[Unit, Work]
-    budgets: tuple[int, ...]
     bags: dict[tuple[str, int], tuple[int, ...]] = field(default_factory=dict)
     """The views of a dataset's bag per (scene, seed) (`bench.harness.bags`); a group
     without one reads every view of its entry."""
@@ -87,6 +86,11 @@ class Plan:
             return rows
         tag = {bags.BAG: bags.bag_names(str(self.entries[unit.group]), bag), "views": len(bag)}
         return [r | tag for r in rows]
+
+    @property
+    def budgets(self) -> tuple[int, ...]:
+        """The budgets of its units (the grid's, carried by each unit alone)."""
+        return tuple(sorted({u.budget for u in self.work if u.budget > 0}))
 
     @property
     def grants(self) -> tuple[str, ...]:

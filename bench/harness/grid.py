@@ -373,7 +373,7 @@ def _run_in(
     entries = _rendered(cfg, ws, groups, options.cluster, stage_s)
     wall["render"] = time.perf_counter() - wall["render"]
     bagged = {(sc, sd): b for sc in cfg.scenes for sd, b in cfg.bags(sc).items()}
-    plan = Plan(entries, work, cfg.budgets, {g: b for g, b in bagged.items() if g in entries})
+    plan = Plan(entries, work, {g: b for g, b in bagged.items() if g in entries})
     t_runs = time.perf_counter()
     try:
         with models_replaced(ws.results, options.overwrite) as state:

@@ -58,16 +58,16 @@ class KindRunner:
     prediction: `bench.harness.evaluate.evaluate`, or the kind's own."""
 
 
-RUNNERS: dict[str, KindRunner] = {}
+KIND_RUNNERS: dict[str, KindRunner] = {}
 
 
 def register_kind(kind: str, runner: KindRunner) -> None:
     """The runner of a declared kind (one per kind)."""
     if kind not in KINDS:
         raise BenchError(f"kind {kind!r} is not declared (bench.vocabulary.declare_kind)")
-    if kind in RUNNERS:
+    if kind in KIND_RUNNERS:
         raise BenchError(f"kind {kind!r} has a runner already")
-    RUNNERS[kind] = runner
+    KIND_RUNNERS[kind] = runner
 
 
 def runner(method: str) -> KindRunner:
@@ -76,7 +76,7 @@ def runner(method: str) -> KindRunner:
     if method not in METHODS:
         valid = ", ".join(package_vocabulary().methods)
         raise BenchError(f"unknown method {method!r}; valid: {valid}")
-    return RUNNERS[METHODS[method].kind]
+    return KIND_RUNNERS[METHODS[method].kind]
 
 
 register_kind(PER_VIEW, KindRunner(store_selection(policy_selection), selection_shared, True))

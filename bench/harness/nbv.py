@@ -63,13 +63,12 @@ from bench.acquisition.choosers import (
     choose,
     chooser_rng,
 )
-from bench.backend.matching import match_and_verify, matcher
 from bench.evaluation.next_views import VIEW_ORACLE, best_candidate
 from bench.frontend.geometry import IMAGES, RIG
-from bench.frontend.policies import PolicyFailed, PolicyInput
-from bench.frontend.selection import select_views
+from bench.frontend.policies import PolicyFailed
 from bench.frontend.signals import compute_signals
 from bench.frontend.views import Source
+from bench.harness import select_match
 from bench.harness.config import MAX_ADDED, RunConfig
 from bench.harness.evaluate import identities, make_row, render_seconds
 from bench.harness.predict import LoadedScene, clear_model, export_model, read_record
@@ -195,14 +194,11 @@ def _state(ctx: Context, views: tuple, grant: str):
         vs, pools, sigs = _front(ctx, views, grant)
         cams, cfg, policy = [v.camera for v in vs], ctx.cfg, ctx.cfg.nbv.policy
         t = time.perf_counter()
-        inputs = [PolicyInput(v, c, s) for v, c, s in zip(vs, pools, sigs)]
-        match = matcher(cams, pools, cfg.backend, cfg.detector.detector)
-        own = cfg.policy_config(policy)
-        sel, _ = select_views(policy, inputs, ctx.unit.budget, ctx.unit.seed, own, match)
+        sel, _, _ = select_match.select(
+            vs, pools, sigs, policy, ctx.unit.budget, ctx.unit.seed, cfg
+        )
         ctx.spent("select", t)
-        xy = [c.xy[s] for c, s in zip(pools, sel)]
-        desc = [c.descriptors[s] for c, s in zip(pools, sel)]
-        pairs, seconds = match_and_verify(cams, xy, desc, cfg.backend, cfg.detector.detector)
+        pairs, seconds = select_match.match(cams, pools, sel, policy, cfg)
         for stage, s in seconds.items():
             ctx.seconds[stage] = ctx.seconds.get(stage, 0.0) + s
         return vs, pools, sigs, sel, pairs

@@ -32,23 +32,23 @@ import shutil
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import cache, partial
 from pathlib import Path
 
 import numpy as np
 
-from bench.backend.matching import PairMatches, match_and_verify, matcher
+from bench.backend.matching import PairMatches
 from bench.backend.peers import run_peer
 from bench.codehash import code_hash
 from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.evaluation.truth import SceneTruth
 from bench.files import atomic_path, content_key, temp_dir_beside, write_text_atomic
 from bench.frontend import plugins
-from bench.frontend.policies import PolicyFailed, PolicyInput
-from bench.frontend.selection import select_views
+from bench.frontend.policies import PolicyFailed
 from bench.frontend.stage import FrontEnd, front_end
 from bench.frontend.views import Source
+from bench.harness import select_match
 from bench.harness.config import RunConfig
 from bench.harness.tasks import RUNNERS, Matched
 from bench.results import LOOP, PREDICTION, Workspace
@@ -125,10 +125,10 @@ Selection = tuple[list[np.ndarray], list[dict]]
 
 def policy_selection(fe: FrontEnd, truth: SceneTruth, unit: Unit, cfg: RunConfig) -> Selection:
     """A policy's selection (`bench.frontend.selection`; it never sees `truth`)."""
-    inputs = [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
-    match = matcher([v.camera for v in fe.views], fe.pools, cfg.backend, cfg.detector.detector)
-    policy_cfg = cfg.policy_config(unit.method)
-    return select_views(unit.method, inputs, unit.budget, unit.seed, policy_cfg, match)
+    selections, rounds, _ = select_match.select(
+        fe.views, fe.pools, fe.signals, unit.method, unit.budget, unit.seed, cfg
+    )
+    return selections, rounds
 
 
 def oracle_selection(fe: FrontEnd, truth: SceneTruth, unit: Unit, cfg: RunConfig) -> Selection:
@@ -217,12 +217,8 @@ def _store_selection(scene, unit, jobs, cfg, ws, record, select) -> None:
         key = repr(([s.tolist() for s in selections], rounds))
         xy = [c.xy[s] for c, s in zip(fe.pools, selections)]
         if key not in matched:
-            desc = [c.descriptors[s] for c, s in zip(fe.pools, selections)]
             cams = [v.camera for v in fe.views]
-            backend = cfg.backend
-            if METHODS[unit.method].matcher:
-                backend = replace(backend, matcher=METHODS[unit.method].matcher)
-            matched[key] = match_and_verify(cams, xy, desc, backend, cfg.detector.detector)
+            matched[key] = select_match.match(cams, fe.pools, selections, unit.method, cfg)
         pairs, match_s = matched[key]
         record["names"] = [v.name for v in fe.views]
         record["grants"][grant] = {

@@ -24,15 +24,15 @@ import numpy as np
 import pycolmap
 
 from bench import BenchError
-from bench.backend.matching import matcher
 from bench.backend.reconstruction import camera_ids, write_database
 from bench.console import log
 from bench.files import atomic_path
 from bench.frontend import plugins
-from bench.frontend.policies import PolicyInput, check_methods
-from bench.frontend.selection import check_budgets, select_views
+from bench.frontend.policies import check_methods
+from bench.frontend.selection import check_budgets
 from bench.frontend.stage import compute
 from bench.frontend.views import View, load_image_folder
+from bench.harness import select_match
 from bench.harness.config import RunConfig
 from bench.harness.methods import runner
 from bench.vocabulary import METHODS
@@ -83,11 +83,9 @@ def select_to_database(request: SelectRequest, out: Path, seconds: dict | None =
         [len(c) for c in pools], budgets, f"the {len(views)} image(s) of {request.images}"
     )
     cams = [v.camera for v in views]
-    match = matcher(cams, pools, cfg.backend, cfg.detector.detector)
-    inputs = [PolicyInput(v, c, g) for v, c, g in zip(views, pools, sigs)]
     step = time.perf_counter()
-    sel, _ = select_views(policy, inputs, budget, 0, cfg.policy, match)
-    pairs = match(sel) if request.match else []
+    sel, _, _ = select_match.select(views, pools, sigs, policy, budget, 0, cfg)
+    pairs = select_match.match(cams, pools, sel, policy, cfg)[0] if request.match else []
     clock["select"] = time.perf_counter() - step
     step = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)

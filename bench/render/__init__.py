@@ -1,4 +1,4 @@
-"""Stage 2, rendering. In: a scene type, a seed and a `RenderConfig`. Out: a render entry
+"""Rendering. In: a scene type, a seed and a `RenderConfig`. Out: a render entry
 `renders/<scene>-s<seed>-<key>/` (six 8-bit views, their ground-truth layers, the rig as
 a COLMAP text model, `meta.json` with checksums), cached by a content hash.
 

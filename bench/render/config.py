@@ -5,10 +5,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 VARIANTS = ("auto", "cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
+# The most views the command line renders on a path (`bench.cli.common.checked_views`):
+# twelve times the dense regime's 21, far beyond any grid (each view is a path-traced image
+# with its ground-truth layers, seconds and megabytes); 100000 started rendering. A comment,
+# not a docstring: a module's bare string is code to `bench.codehash`, and every row's hash.
 MAX_VIEWS = 256
-"""The most views a path takes: twelve times the dense regime's 21, far beyond any grid
-(each view is a path-traced image with its ground-truth layers, seconds and megabytes);
-100000 started rendering."""
 
 
 @dataclass(frozen=True)
@@ -39,8 +40,8 @@ class RenderConfig:
     def validate(self) -> RenderConfig:
         from bench import BenchError
 
-        if not 2 <= self.views <= MAX_VIEWS:
-            raise BenchError(f"views must be from 2 to {MAX_VIEWS}, got {self.views}")
+        if self.views < 2:
+            raise BenchError(f"views must be at least 2, got {self.views}")
         for name in ("width", "height", "spp", "max_depth"):
             if getattr(self, name) <= 0:
                 raise BenchError(f"{name} must be positive, got {getattr(self, name)}")

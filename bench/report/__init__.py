@@ -1,4 +1,4 @@
-"""Stage 8, the report. In: a results folder (`runs.csv`, `vocabulary.json`, the exported
+"""The report. In: a results folder (`runs.csv`, `vocabulary.json`, the exported
 models) and the render cache's images for Figure 2. Out: the tables, the figures and the
 published snapshot.
 

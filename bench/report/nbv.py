@@ -18,7 +18,6 @@
 
 from __future__ import annotations
 
-import math
 import re
 from pathlib import Path
 
@@ -29,10 +28,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from bench.report.figures import save  # noqa: E402
+from bench.report.figures import headline_budget, save  # noqa: E402
 from bench.report.stats import paired_difference, stratified_interval  # noqa: E402
+from bench.report.tables import within  # noqa: E402
+from bench.report.text import ci, num, table  # noqa: E402
 from bench.results import TABLE3
-from bench.vocabulary import HEADLINE, HEADLINE_BUDGET, NEXT_VIEWS, Vocabulary  # noqa: E402
+from bench.vocabulary import HEADLINE, NEXT_VIEWS, Vocabulary  # noqa: E402
 
 GAIN = re.compile(r"(?P<score>.+)_gain_k(?P<k>\d+)")
 POOLED = "all scenes"
@@ -50,12 +51,6 @@ def gains(rows: pd.DataFrame, vocab: Vocabulary) -> list[tuple[str, str, int]]:
     found = [(m, GAIN.fullmatch(m)) for m in vocab.tasks[NEXT_VIEWS].metrics if m in rows]
     out = [(m, g["score"], int(g["k"])) for m, g in found if g]
     return sorted(out, key=lambda x: (x[1], x[2]))
-
-
-def _clip(lo: float, hi: float, bounds) -> tuple[float, float]:
-    if bounds is None or math.isnan(lo):
-        return lo, hi
-    return max(lo, bounds[0]), hi if bounds[1] is None else min(hi, bounds[1])
 
 
 def table3(df: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
@@ -76,7 +71,7 @@ def table3(df: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
                 for method in (m for m in methods if m in wide):
                     x = wide[method].to_numpy(float)
                     mean, lo, hi, note = stratified_interval(x, strata)
-                    lo, hi = _clip(lo, hi, vocab.range_of(metric))
+                    lo, hi = within(lo, hi, vocab.range_of(metric))
                     row = {"scene": scope, "budget": budget, "score": score, "k": k}
                     row |= {"method": method, "runs": int(np.isfinite(x).sum())}
                     row |= {"gain": mean, "gain_lo": lo, "gain_hi": hi, "gain_note": note}
@@ -90,12 +85,6 @@ def table3(df: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
                             | res
                         )
     return pd.DataFrame(out)
-
-
-def headline_budget(t3: pd.DataFrame) -> int:
-    """256 when the table has it, else its middle budget."""
-    budgets = sorted(t3["budget"].unique())
-    return HEADLINE_BUDGET if HEADLINE_BUDGET in budgets else budgets[len(budgets) // 2]
 
 
 def figure_views(df: pd.DataFrame, vocab: Vocabulary, out: Path) -> bool:
@@ -146,21 +135,6 @@ def figure_views(df: pd.DataFrame, vocab: Vocabulary, out: Path) -> bool:
     return True
 
 
-def _num(x) -> str:
-    return "n/a" if x is None or pd.isna(x) else f"{float(x):.3g}"
-
-
-def _ci(mean, lo, hi, note="") -> str:
-    if pd.isna(lo) or pd.isna(hi):
-        return f"{_num(mean)}" + (f", {note}" if isinstance(note, str) and note else "")
-    return f"{_num(mean)} [{_num(lo)}, {_num(hi)}]"
-
-
-def _table(header: list[str], body: list[list[str]]) -> list[str]:
-    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    return out + ["| " + " | ".join(r) + " |" for r in body] + [""]
-
-
 def verdict(r: pd.Series) -> str:
     """Whether a paired difference's interval lies above 0, below, or holds it."""
     if pd.isna(r["diff_lo"]):
@@ -194,22 +168,22 @@ def page_section(results: Path, vocab: Vocabulary) -> list[str]:
     body = []
     for (method, k), g in at.groupby(["method", "k"], sort=False):
         one = {s: g[g["score"] == s].iloc[0] for s in scores if (g["score"] == s).any()}
-        cells = [_ci(r["gain"], r["gain_lo"], r["gain_hi"], r["gain_note"]) for r in one.values()]
+        cells = [ci(r["gain"], r["gain_lo"], r["gain_hi"], r["gain_note"]) for r in one.values()]
         for b in baselines:
             for s in scores:
                 d = g[(g["score"] == s) & (g["baseline"] == b)]
                 cells.append(
-                    _ci(*d.iloc[0][["diff", "diff_lo", "diff_hi", "diff_note"]]) if len(d) else "—"
+                    ci(*d.iloc[0][["diff", "diff_lo", "diff_hi", "diff_note"]]) if len(d) else "—"
                 )
         body.append([vocab.label(method), str(k), *cells])
-    out += _table(header, body)
+    out += table(header, body) + [""]
     contenders = [m for m in dict.fromkeys(at["method"]) if m in vocab.with_role("contender")]
     lines = []
     for m in contenders:
         for _, r in at[(at["method"] == m) & at["baseline"].isin(baselines)].iterrows():
             lines.append(
                 f"- {m} − {r['baseline']}, {r['score']}, k = {r['k']}: "
-                f"{_ci(r['diff'], r['diff_lo'], r['diff_hi'])} ({verdict(r)}; "
+                f"{ci(r['diff'], r['diff_lo'], r['diff_hi'])} ({verdict(r)}; "
                 f"{r['wins']}/{r['ties']}/{r['losses']} w/t/l)"
             )
     references = [m for m in dict.fromkeys(at["method"]) if m in vocab.with_role("reference")]
@@ -221,7 +195,7 @@ def page_section(results: Path, vocab: Vocabulary) -> list[str]:
                 gap = means[ref] - others.max()
                 lines.append(
                     f"- {ref} bounds every chooser in {score} at k = {k}: "
-                    + ("yes" if gap >= 0 else f"no, {others.idxmax()} is {_num(-gap)} above it")
+                    + ("yes" if gap >= 0 else f"no, {others.idxmax()} is {num(-gap)} above it")
                 )
     out += lines + [""] if lines else []
     scenes = [s for s in dict.fromkeys(t3["scene"]) if s != POOLED]
@@ -233,8 +207,8 @@ def page_section(results: Path, vocab: Vocabulary) -> list[str]:
         out += ["Mean gain per scene:", ""]
         body = [
             [scene, vocab.label(method)]
-            + [_num(g[(g["score"] == s) & (g["k"] == k)]["gain"].mean()) for s, k in cols]
+            + [num(g[(g["score"] == s) & (g["k"] == k)]["gain"].mean()) for s, k in cols]
             for (scene, method), g in per.groupby(["scene", "method"], sort=False)
         ]
-        out += _table(["scene", "chooser", *[f"{s}, k = {k}" for s, k in cols]], body)
+        out += table(["scene", "chooser", *[f"{s}, k = {k}" for s, k in cols]], body) + [""]
     return out

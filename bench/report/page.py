@@ -8,13 +8,15 @@ by hand, so it never disagrees with its folder; `bench publish` copies it with t
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import pandas as pd
 
 from bench.failures import outcomes
 from bench.report import nbv
+from bench.report.text import ci
+from bench.report.text import num as _num
+from bench.report.text import table as _table
 from bench.report.transfer import verdicts
 from bench.results import (
     CONFIG,
@@ -67,33 +69,14 @@ def _json(results: Path, name: str) -> dict:
     return json.loads(path.read_text()) if path.is_file() else {}
 
 
-def _num(x) -> str:
-    """A number as the page shows it: 3 significant digits, integers whole, n/a if missing."""
-    if x is None or (isinstance(x, float) and math.isnan(x)):
-        return "n/a"
-    x = float(x)
-    if x == int(x) and abs(x) < 1e6:
-        return str(int(x))
-    return f"{x:.3g}" if abs(x) < 1000 else f"{x:,.0f}"
-
-
 def _text(x, missing: str = "n/a") -> str:
     return x if isinstance(x, str) else missing
 
 
 def _interval(row: pd.Series, col: str, lo: str = "", hi: str = "", note: str = "") -> str:
     """`mean [lo, hi]`, or the mean and the table's note on why it has no interval."""
-    mean = _num(row.get(col))
-    low, high = row.get(lo or f"{col}_lo"), row.get(hi or f"{col}_hi")
-    if low is not None and high is not None and not pd.isna(low) and not pd.isna(high):
-        return f"{mean} [{_num(low)}, {_num(high)}]"
     why = row.get(note) if note else None
-    return f"{mean}, {why}" if isinstance(why, str) and why else mean
-
-
-def _table(header: list[str], rows: list[list[str]]) -> list[str]:
-    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    return out + ["| " + " | ".join(r) + " |" for r in rows]
+    return ci(row.get(col), row.get(lo or f"{col}_lo"), row.get(hi or f"{col}_hi"), why)
 
 
 def _run_section(manifest: dict, runs: pd.DataFrame) -> list[str]:

@@ -158,7 +158,7 @@ def with_shares(df: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     return df.copy().assign(**shares)  # .copy(): its blocks joined before the columns added
 
 
-def _within(lo: float, hi: float, bounds) -> tuple[float, float]:
+def within(lo: float, hi: float, bounds) -> tuple[float, float]:
     """An interval clipped to the metric's declared range (the mean lies in it, so the
     clipped interval covers it whenever the whole one does)."""
     if bounds is None or math.isnan(lo):
@@ -201,7 +201,7 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
             if m in g:
                 row[m], lo, hi, note, seen = summaries.get((m, policy, budget), none)
                 bounds = vocab.range_of(vocab.split(m)[1])
-                row[f"{m}_lo"], row[f"{m}_hi"] = _within(lo, hi, bounds)
+                row[f"{m}_lo"], row[f"{m}_hi"] = within(lo, hi, bounds)
                 task, name = vocab.split(m)
                 if errors.get(task) and vocab.metrics[name].failure is None:
                     note, seen = (

@@ -1,4 +1,4 @@
-"""Stage 1, scene descriptions. In: `scenes/<name>.toml` (a scene type's documented
+"""Scene descriptions. In: `scenes/<name>.toml` (a scene type's documented
 parameters) and a seed. Out: a renderer-independent `SceneDescription` (meshes,
 materials, lights, the calibrated camera rig).
 
