@@ -1,7 +1,8 @@
 """Matching and geometric verification of the selected features of every pair of views.
 
 1. Tentative matches (`BackendConfig.matcher`): `ratio`, mutual nearest neighbours in
-   descriptor space that also pass Lowe's ratio test (d1 < ratio * d2); or `lightglue`,
+   descriptor space that also pass Lowe's ratio test (d1 < ratio * d2), on the GPU where
+   one is present, with exactly the CPU's matches (`bench.backend.gpu`); or `lightglue`,
    LightGlue with the weights of the pool's detector (ALIKED and DISK pools only:
    `bench.frontend.learned`).
 2. Verification per pair with COLMAP's calibrated two-view geometry (RANSAC on the
@@ -21,9 +22,10 @@ from itertools import combinations
 import numpy as np
 
 from bench import BenchError
+from bench.backend import gpu
 from bench.camera import Camera
-from bench.frontend import learned
-from bench.frontend.features import Candidates, tentative_matches
+from bench.frontend import features, learned
+from bench.frontend.features import Candidates
 from bench.twoview import configuration, two_view_geometry, verification_options
 
 MATCHERS = ("ratio", "lightglue")
@@ -97,6 +99,14 @@ def verify(
         return inliers, configuration(tvg), None
     pose = np.c_[np.asarray(rel.rotation.matrix()), np.asarray(rel.translation)]
     return inliers, configuration(tvg), pose
+
+
+def tentative_matches(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float) -> np.ndarray:
+    """(M, 2) index pairs: mutual nearest neighbours that pass the ratio test
+    (`bench.frontend.features.tentative_matches`), on the GPU where one is present: the
+    same matches (`bench.backend.gpu`)."""
+    out = gpu.ratio_matches(desc_a, desc_b, ratio)
+    return features.tentative_matches(desc_a, desc_b, ratio) if out is None else out
 
 
 def check_matcher(cfg: BackendConfig, detector: str) -> None:
