@@ -640,8 +640,7 @@ def upgrade(results: Path, current: Vocabulary) -> list[str]:
     upgrade`): the `policy` column of its rows is renamed `method` (`_rename_method`),
     and a recorded vocabulary that lacks this one's fields (`older_fields`) gets the
     package's declarations of its methods and tasks, by name, and of every metric. What it
-    changed, one item each (empty: the folder was up to date); damaged rows are then
-    refused as `bench plot` refuses them."""
+    changed, one item each (empty: the folder was up to date)."""
     results = Path(results)
     path = results / VOCABULARY
     if not path.is_file():
@@ -661,9 +660,14 @@ def upgrade(results: Path, current: Vocabulary) -> list[str]:
         tasks = {n: current.tasks[n] for n in data["tasks"]}
         write_text_atomic(path, Vocabulary(methods, tasks, current.metrics).to_json())
         changed.append(f"{VOCABULARY}: declared as this bench does ({', '.join(older)})")
-    if (results / RUNS).is_file() and check_runs(results / RUNS)[2]:
-        read_runs(results / RUNS)  # damaged rows: refused as `bench plot` refuses them
     return changed
+
+
+def refuse_damage(results: Path) -> None:
+    """After an upgrade: damaged rows of the folder's `runs.csv` refused in one line, as
+    `bench plot` refuses them (an upgrade recomputes nothing, so it cannot mend them)."""
+    if (Path(results) / RUNS).is_file() and check_runs(Path(results) / RUNS)[2]:
+        read_runs(Path(results) / RUNS)
 
 
 def _rename_method(path: Path) -> list[str]:

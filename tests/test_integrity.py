@@ -282,6 +282,7 @@ def test_a_setting_added_since_the_snapshot_differs_only_off_its_default(
     (snap / "config.json").write_text(json.dumps(old))
     argv = ["publish", "--results", str(r), "--to", str(snap)]
     assert main(argv) == 0
+    assert "published as is, not as a regime's snapshot" in capsys.readouterr().err
     (snap / "config.json").write_text(json.dumps(old))
     new = json.loads((r / "config.json").read_text())
     new["settings"]["backend"]["matcher"] = "lightglue"
@@ -399,8 +400,10 @@ def test_a_folder_with_the_old_policy_column_is_refused_and_upgraded(small_run, 
     (r / "runs.csv").write_text(out.getvalue())
     assert main(["plot", "--results", str(r)]) == 2
     assert _one_line(capsys).endswith(f"`bench upgrade --results {r}` renames it")
-    assert main(["upgrade", "--results", str(r)]) == 0
-    assert "runs.csv: column policy renamed method (2 rows)" in capsys.readouterr().out
+    assert main(["upgrade", "--results", str(r)]) == 2  # renamed, and the altered row said
+    said = capsys.readouterr()
+    assert "runs.csv: column policy renamed method (2 rows)" in said.out
+    assert "line 3" in said.err and "do not match its row_checksum" in said.err
     new = list(csv.DictReader((r / "runs.csv").read_text().splitlines()))
     assert [row[ROW_CHECKSUM] == row_checksum(row) for row in new] == [True, False]
     with pytest.raises(BenchError, match="line 3 .*do not match its row_checksum"):

@@ -96,8 +96,6 @@ def run(args: argparse.Namespace) -> None:
     runs_file(args.results / RUNS)
     with holding(args.results, reading=True):
         check_publishable(args.results, grid)  # before anything is created
-        if grid is None:  # a snapshot of its own: said when it is no regime's grid
-            _say_not_a_regime(args.results, regime)
     try:
         args.to.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -110,4 +108,6 @@ def run(args: argparse.Namespace) -> None:
                 f"({'; '.join(differ)}); --replace replaces it"
             )
         n = publish(args.results, args.to)
+    if grid is None:  # a snapshot of its own: said when it is no regime's grid
+        _say_not_a_regime(args.results, regime)
     print(f"published {n} files of {args.results} in {args.to}")

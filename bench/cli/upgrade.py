@@ -23,13 +23,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> None:
     from bench import BenchError
     from bench.harness.declared import package_vocabulary
-    from bench.results import holding, upgrade
+    from bench.results import holding, refuse_damage, upgrade
 
     if not args.results.is_dir():  # before the lock, which would be "cannot write"
         raise BenchError(f"{args.results} not found: give a results folder of `bench run`")
     with holding(args.results):
         changed = upgrade(args.results, package_vocabulary())
-    print(
-        "\n".join(f"{args.results}: {c}" for c in changed)
-        or f"{args.results} is up to date; nothing changed"
-    )
+        print("\n".join(f"{args.results}: {c}" for c in changed), end="\n" if changed else "")
+        refuse_damage(args.results)  # what it changed is said; damage is not "up to date"
+    if not changed:
+        print(f"{args.results} is up to date; nothing changed")
