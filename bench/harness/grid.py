@@ -452,7 +452,7 @@ def _rendered(
     scenes = [g for g in groups if g not in entries]
     side_by_side = cluster.workers if cluster.scheduler is None else 1
     render = partial(render_scene, cfg=cfg.render(), renders_dir=ws.renders)
-    with progress("render", len(groups), "scene", shown=not cfg.datasets) as bar:
+    with progress("render", len(groups), "scene", shown=bool(scenes)) as bar:
         bar.update(len(entries))
         for (sc, sd), entry, seconds in render_scenes(scenes, render, side_by_side):
             entries[sc, sd] = entry
