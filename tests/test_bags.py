@@ -87,3 +87,20 @@ def test_a_bags_signals_are_those_of_its_views_alone(dataset, tmp_path):
         for k, i in enumerate(bag)
         for s in ("ambiguity", "parallax", "epipolar")
     )
+
+
+def test_bag_options_default_apply_to_datasets_alone_and_not_to_the_next_views_task(capsys):
+    from argparse import Namespace
+
+    from bench import BenchError
+    from bench.cli.run import bags_arg
+
+    none = Namespace(bag_size=None, bags=None)
+    assert bags_arg(none, True, ("sfm", "pairs")) == (6, 10)
+    assert bags_arg(Namespace(bag_size=0, bags=7), True, ("sfm",)) == (0, 1)
+    assert bags_arg(Namespace(bag_size=4, bags=3), True, ("nbv",)) == (0, 1)
+    assert "--bag-size and --bags ignored with --tasks nbv" in capsys.readouterr().err
+    bags_arg(Namespace(bag_size=4, bags=None), False, ("sfm",))
+    assert "--bag-size ignored without --dataset" in capsys.readouterr().err
+    with pytest.raises(BenchError, match="--bags must be at least 1"):
+        bags_arg(Namespace(bag_size=4, bags=0), True, ("sfm",))

@@ -354,14 +354,21 @@ def has_pixel_truth(dataset: Path) -> bool:
     return ok
 
 
-def bags_arg(args: argparse.Namespace, datasets: bool) -> tuple[int, int]:
+def bags_arg(args: argparse.Namespace, datasets: bool, tasks: tuple[str, ...]) -> tuple[int, int]:
     """(`--bag-size`, `--bags`), checked; their defaults with a dataset (one bag of the
-    whole dataset where the size is 0)."""
+    whole dataset where the size is 0, and with a task that reads a path of its own: the
+    next-views task chooses among every view of the set)."""
     from bench.harness.bags import DEFAULT_COUNT, DEFAULT_SIZE
+    from bench.harness.tasks import RUNNERS
 
     given = [n for n, v in (("--bag-size", args.bag_size), ("--bags", args.bags)) if v is not None]
     if given and not datasets:
         log(f"{' and '.join(given)} ignored without --dataset: rendered scenes have their rigs")
+    pathed = [t for t in tasks if t in RUNNERS and RUNNERS[t].rig is not None]
+    if pathed and datasets:
+        if given:
+            log(f"{' and '.join(given)} ignored with --tasks {pathed[0]}: it reads the whole set")
+        return 0, 1
     size = DEFAULT_SIZE if args.bag_size is None else args.bag_size
     count = DEFAULT_COUNT if args.bags is None else args.bags
     if count < 1:
@@ -390,7 +397,7 @@ def run(args: argparse.Namespace) -> None:
     regime = args.regime or "sparse"
     if args.regime and datasets:
         log("--regime is ignored with --dataset: a dataset's views are what they are")
-    bag_size, bag_count = bags_arg(args, bool(datasets))
+    bag_size, bag_count = bags_arg(args, bool(datasets), tasks)
     if datasets:
         if args.seeds is not None:
             log("--seeds is ignored with --dataset: a dataset's seeds are its bags (--bags)")

@@ -194,9 +194,10 @@ def _why(note, cols: list[str]) -> str:
     return "; ".join(reasons)
 
 
-def _tiers_section(t1: pd.DataFrame) -> list[str]:
+def _tiers_section(t1: pd.DataFrame, vocab: Vocabulary) -> list[str]:
     """Which methods cannot be told apart, per tiered metric at the headline budget
-    (Table 1's `<metric>_tier`: Holm-corrected Wilcoxon tests, docs/protocol.md)."""
+    (Table 1's `<metric>_tier`: Holm-corrected Wilcoxon tests, docs/protocol.md), each
+    tier best first."""
     cols = [c for c in t1.columns if c.endswith("_tier") and t1[c].notna().any()]
     if not cols:
         return []
@@ -208,14 +209,17 @@ def _tiers_section(t1: pd.DataFrame) -> list[str]:
         "",
         "Tier 1 is the best method by mean and every method not significantly different "
         "from it (two-sided Wilcoxon signed-rank tests over the units every method has, "
-        "Holm-corrected at 0.05); the next tier starts at the best method left.",
+        "Holm-corrected at 0.05); the next tier starts at the best method left. Each tier "
+        "best first.",
         "",
     ]
     for col in cols:
-        ranked = at.dropna(subset=[col]).sort_values(col, kind="stable")
+        metric = col.removesuffix("_tier")
+        best = [True, metric in vocab.lower_better()]
+        ranked = at.dropna(subset=[col]).sort_values([col, metric], ascending=best, kind="stable")
         groups = ranked.groupby(col, sort=True)["method"].agg(", ".join)
         tiers = "; ".join(f"{int(k)}: {v}" for k, v in groups.items())
-        out.append(f"- `{col.removesuffix('_tier')}`: {tiers}")
+        out.append(f"- `{metric}`: {tiers}")
     return out + [""]
 
 
@@ -376,7 +380,7 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
     out += _run_section(_json(results, MANIFEST), runs) + [""]
     out += _grid_section(runs, _json(results, CONFIG)) + [""]
     out += _table1_section(t1, vocab, "Table 1: means over runs, 95% intervals")
-    out += _tiers_section(t1)
+    out += _tiers_section(t1, vocab)
     out += _equal_section(_read(results, TABLE1_EQUAL))
     out += _table2_section(_read(results, TABLE2))
     out += _paired_section(
