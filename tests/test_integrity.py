@@ -31,7 +31,7 @@ from bench.harness.predict import export_model
 from bench.render import entry as render
 from bench.report import figures
 from bench.report.write import publish, write_report
-from bench.results import read_runs
+from bench.runs import read_runs
 from bench.vocabulary import KEY, Vocabulary
 from tests.conftest import (
     MEDIUM,
@@ -72,7 +72,7 @@ def _edit(runs_csv: Path, method: str, column: str, value: str, reseal: bool = F
     row = rows[line - 1]
     old, row[header.index(column)] = row[header.index(column)], value
     if reseal:
-        from bench.results import row_checksum
+        from bench.runs import row_checksum
 
         row[-1] = row_checksum(dict(zip(header, row)))
     out = io.StringIO()
@@ -154,7 +154,7 @@ def test_a_percentage_outside_0_to_100_is_refused(small_run, tmp_path, capsys, v
 
 
 def test_a_computed_row_outside_its_range_is_never_written(tmp_path):
-    from bench.results import append_runs
+    from bench.runs import append_runs
     from bench.vocabulary import Vocabulary
 
     row = read_runs(PUBLISHED / "runs.csv").iloc[0].to_dict() | {"maa": 1.5}
@@ -170,11 +170,11 @@ def test_runs_csv_is_appended_to_not_rewritten(small_run, renders_dir, tmp_path,
     shutil.copytree(small_run, r)
     before = (r / "runs.csv").read_text()
     rewritten = []
-    import bench.results as results
+    import bench.runs as runs
 
-    real = results.write_text_atomic
+    real = runs.write_text_atomic
     monkeypatch.setattr(
-        results, "write_text_atomic", lambda p, t: rewritten.append(p.name) or real(p, t)
+        runs, "write_text_atomic", lambda p, t: rewritten.append(p.name) or real(p, t)
     )
     grown = dataclasses.replace(GRID, budgets=(64, 32))
     bench_run(grown, r, renders_dir)
@@ -215,7 +215,8 @@ def test_publish_keeps_a_snapshot_of_other_settings_unless_replace(small_run, tm
 
 def _errored(runs_csv: Path) -> None:
     """Mark the grid row of `runs.csv` as one that could not be computed (resealed)."""
-    from bench.results import REFERENCE_MAPS, ROW_CHECKSUM, append_runs
+    from bench.runs import ROW_CHECKSUM, append_runs
+    from bench.vocabulary import REFERENCE_MAPS
 
     runs = read_runs(runs_csv)
     grid = runs["method"] == "grid"
@@ -386,7 +387,7 @@ def test_a_folder_with_the_old_policy_column_is_refused_and_upgraded(small_run, 
     """A `runs.csv` written before the column was named `method` (its rows sealed under the
     old name) is refused in one line naming `bench upgrade`, which renames the column and
     re-seals every row whose checksum held; a row altered by hand stays altered."""
-    from bench.results import ROW_CHECKSUM, row_checksum
+    from bench.runs import ROW_CHECKSUM, row_checksum
 
     r = tmp_path / "r"
     shutil.copytree(small_run, r)

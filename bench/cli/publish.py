@@ -85,8 +85,10 @@ def _say_not_a_regime(results, regime: str) -> None:
 
 def run(args: argparse.Namespace) -> None:
     from bench import BenchError
+    from bench.binding import snapshot_differences
     from bench.report.write import check_publishable, publish
-    from bench.results import RUNS, holding, runs_file, snapshot_differences
+    from bench.results import RUNS, holding
+    from bench.runs import runs_file
 
     regime = args.regime or "sparse"
     # named, or its snapshot the target: the folder must hold that regime's grid

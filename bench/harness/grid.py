@@ -2,7 +2,7 @@
 
 Stages per (scene, seed): render (cached) -> front end (cached) -> for each policy and
 budget: one unit (`bench.harness.execute`), its rows appended to `runs.csv` at once (an
-interrupt keeps every finished row; a cut last row is caught as damage, `bench.results`).
+interrupt keeps every finished row; a cut last row is caught as damage, `bench.runs`).
 The settings are stored in `config.json` beside the results and the vocabulary of the rows
 in `vocabulary.json`; a run into a folder holding other settings is refused unless
 `overwrite`. Rows whose prediction is current but whose scoring is not (or every row,
@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from bench import ROOT, BenchError
+from bench.binding import bind_results_dir, check_results_dir, models_replaced
 from bench.console import log, progress
 from bench.failures import ERROR, exclusions, failures, outcomes
 from bench.files import write_text_atomic
@@ -42,19 +43,8 @@ from bench.harness.predict import prediction_hash
 from bench.harness.tasks import RUNNERS
 from bench.render.config import RenderConfig
 from bench.render.entry import entry_meta, entry_name, render_scene
-from bench.results import (
-    DAMAGED,
-    MANIFEST,
-    Workspace,
-    append_runs,
-    bind_results_dir,
-    check_results_dir,
-    holding,
-    keep_runs,
-    models_replaced,
-    read_runs,
-    set_aside_damaged,
-)
+from bench.results import DAMAGED, MANIFEST, Workspace, holding
+from bench.runs import append_runs, keep_runs, read_runs, set_aside_damaged
 from bench.scenes.spec import load_spec, scene_names
 from bench.vocabulary import (
     KEY,
@@ -215,8 +205,9 @@ def run_benchmark(
     report: Report | None = None,
 ) -> pd.DataFrame:
     """Run whatever of the grid is missing from `runs.csv`, then `report(rows, results,
-    renders)` (see `bench.results` for what counts as finished, damaged or refused). One
-    run at a time holds a results folder; another is refused in one line while it does."""
+    renders)` (see `bench.runs` and `bench.binding` for what counts as finished, damaged
+    or refused). One run at a time holds a results folder; another is refused in one line
+    while it does."""
     cfg.validate()
     if options.cluster.scheduler is not None:
         check_scheduler(options.cluster.scheduler)

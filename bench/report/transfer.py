@@ -31,8 +31,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from bench.binding import read_settings, read_vocabulary
 from bench.report.tables import headline_frame, solvable
-from bench.results import RUNS, read_runs, read_settings, read_vocabulary
+from bench.results import RUNS
+from bench.runs import read_runs
 from bench.vocabulary import Vocabulary
 
 DRAWS = 2000

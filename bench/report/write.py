@@ -23,6 +23,7 @@ from pathlib import Path
 import pandas as pd
 
 from bench import BenchError
+from bench.binding import read_settings, read_vocabulary
 from bench.console import log
 from bench.failures import errors, exclusions, failures
 from bench.files import atomic_path, write_text_atomic
@@ -73,11 +74,9 @@ from bench.results import (
     TRANSFER_RANKS,
     VOCABULARY,
     png,
-    read_runs,
-    read_settings,
-    read_vocabulary,
     table1_of,
 )
+from bench.runs import read_runs
 from bench.vocabulary import Vocabulary
 
 
