@@ -23,14 +23,14 @@ from bench import ROOT, BenchError
 from bench.backend.reconstruction import known_pose_model
 from bench.cli import build_parser, common, main
 from bench.cli.common import LATEST, QUICK, REGIMES, parse_list, regime_folder
-from bench.harness import execute
-from bench.harness import grid as harness
+from bench.harness import execute, manifest
 from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig
 from bench.harness.predict import export_model
 from bench.render import entry as render
 from bench.report import figures
-from bench.report.write import publish, write_report
+from bench.report.publish import publish
+from bench.report.write import write_report
 from bench.runs import read_runs
 from bench.vocabulary import KEY, Vocabulary
 from tests.conftest import (
@@ -266,7 +266,7 @@ def test_publish_into_a_regimes_snapshot_checks_its_grid(small_run, tmp_path, ca
     assert not (tmp_path / "results" / "published").exists()
     assert main(["publish", "--to", str(tmp_path / "mine")]) == 0  # a snapshot of its own
     said = capsys.readouterr().err  # and it says that it is no regime's grid
-    assert "published as is, not as a regime's snapshot: results/latest is not the sparse" in said
+    assert "published as a snapshot of its own: results/latest's grid is checked" in said
 
 
 def test_a_setting_added_since_the_snapshot_differs_only_off_its_default(
@@ -283,7 +283,7 @@ def test_a_setting_added_since_the_snapshot_differs_only_off_its_default(
     (snap / "config.json").write_text(json.dumps(old))
     argv = ["publish", "--results", str(r), "--to", str(snap)]
     assert main(argv) == 0
-    assert "published as is, not as a regime's snapshot" in capsys.readouterr().err
+    assert "published as a snapshot of its own" in capsys.readouterr().err
     (snap / "config.json").write_text(json.dumps(old))
     new = json.loads((r / "config.json").read_text())
     new["settings"]["backend"]["matcher"] = "lightglue"
@@ -530,8 +530,8 @@ def test_the_manifest_names_whichever_distribution_provides_a_module(
             raise PackageNotFoundError(name)
         return version(name)
 
-    monkeypatch.setattr(harness, "packages_distributions", lambda: provided, raising=False)
-    monkeypatch.setattr(harness, "version", installed)
+    monkeypatch.setattr(manifest, "packages_distributions", lambda: provided, raising=False)
+    monkeypatch.setattr(manifest, "version", installed)
     shutil.copytree(quick_results, tmp_path / "r")
     bench_run(SMALL, tmp_path / "r", renders_dir)
     versions = json.loads((tmp_path / "r" / "manifest.json").read_text())["versions"]

@@ -17,33 +17,30 @@ from __future__ import annotations
 
 import json
 import os
-import platform
-import subprocess
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from importlib.metadata import packages_distributions, version
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from bench import ROOT, BenchError
+from bench import BenchError
 from bench.binding import bind_results_dir, check_results_dir, models_replaced
 from bench.console import log, progress
 from bench.failures import ERROR, exclusions, failures, outcomes
-from bench.files import write_text_atomic
 from bench.frontend import plugins
 from bench.frontend.policies import check_methods, learned_weights
-from bench.frontend.views import Source, source_key
+from bench.frontend.views import source_key
 from bench.harness.config import RunConfig
 from bench.harness.evaluate import evaluation_hash
 from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
+from bench.harness.manifest import git_commit, write_manifest
 from bench.harness.predict import prediction_hash
 from bench.harness.tasks import RUNNERS
 from bench.render.config import RenderConfig
-from bench.render.entry import entry_meta, entry_name, render_scene
-from bench.results import DAMAGED, MANIFEST, Workspace, holding
+from bench.render.entry import entry_name, render_scene
+from bench.results import DAMAGED, Workspace, holding
 from bench.runs import append_runs, keep_runs, read_runs, set_aside_damaged
 from bench.scenes.spec import load_spec, scene_names
 from bench.vocabulary import (
@@ -290,7 +287,7 @@ def _run_in(
     t_start = time.perf_counter()
     invocation = {
         "id": time.strftime("%Y%m%dT%H%M%S") + f"-{os.getpid()}",
-        "git_commit": _git_commit(),  # before this run rewrites any tracked result file
+        "git_commit": git_commit(),  # before this run rewrites any tracked result file
     }
     check_results_dir(ws.results, cfg.run.as_dict(), options.overwrite, RunConfig().as_dict())
     df, rescore = _current_rows(cfg, ws, options)
@@ -350,13 +347,15 @@ def _run_in(
     stage_s["runs_wall"] = time.perf_counter() - t_runs
     out = read_runs(ws.runs_csv)
     invocation |= {"rows": n_rows, "seconds": {"total": time.perf_counter() - t_start, **stage_s}}
-    write_manifest(ws, cfg, invocation, out)  # before the report: its page shows the run
+    write_manifest(
+        ws, cfg.run.as_dict(), invocation, out
+    )  # before the report: its page shows the run
     if report is not None:
         t = time.perf_counter()
         report(out, ws.results, ws.renders)
         invocation["seconds"]["report"] = time.perf_counter() - t
         invocation["seconds"]["total"] = time.perf_counter() - t_start
-        write_manifest(ws, cfg, invocation, out)
+        write_manifest(ws, cfg.run.as_dict(), invocation, out)
     ours = in_grid(cfg, out)
     said = [
         failures(ours),
@@ -383,7 +382,7 @@ def _interrupted(ws: Workspace, cfg: BenchConfig, invocation: dict, stage_s: dic
         return
     n = int((rows["invocation"] == invocation["id"]).sum())
     invocation["seconds"] |= stage_s
-    write_manifest(ws, cfg, invocation | {"rows": n, "interrupted": True}, rows)
+    write_manifest(ws, cfg.run.as_dict(), invocation | {"rows": n, "interrupted": True}, rows)
 
 
 def in_grid(cfg: BenchConfig, rows: pd.DataFrame) -> pd.DataFrame:
@@ -430,79 +429,3 @@ def _add_seconds(stage_s: dict[str, float], new: list[dict]) -> None:
     for r in new:
         stage_s["task"] += np.nan_to_num(r.get("task_ms", 0.0)) / 1000
         stage_s["evaluate"] += np.nan_to_num(r.get("evaluate_ms", 0.0)) / 1000
-
-
-def _git_commit() -> str:
-    try:
-        sha = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True, timeout=10
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=ROOT,
-            capture_output=True,
-            text=True,
-            timeout=10,
-        ).stdout.strip()
-        return sha + ("-dirty" if dirty else "") if sha else "unknown"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-
-
-MODULES = ("mitsuba", "drjit", "numpy", "cv2", "pycolmap", "pandas", "matplotlib", "scipy")
-"""The modules whose versions the manifest records."""
-
-
-def module_versions(modules: tuple[str, ...]) -> dict[str, str]:
-    """Per module, the version of the distribution that provides it, named where its name
-    differs (`cv2`: `opencv-contrib-python-headless 5.0.0.93`, or whichever OpenCV build is
-    installed), and `unknown` where no installed distribution provides it."""
-    provided = packages_distributions()
-    out = {}
-    for module in modules:
-        names = sorted(provided.get(module, []))
-        out[module] = (
-            ", ".join(f"{n} {version(n)}" if n != module else version(n) for n in names)
-            or "unknown"
-        )
-    return out
-
-
-def write_manifest(ws: Workspace, cfg: BenchConfig, invocation: dict, rows: pd.DataFrame) -> None:
-    """Versions, variant, host, settings and the invocations that computed the rows of
-    `runs.csv`: each with its commit and seconds per stage, kept while it owns a row (a rerun
-    that computes nothing adds nothing), and their sum."""
-    path = ws.results / MANIFEST
-    try:
-        earlier = json.loads(path.read_text()).get("invocations", [])
-    except (OSError, ValueError, AttributeError):
-        earlier = []
-    live = set(rows["invocation"])
-    kept = [
-        i
-        for i in earlier
-        if isinstance(i, dict) and i.get("id") in live and i.get("id") != invocation["id"]
-    ]
-    if invocation["rows"]:
-        kept.append(invocation)
-    for inv in kept:
-        inv["rows_now"] = int((rows["invocation"] == inv["id"]).sum())
-    total: dict[str, float] = {}
-    for inv in kept:
-        for k, v in inv["seconds"].items():
-            total[k] = total.get(k, 0.0) + v
-    entries = [ws.renders / k for k in rows["render_key"].unique()]
-    metas = [entry_meta(e) for e in entries if Source.kind(e) == "render"]
-    manifest = {
-        "versions": {"python": platform.python_version(), **module_versions(MODULES)},
-        "variant": sorted({m["variant"] for m in metas}),
-        "host": {"node": platform.node(), "platform": platform.platform(), "cpus": os.cpu_count()},
-        "settings": cfg.run.as_dict(),
-        "evaluation_hash": evaluation_hash(),
-        "grid": {k: sorted(map(str, rows[k].unique())) for k in KEY},
-        "git_commit": sorted({inv["git_commit"] for inv in kept}),
-        "invocations": kept,
-        "seconds": total,
-        "render_entries": sorted(e.name for e in entries),
-    }
-    write_text_atomic(path, json.dumps(manifest, indent=1))
