@@ -34,10 +34,11 @@ from pathlib import Path
 
 import pandas as pd
 
+from bench.binding import read_vocabulary
 from bench.report.stats import paired_difference
 from bench.report.tables import headline_frame, solvable
 from bench.report.transfer import kendall_tau, tau_interval
-from bench.results import read_runs, read_vocabulary
+from bench.runs import read_runs
 from bench.vocabulary import Vocabulary
 
 PEER = "colmap-b"

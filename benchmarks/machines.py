@@ -17,9 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.binding import read_vocabulary
 from bench.report.power import tau
 from bench.report.tables import headline_frame, solvable
-from bench.results import read_runs, read_vocabulary
+from bench.runs import read_runs
 
 METRICS = {"tri": "acc_completeness_pct", "sfm": "sfm_maa", "pairs": "pairs_auc_10"}
 

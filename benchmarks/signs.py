@@ -18,10 +18,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from bench.binding import read_settings, read_vocabulary
 from bench.report.stats import paired_difference
 from bench.report.tables import headline_frame, solvable
 from bench.report.transfer import transfer_regimes
-from bench.results import RUNS, read_runs, read_settings, read_vocabulary
+from bench.results import RUNS
+from bench.runs import read_runs
 
 PEER = "colmap-b"
 METRICS = ("sfm_maa", "pairs_auc_10")

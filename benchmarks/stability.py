@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 import pandas as pd
 
+from bench.binding import read_vocabulary
 from bench.files import META, checksum, write_text_atomic
 from bench.harness.config import RunConfig
 from bench.harness.execute import Cluster
@@ -37,7 +38,7 @@ from bench.harness.grid import BenchConfig, RunOptions, run_benchmark, with_refe
 from bench.render.entry import render_scene
 from bench.report.power import tau
 from bench.report.tables import headline_frame, solvable
-from bench.results import Workspace, read_vocabulary
+from bench.results import Workspace
 
 METHODS = (
     "random,texture,grid,response,ssc,quadtree,adaptive,adaptive-fast,cross-view,learned,"

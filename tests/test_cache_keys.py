@@ -218,8 +218,8 @@ def test_a_new_policy_or_a_methods_own_setting_changes_that_methods_rows_alone(t
 
 
 def test_a_methods_own_setting_does_not_bind_the_folder(tmp_path):
+    from bench.binding import bind_results_dir, check_results_dir
     from bench.harness.config import RunConfig
-    from bench.results import bind_results_dir, check_results_dir
     from bench.vocabulary import Vocabulary
 
     bind_results_dir(tmp_path, RunConfig().as_dict(), Vocabulary.current(), False)
@@ -242,8 +242,8 @@ def test_a_methods_own_setting_does_not_bind_the_folder(tmp_path):
 def test_a_setting_added_since_the_folder_was_made_binds_it_only_off_its_default(tmp_path):
     """A folder of the code before backend.matcher existed: extending it at the default
     (the behaviour before) needs no --overwrite; asking for LightGlue does."""
+    from bench.binding import check_results_dir
     from bench.harness.config import RunConfig
-    from bench.results import check_results_dir
 
     old = RunConfig().shared()
     del old["backend"]["matcher"]

@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 from bench import BenchError
 from bench.backend.matching import BackendConfig
 from bench.backend.reconstruction import fixed_intrinsics_options
+from bench.binding import read_vocabulary
 from bench.cli import main
 from bench.evaluation.export import export_dataset
 from bench.frontend.colmap_model import read_model
@@ -30,7 +31,6 @@ from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig
 from bench.harness.select import SelectRequest, select_to_database
 from bench.report.transfer import transfer
-from bench.results import read_vocabulary
 from bench.vocabulary import KEY
 from tests.conftest import MEDIUM, bench_run
 

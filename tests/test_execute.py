@@ -21,7 +21,7 @@ from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig
 from bench.report import figures
 from bench.report.write import write_report
-from bench.results import read_runs
+from bench.runs import read_runs
 from bench.vocabulary import KEY, Vocabulary
 from tests.conftest import (
     MEDIUM,

@@ -20,7 +20,7 @@ from bench.frontend.policies import POLICIES, PolicyFailed, PolicyInput, policy,
 from bench.frontend.signals import SIGNALS, Signals
 from bench.frontend.views import View
 from bench.report import figures
-from bench.results import read_runs
+from bench.runs import read_runs
 from bench.vocabulary import METHODS, REFERENCE_MAPS, Vocabulary
 
 LATE = """\

@@ -22,7 +22,8 @@ from bench.harness import predict as prediction
 from bench.harness.config import RunConfig
 from bench.render import entry as render
 from bench.report.write import write_report
-from bench.results import Workspace, read_runs
+from bench.results import Workspace
+from bench.runs import read_runs
 from bench.vocabulary import KEY, Job, Unit
 from tests.conftest import (
     MEDIUM,
@@ -395,7 +396,7 @@ def test_one_version_in_the_package_the_changelog_and_the_readme(capsys):
 
 def test_cells_stock_colmap_cannot_map_are_marked_and_left_out_of_the_sfm_means():
     from bench.report.tables import headline_frame, paired_sfm, table1, table_scenes
-    from bench.results import mark_reference
+    from bench.runs import mark_reference
 
     rows = []
     # stock COLMAP maps seed 0; seed 1 it registers in part, seed 2 with wrong poses
@@ -425,7 +426,7 @@ def test_cells_stock_colmap_cannot_map_are_marked_and_left_out_of_the_sfm_means(
 def test_a_reference_at_the_exclusion_boundary_maps():
     """Stock COLMAP maps a cell when it registers every view with mAA of at least 0.5:
     exactly 0.5 maps, just below does not, nor every view but one at mAA 1."""
-    from bench.results import mark_reference
+    from bench.runs import mark_reference
 
     cells = {0: (6, 0.5), 1: (6, 0.5 - 1e-9), 2: (5, 1.0), 3: (6, 1.0)}
     rows = [

@@ -23,15 +23,15 @@ from bench import ROOT, BenchError
 from bench.backend.reconstruction import known_pose_model
 from bench.cli import build_parser, common, main
 from bench.cli.common import LATEST, QUICK, REGIMES, parse_list, regime_folder
-from bench.harness import execute
-from bench.harness import grid as harness
+from bench.harness import execute, manifest
 from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig
 from bench.harness.predict import export_model
 from bench.render import entry as render
 from bench.report import figures
-from bench.report.write import publish, write_report
-from bench.results import read_runs
+from bench.report.publish import publish
+from bench.report.write import write_report
+from bench.runs import read_runs
 from bench.vocabulary import KEY, Vocabulary
 from tests.conftest import (
     MEDIUM,
@@ -72,7 +72,7 @@ def _edit(runs_csv: Path, method: str, column: str, value: str, reseal: bool = F
     row = rows[line - 1]
     old, row[header.index(column)] = row[header.index(column)], value
     if reseal:
-        from bench.results import row_checksum
+        from bench.runs import row_checksum
 
         row[-1] = row_checksum(dict(zip(header, row)))
     out = io.StringIO()
@@ -154,7 +154,7 @@ def test_a_percentage_outside_0_to_100_is_refused(small_run, tmp_path, capsys, v
 
 
 def test_a_computed_row_outside_its_range_is_never_written(tmp_path):
-    from bench.results import append_runs
+    from bench.runs import append_runs
     from bench.vocabulary import Vocabulary
 
     row = read_runs(PUBLISHED / "runs.csv").iloc[0].to_dict() | {"maa": 1.5}
@@ -170,11 +170,11 @@ def test_runs_csv_is_appended_to_not_rewritten(small_run, renders_dir, tmp_path,
     shutil.copytree(small_run, r)
     before = (r / "runs.csv").read_text()
     rewritten = []
-    import bench.results as results
+    import bench.runs as runs
 
-    real = results.write_text_atomic
+    real = runs.write_text_atomic
     monkeypatch.setattr(
-        results, "write_text_atomic", lambda p, t: rewritten.append(p.name) or real(p, t)
+        runs, "write_text_atomic", lambda p, t: rewritten.append(p.name) or real(p, t)
     )
     grown = dataclasses.replace(GRID, budgets=(64, 32))
     bench_run(grown, r, renders_dir)
@@ -215,7 +215,8 @@ def test_publish_keeps_a_snapshot_of_other_settings_unless_replace(small_run, tm
 
 def _errored(runs_csv: Path) -> None:
     """Mark the grid row of `runs.csv` as one that could not be computed (resealed)."""
-    from bench.results import REFERENCE_MAPS, ROW_CHECKSUM, append_runs
+    from bench.runs import ROW_CHECKSUM, append_runs
+    from bench.vocabulary import REFERENCE_MAPS
 
     runs = read_runs(runs_csv)
     grid = runs["method"] == "grid"
@@ -265,7 +266,7 @@ def test_publish_into_a_regimes_snapshot_checks_its_grid(small_run, tmp_path, ca
     assert not (tmp_path / "results" / "published").exists()
     assert main(["publish", "--to", str(tmp_path / "mine")]) == 0  # a snapshot of its own
     said = capsys.readouterr().err  # and it says that it is no regime's grid
-    assert "published as is, not as a regime's snapshot: results/latest is not the sparse" in said
+    assert "published as a snapshot of its own: results/latest's grid is checked" in said
 
 
 def test_a_setting_added_since_the_snapshot_differs_only_off_its_default(
@@ -282,7 +283,7 @@ def test_a_setting_added_since_the_snapshot_differs_only_off_its_default(
     (snap / "config.json").write_text(json.dumps(old))
     argv = ["publish", "--results", str(r), "--to", str(snap)]
     assert main(argv) == 0
-    assert "published as is, not as a regime's snapshot" in capsys.readouterr().err
+    assert "published as a snapshot of its own" in capsys.readouterr().err
     (snap / "config.json").write_text(json.dumps(old))
     new = json.loads((r / "config.json").read_text())
     new["settings"]["backend"]["matcher"] = "lightglue"
@@ -386,7 +387,7 @@ def test_a_folder_with_the_old_policy_column_is_refused_and_upgraded(small_run, 
     """A `runs.csv` written before the column was named `method` (its rows sealed under the
     old name) is refused in one line naming `bench upgrade`, which renames the column and
     re-seals every row whose checksum held; a row altered by hand stays altered."""
-    from bench.results import ROW_CHECKSUM, row_checksum
+    from bench.runs import ROW_CHECKSUM, row_checksum
 
     r = tmp_path / "r"
     shutil.copytree(small_run, r)
@@ -529,8 +530,8 @@ def test_the_manifest_names_whichever_distribution_provides_a_module(
             raise PackageNotFoundError(name)
         return version(name)
 
-    monkeypatch.setattr(harness, "packages_distributions", lambda: provided, raising=False)
-    monkeypatch.setattr(harness, "version", installed)
+    monkeypatch.setattr(manifest, "packages_distributions", lambda: provided, raising=False)
+    monkeypatch.setattr(manifest, "version", installed)
     shutil.copytree(quick_results, tmp_path / "r")
     bench_run(SMALL, tmp_path / "r", renders_dir)
     versions = json.loads((tmp_path / "r" / "manifest.json").read_text())["versions"]

@@ -146,12 +146,14 @@ def test_a_view_chooser_module_reaching_ground_truth_is_refused(planted):
 
 
 REPORT_MAY_IMPORT = ("bench.report", "bench.vocabulary", "bench.results", "bench.files")
+REPORT_MAY_IMPORT += ("bench.runs", "bench.binding")
 REPORT_MAY_IMPORT += ("bench.console", "bench.failures")
 
 
 @pytest.mark.parametrize(
     "name",
-    [m for m in MODULES if m.startswith(("bench.report", "bench.vocabulary", "bench.results"))],
+    [m for m in MODULES if m.startswith(("bench.report", "bench.vocabulary", "bench.results"))]
+    + ["bench.runs", "bench.binding"],
 )
 def test_the_report_reads_results_and_never_imports_a_stage_that_computes(name):
     """The report stage (and the vocabulary and results contract it reads) import no stage

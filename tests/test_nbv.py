@@ -27,6 +27,7 @@ from bench.acquisition.choosers import (
     chooser_rng,
 )
 from bench.backend.matching import PairMatches
+from bench.binding import read_vocabulary
 from bench.camera import look_at
 from bench.evaluation.export import export_dataset
 from bench.frontend.features import Candidates
@@ -36,7 +37,7 @@ from bench.harness.config import NbvConfig, RunConfig
 from bench.harness.grid import BenchConfig
 from bench.render.entry import render_scene
 from bench.report.transfer import transfer
-from bench.results import read_runs, read_vocabulary
+from bench.runs import read_runs
 from bench.vocabulary import METHODS
 from tests.conftest import MEDIUM, bench_run
 

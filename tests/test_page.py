@@ -10,10 +10,12 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from bench.binding import read_vocabulary
 from bench.report.page import results_page
 from bench.report.tables import with_shares
 from bench.report.write import write_tables
-from bench.results import PAGE, read_runs, read_vocabulary
+from bench.results import PAGE
+from bench.runs import read_runs
 from bench.vocabulary import Vocabulary
 
 PUBLISHED = Path(__file__).resolve().parents[1] / "results" / "published"

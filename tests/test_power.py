@@ -107,8 +107,8 @@ def test_a_transfer_row_carries_its_power_with_known_values():
 def test_table1_tiers_each_budget_apart_and_leave_references_out():
     from pathlib import Path
 
+    from bench.binding import read_vocabulary
     from bench.report.tables import tier_column, with_tiers
-    from bench.results import read_vocabulary
 
     vocab = read_vocabulary(Path(__file__).resolve().parents[1] / "results" / "published")
     base = np.random.default_rng(0).uniform(0.4, 0.6, 10)

@@ -13,7 +13,7 @@ import pytest
 from bench import BenchError, vocabulary
 from bench.cli import main
 from bench.harness.config import RunConfig
-from bench.results import read_runs
+from bench.runs import read_runs
 from tests.conftest import (
     bench_run,
     small_grid,

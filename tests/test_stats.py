@@ -12,20 +12,15 @@ import pytest
 from scipy import stats as scipy_stats
 
 from bench import BenchError
+from bench.binding import read_vocabulary
 from bench.cli import main
 from bench.evaluation.export import export_dataset
 from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig, with_reference
 from bench.report.stats import paired_difference, stratified_interval
 from bench.report.tables import headline_frame, paired, paired_sfm, table1, with_shares
-from bench.results import (
-    ROW_CHECKSUM,
-    VOCABULARY,
-    append_runs,
-    mark_reference,
-    read_runs,
-    read_vocabulary,
-)
+from bench.results import VOCABULARY
+from bench.runs import ROW_CHECKSUM, append_runs, mark_reference, read_runs
 from bench.vocabulary import REFERENCE_MAPS, Vocabulary
 from tests.conftest import MEDIUM, bench_run
 

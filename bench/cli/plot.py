@@ -43,7 +43,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> None:
     from bench.report.write import write_report
-    from bench.results import RUNS, holding, read_runs, runs_file
+    from bench.results import RUNS, holding
+    from bench.runs import read_runs, runs_file
 
     runs_csv = runs_file(args.results / RUNS)
     with holding(args.results):  # refused while a run writes the folder

@@ -70,23 +70,13 @@ def regime_grid(name: str) -> dict:
     }
 
 
-def _say_not_a_regime(results, regime: str) -> None:
-    """One line where a folder published with --to and no --regime is not the regime's
-    grid (a --quick run, say): it is published as is, and `--regime` would refuse it."""
-    from bench import BenchError
-    from bench.console import log
-    from bench.report.write import check_publishable
-
-    try:
-        check_publishable(results, regime_grid(regime))
-    except BenchError as e:
-        log(f"published as is, not as a regime's snapshot: {e}")
-
-
 def run(args: argparse.Namespace) -> None:
     from bench import BenchError
-    from bench.report.write import check_publishable, publish
-    from bench.results import RUNS, holding, runs_file, snapshot_differences
+    from bench.binding import snapshot_differences
+    from bench.console import log
+    from bench.report.publish import check_publishable, publish
+    from bench.results import RUNS, holding
+    from bench.runs import runs_file
 
     regime = args.regime or "sparse"
     # named, or its snapshot the target: the folder must hold that regime's grid
@@ -108,6 +98,9 @@ def run(args: argparse.Namespace) -> None:
                 f"({'; '.join(differ)}); --replace replaces it"
             )
         n = publish(args.results, args.to)
-    if grid is None:  # a snapshot of its own: said when it is no regime's grid
-        _say_not_a_regime(args.results, regime)
+    if grid is None:  # a snapshot of its own, said (its grid may be a --quick run's)
+        log(
+            f"published as a snapshot of its own: {args.results}'s grid is checked against "
+            "a regime's only with --regime sparse|dense"
+        )
     print(f"published {n} files of {args.results} in {args.to}")

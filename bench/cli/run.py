@@ -377,12 +377,13 @@ def bags_arg(args: argparse.Namespace, datasets: bool, tasks: tuple[str, ...]) -
 
 
 def run(args: argparse.Namespace) -> None:
+    from bench.binding import read_vocabulary
     from bench.failures import errors
     from bench.harness.execute import Cluster, default_workers
     from bench.harness.grid import BenchConfig, RunOptions, in_grid, run_benchmark, with_reference
     from bench.report.page import brief_table1
     from bench.report.write import write_report
-    from bench.results import PAGE, Workspace, read_vocabulary
+    from bench.results import PAGE, Workspace
     from bench.scenes.spec import scene_names
     from bench.vocabulary import GROUND_TRUTH, HEADLINE, METHODS
 

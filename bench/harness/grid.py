@@ -2,7 +2,7 @@
 
 Stages per (scene, seed): render (cached) -> front end (cached) -> for each policy and
 budget: one unit (`bench.harness.execute`), its rows appended to `runs.csv` at once (an
-interrupt keeps every finished row; a cut last row is caught as damage, `bench.results`).
+interrupt keeps every finished row; a cut last row is caught as damage, `bench.runs`).
 The settings are stored in `config.json` beside the results and the vocabulary of the rows
 in `vocabulary.json`; a run into a folder holding other settings is refused unless
 `overwrite`. Rows whose prediction is current but whose scoring is not (or every row,
@@ -17,46 +17,34 @@ from __future__ import annotations
 
 import json
 import os
-import platform
-import subprocess
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from functools import partial
-from importlib.metadata import packages_distributions, version
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from bench import ROOT, BenchError
+from bench import BenchError
+from bench.binding import bind_results_dir, check_results_dir, models_replaced
 from bench.console import log, progress
 from bench.failures import ERROR, exclusions, failures, outcomes
-from bench.files import entry_problem, write_text_atomic
+from bench.files import entry_problem
 from bench.frontend import plugins
 from bench.frontend.policies import check_methods, learned_weights
-from bench.frontend.views import Source, source_key
+from bench.frontend.views import source_key
 from bench.harness.bags import BAG, bag_names, dataset_bags
 from bench.harness.config import RunConfig
 from bench.harness.evaluate import evaluation_hash
 from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
+from bench.harness.manifest import git_commit, write_manifest
 from bench.harness.predict import prediction_hash
 from bench.harness.tasks import RUNNERS
 from bench.render.config import RenderConfig
-from bench.render.entry import entry_meta, entry_name, render_scene, render_scenes
-from bench.results import (
-    DAMAGED,
-    MANIFEST,
-    Workspace,
-    append_runs,
-    bind_results_dir,
-    check_results_dir,
-    holding,
-    keep_runs,
-    models_replaced,
-    read_runs,
-    set_aside_damaged,
-)
+from bench.render.entry import entry_name, render_scene, render_scenes
+from bench.results import DAMAGED, Workspace, holding
+from bench.runs import append_runs, keep_runs, read_runs, set_aside_damaged
 from bench.scenes.spec import load_spec, scene_names
 from bench.vocabulary import (
     KEY,
@@ -238,8 +226,9 @@ def run_benchmark(
     report: Report | None = None,
 ) -> pd.DataFrame:
     """Run whatever of the grid is missing from `runs.csv`, then `report(rows, results,
-    renders)` (see `bench.results` for what counts as finished, damaged or refused). One
-    run at a time holds a results folder; another is refused in one line while it does."""
+    renders)` (see `bench.runs` and `bench.binding` for what counts as finished, damaged
+    or refused). One run at a time holds a results folder; another is refused in one line
+    while it does."""
     cfg.validate()
     if options.cluster.scheduler is not None:
         check_scheduler(options.cluster.scheduler)
@@ -338,7 +327,7 @@ def _run_in(
     t_start = time.perf_counter()
     invocation = {
         "id": time.strftime("%Y%m%dT%H%M%S") + f"-{os.getpid()}",
-        "git_commit": _git_commit(),  # before this run rewrites any tracked result file
+        "git_commit": git_commit(),  # before this run rewrites any tracked result file
     }
     check_results_dir(ws.results, cfg.run.as_dict(), options.overwrite, RunConfig().as_dict())
     df, rescore = _current_rows(cfg, ws, options)
@@ -398,14 +387,14 @@ def _run_in(
         "wall": wall | {"total": time.perf_counter() - t_start},
         "cluster": _cluster_record(options.cluster),
     }
-    write_manifest(ws, cfg, invocation, out)  # before the report: its page shows the run
+    write_manifest(ws, cfg.run.as_dict(), invocation, out)  # before the report: its page shows it
     if report is not None:
         t = time.perf_counter()
         report(out, ws.results, ws.renders)
         invocation["seconds"]["report"] = invocation["wall"]["report"] = time.perf_counter() - t
         invocation["seconds"]["total"] = time.perf_counter() - t_start
         invocation["wall"]["total"] = invocation["seconds"]["total"]
-        write_manifest(ws, cfg, invocation, out)
+        write_manifest(ws, cfg.run.as_dict(), invocation, out)
     ours = in_grid(cfg, out)
     said = [
         failures(ours),
@@ -432,7 +421,7 @@ def _interrupted(ws: Workspace, cfg: BenchConfig, invocation: dict, stage_s: dic
         return
     n = int((rows["invocation"] == invocation["id"]).sum())
     invocation["seconds"] |= stage_s
-    write_manifest(ws, cfg, invocation | {"rows": n, "interrupted": True}, rows)
+    write_manifest(ws, cfg.run.as_dict(), invocation | {"rows": n, "interrupted": True}, rows)
 
 
 def _rendered(
@@ -513,85 +502,3 @@ def _add_seconds(stage_s: dict[str, float], new: list[dict]) -> None:
     for r in new:
         stage_s["task"] += np.nan_to_num(r.get("task_ms", 0.0)) / 1000
         stage_s["evaluate"] += np.nan_to_num(r.get("evaluate_ms", 0.0)) / 1000
-
-
-def _git_commit() -> str:
-    try:
-        sha = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True, timeout=10
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=ROOT,
-            capture_output=True,
-            text=True,
-            timeout=10,
-        ).stdout.strip()
-        return sha + ("-dirty" if dirty else "") if sha else "unknown"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-
-
-MODULES = ("mitsuba", "drjit", "numpy", "cv2", "pycolmap", "pandas", "matplotlib", "scipy")
-"""The modules whose versions the manifest records."""
-
-
-def module_versions(modules: tuple[str, ...]) -> dict[str, str]:
-    """Per module, the version of the distribution that provides it, named where its name
-    differs (`cv2`: `opencv-contrib-python-headless 5.0.0.93`, or whichever OpenCV build is
-    installed), and `unknown` where no installed distribution provides it."""
-    provided = packages_distributions()
-    out = {}
-    for module in modules:
-        names = sorted(provided.get(module, []))
-        out[module] = (
-            ", ".join(f"{n} {version(n)}" if n != module else version(n) for n in names)
-            or "unknown"
-        )
-    return out
-
-
-def write_manifest(ws: Workspace, cfg: BenchConfig, invocation: dict, rows: pd.DataFrame) -> None:
-    """Versions, variant, host, settings and the invocations that computed the rows of
-    `runs.csv`: each with its commit, seconds per stage (`seconds`: the rows' stages summed
-    over the workers, and the render stage's scenes), wall seconds per phase (`wall`:
-    render, runs, report, total) and what ran it (`cluster`: workers, cores), kept while it
-    owns a row (a rerun that computes nothing adds nothing), and their sums."""
-    path = ws.results / MANIFEST
-    try:
-        earlier = json.loads(path.read_text()).get("invocations", [])
-    except (OSError, ValueError, AttributeError):
-        earlier = []
-    live = set(rows["invocation"])
-    kept = [
-        i
-        for i in earlier
-        if isinstance(i, dict) and i.get("id") in live and i.get("id") != invocation["id"]
-    ]
-    if invocation["rows"]:
-        kept.append(invocation)
-    for inv in kept:
-        inv["rows_now"] = int((rows["invocation"] == inv["id"]).sum())
-    total: dict[str, float] = {}
-    wall: dict[str, float] = {}
-    for inv in kept:
-        for k, v in inv["seconds"].items():
-            total[k] = total.get(k, 0.0) + v
-        for k, v in inv.get("wall", {}).items():  # an invocation before the wall was kept has none
-            wall[k] = wall.get(k, 0.0) + v
-    entries = [ws.renders / k for k in rows["render_key"].unique()]
-    metas = [entry_meta(e) for e in entries if Source.kind(e) == "render"]
-    manifest = {
-        "versions": {"python": platform.python_version(), **module_versions(MODULES)},
-        "variant": sorted({m["variant"] for m in metas}),
-        "host": {"node": platform.node(), "platform": platform.platform(), "cpus": os.cpu_count()},
-        "settings": cfg.run.as_dict(),
-        "evaluation_hash": evaluation_hash(),
-        "grid": {k: sorted(map(str, rows[k].unique())) for k in KEY},
-        "git_commit": sorted({inv["git_commit"] for inv in kept}),
-        "invocations": kept,
-        "seconds": total,
-        "wall": wall,
-        "render_entries": sorted(e.name for e in entries),
-    }
-    write_text_atomic(path, json.dumps(manifest, indent=1))

@@ -18,7 +18,7 @@ import pandas as pd  # noqa: E402
 from matplotlib.ticker import FixedLocator, NullLocator  # noqa: E402
 
 from bench.files import atomic_path  # noqa: E402
-from bench.results import POINT_ERRORS, Workspace  # noqa: E402
+from bench.results import POINT_ERRORS, Workspace
 from bench.vocabulary import (  # noqa: E402
     FIGURE_SCENE,
     GROUND_TRUTH,

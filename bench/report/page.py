@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from bench.binding import read_vocabulary
 from bench.failures import outcomes
 from bench.report import nbv
 from bench.report.text import ci
@@ -34,7 +35,6 @@ from bench.results import (
     TABLE2,
     TRANSFER,
     png,
-    read_vocabulary,
 )
 from bench.vocabulary import HEADLINE, HEADLINE_BUDGET, HEADLINE_POLICY, PAIRED_PEERS, Vocabulary
 

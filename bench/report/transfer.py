@@ -40,9 +40,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from bench.binding import read_settings, read_vocabulary
 from bench.report.power import ceiling, real_to_real, sign_agreement, split_half
 from bench.report.tables import headline_frame, solvable
-from bench.results import RUNS, read_runs, read_settings, read_vocabulary
+from bench.results import RUNS
+from bench.runs import read_runs
 from bench.vocabulary import Vocabulary
 
 SIGN_REFERENCE = "colmap-b"
