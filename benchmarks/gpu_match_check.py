@@ -59,7 +59,7 @@ def main() -> int:
         decided = differ = 0
         for a, b in pairs:
             ref = features.tentative_matches(a, b, args.ratio)
-            out = gpu.ratio_matches(a, b, args.ratio)
+            out = gpu.matches_on(a, b, args.ratio, where)
             if out is not None:
                 decided += 1
                 differ += not np.array_equal(out, ref)
