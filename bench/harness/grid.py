@@ -313,7 +313,9 @@ def _other_bag(cfg: BenchConfig, df: pd.DataFrame, scene: str) -> pd.Series:
     want = {sd: bag_names(str(folder), b) for sd, b in bags.items()}
     have = df[BAG] if BAG in df else pd.Series(pd.NA, index=df.index)
     expected = df["seed"].map(want)
-    other = (df["scene"] == scene) & (have.astype(object).fillna("") != expected.fillna(""))
+    other = (df["scene"] == scene) & (
+        have.astype(object).fillna("") != expected.astype(object).fillna("")
+    )
     if other.any():
         log(
             f"{int(other.sum())} row(s) of {scene} were computed on other bags; computing them again"
