@@ -15,6 +15,7 @@ of the grid's rows failed, by reason, and which (scene, seed) the sfm means leav
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import time
@@ -55,6 +56,9 @@ from bench.vocabulary import (
     Unit,
     Vocabulary,
 )
+
+_INVOCATIONS = itertools.count(1)
+"""Numbers the invocations of this process: two in one second stay two (their id)."""
 
 
 def default_methods() -> tuple[str, ...]:
@@ -328,7 +332,7 @@ def _run_in(
 ) -> pd.DataFrame:
     t_start = time.perf_counter()
     invocation = {
-        "id": time.strftime("%Y%m%dT%H%M%S") + f"-{os.getpid()}",
+        "id": time.strftime("%Y%m%dT%H%M%S") + f"-{os.getpid()}-{next(_INVOCATIONS)}",
         "git_commit": git_commit(),  # before this run rewrites any tracked result file
     }
     check_results_dir(ws.results, cfg.run.as_dict(), options.overwrite, RunConfig().as_dict())
