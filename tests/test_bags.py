@@ -12,7 +12,8 @@ from scipy.sparse.csgraph import connected_components
 
 from bench.cli import main
 from bench.evaluation.export import export_dataset
-from bench.harness.bags import BAG, draw_bags
+from bench.evaluation.relative import MIN_SHARED
+from bench.harness.bags import BAG, covisible, draw_bags
 
 
 def test_bags_on_a_chain_are_its_runs_of_consecutive_views_each_once():
@@ -104,3 +105,9 @@ def test_bag_options_default_apply_to_datasets_alone_and_not_to_the_next_views_t
     assert "--bag-size ignored without --dataset" in capsys.readouterr().err
     with pytest.raises(BenchError, match="--bags must be at least 1"):
         bags_arg(Namespace(bag_size=4, bags=0), True, ("sfm",))
+
+
+def test_two_views_are_co_visible_from_exactly_min_shared_common_points():
+    """Views 0 and 1 share `MIN_SHARED` model points; view 2 shares one fewer with each."""
+    seen = [np.arange(MIN_SHARED), np.arange(MIN_SHARED), np.arange(1, MIN_SHARED)]
+    assert covisible([None] * 3, seen) == {(0, 1)}

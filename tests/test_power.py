@@ -146,3 +146,69 @@ def test_the_verdict_says_whether_the_renders_predict_a_set_as_well_as_the_photo
     assert "sfm_maa (tau 0.50 [0.10, 0.80] against 0.30, within the interval;" in line
     assert "less well than the other photographs in pairs_auc_10 (tau 0.50" in line
     assert "against 0.90; reliability 0.90 renders, 0.80 photographs, ceiling 0.85)" in line
+
+
+def test_holms_correction_merges_a_tier_the_raw_p_values_would_split():
+    """a exceeds b in 7 of 10 units (signed ranks -1, -2, -3, +4 ... +10: exact p 0.027),
+    and c is b: raw, a stands apart from b and c (p 0.027 < 0.05); Holm's x 3 gives 0.082,
+    one tier."""
+    b = np.linspace(0.2, 0.5, 10)
+    d = np.arange(1, 11) / 100 * np.r_[-1, -1, -1, np.ones(7)]
+    values = pd.DataFrame({"a": b + d, "b": b, "c": b})
+    assert tiers(values, lower_better=False).to_dict() == {"a": 1, "b": 1, "c": 1}
+
+
+def test_a_zero_on_either_side_leaves_the_method_undecided():
+    a = pd.Series({"m1": 0.2, "m2": -0.1, "m3": 0.3})
+    b = pd.Series({"m1": 0.1, "m2": 0.0, "m3": 0.2})
+    assert sign_agreement(a, b) == (2, 2)  # m2 has no sign on the second side
+    assert sign_agreement(b, a) == (2, 2)  # nor on the first
+
+
+def test_the_photographs_sign_baseline_leaves_the_set_itself_out():
+    """This set: x +3 over colmap-b; the others: x -0.5 and +0.2 (mean -0.15, against
+    this set's sign), y +1 everywhere. With this set in the others' mean, x would agree."""
+    from bench.report.transfer import power
+
+    cols = ["x", "y", "colmap-b"]
+    real = pd.DataFrame([[4, 2, 1], [4, 2, 1]], columns=cols, dtype=float)
+    sets = pd.DataFrame(
+        [[4, 2, 1], [0.5, 2, 1], [1.2, 2, 1]], index=["this", "B", "C"], columns=cols
+    )
+    out = power(real, real, sets, "this", cols, lower_better=False)
+    assert (out["signs_agree_photos"], out["signs_decided_photos"]) == (1, 2)
+
+
+def _pairs_rows(scene: str, cells: list[list[float]], methods: list[str]) -> list[dict]:
+    """Hand-made `ok` pairs rows at B = 256: one per (cell, method), auc_10 its value."""
+    return [
+        {"scene": scene, "seed": k, "method": m, "budget": 256, "task": "pairs"}
+        | {"protocol": "multiview", "render_key": "r", "prediction_hash": "p"}
+        | {"evaluation_hash": "e", "status": "ok", "failure": "", "invocation": "i"}
+        | {"wall_ms": 1.0, "auc_10": v, "maa_pairs": v, "pairs_scored": 15}
+        for k, row in enumerate(cells)
+        for m, v in zip(methods, row)
+    ]
+
+
+def test_transfer_gives_each_side_its_own_reliability(tmp_path):
+    """The renders' cells rank the methods the same in every unit (reliability 1); the
+    photographs' are the four units of reliability 0.8 above."""
+    import shutil
+    from pathlib import Path
+
+    from bench.binding import read_vocabulary
+    from bench.report.transfer import transfer
+    from bench.runs import append_runs
+
+    published = Path(__file__).resolve().parents[1] / "results" / "published"
+    for name in ("vocabulary.json", "config.json"):
+        shutil.copy(published / name, tmp_path / name)
+    vocab = read_vocabulary(tmp_path)
+    methods = ["texture", "grid", "random"]
+    rendered = [[0.3, 0.2, 0.1], [0.6, 0.5, 0.4], [0.3, 0.2, 0.1], [0.6, 0.5, 0.4]]
+    append_runs(tmp_path / "runs.csv", _pairs_rows("table", rendered, methods), vocab)
+    photos = [[0.3, 0.2, 0.1], [0.3, 0.1, 0.2], [0.3, 0.2, 0.1], [0.2, 0.3, 0.1]]
+    summary, _ = transfer(pd.DataFrame(_pairs_rows("set", photos, methods)), vocab, tmp_path)
+    (row,) = summary.to_dict("records")
+    assert row["rel_rendered"] == 1.0 and row["rel_dataset"] == pytest.approx(0.8)

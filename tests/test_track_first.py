@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from bench.backend.matching import PairMatches
@@ -74,3 +76,19 @@ def test_without_any_verified_match_it_is_the_cross_view_selection():
 def test_it_is_declared_a_multi_view_policy_reading_cross_views_signals():
     m = METHODS[NAME]
     assert m.kind == MULTI_VIEW and "epipolar" in m.reads and m.role == "contender"
+
+
+def test_track_lengths_go_to_the_first_passs_candidates_by_id_not_by_position():
+    """Texture rising with the index: a first pass of 2 B = 2 holds candidates 8 and 9 of
+    10 (positions 0 and 1); a 3-view track on candidate 8 makes B = 1 keep 8, not 0 (the
+    candidate at 8's position) and not 9 (the best score)."""
+    inputs = _inputs()
+    inputs = [replace(i, signals=replace(i.signals, texture=np.linspace(0, 1, 10))) for i in inputs]
+    seen = []
+
+    def match(selections):
+        seen.append([s.tolist() for s in selections])
+        return _pairs({(0, 1): [(0, 0)], (1, 2): [(0, 0)]})
+
+    sel, _ = MULTIVIEW[NAME](inputs, 1, TrackFirstConfig(first_pass=2), match)
+    assert seen == [[[8, 9]] * 3] and [s.tolist() for s in sel] == [[8]] * 3
