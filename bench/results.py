@@ -15,6 +15,7 @@ from pathlib import Path
 from bench.files import exclusive
 from bench.vocabulary import (
     HEADLINE,
+    NO_PROTOCOL,
     Job,
     Unit,
 )
@@ -95,11 +96,11 @@ class Workspace:
         """Where a job's model is exported: the headline task's folder is the unit's, any
         other task's a subfolder named after it; in it, the headline protocol's model at
         the top and any other protocol's in a subfolder named after the protocol (e.g.
-        `twoview/`, `sfm/`, `sfm/twoview/`)."""
+        `twoview/`, `sfm/`, `sfm/twoview/`; a task without tracks, `pairs/`, at the top)."""
         folder = self.unit_dir(unit)
         if job.task != HEADLINE[0]:
             folder = folder / job.task
-        return folder if job.protocol == HEADLINE[1] else folder / job.protocol
+        return folder if job.protocol in (HEADLINE[1], NO_PROTOCOL) else folder / job.protocol
 
 
 def holding(folder: Path, reading: bool = False):

@@ -2,8 +2,8 @@
 
 Every row is validated: the file's structure (each line has as many fields as the header:
 a row cut in the middle is caught), the required columns, the key values (scene, method,
-seed >= 0, budget >= 0, a known task and protocol; no key twice), numbers where numbers
-belong, the status (`ok` rows have their task's headline metrics, `failed` rows a reason).
+seed >= 0, budget >= 0, a known task and protocol, `none` for a task without tracks;
+no key twice), numbers where numbers belong, the status (`ok` rows have their task's headline metrics, `failed` rows a reason).
 Each row also carries its own integrity: every number lies in its declared range
 (`bench.vocabulary.Metric.range`), and `row_checksum` (last) is a hash of the row's values as
 written, so a value edited by hand is caught (against accidents, not an attacker with the
@@ -38,6 +38,7 @@ from bench.results import DAMAGED
 from bench.vocabulary import (
     HEADLINE,
     KEY,
+    NO_PROTOCOL,
     PROTOCOLS,
     REFERENCE_MAPS,
     REFERENCE_MIN_MAA,
@@ -90,8 +91,12 @@ def _row_problem(row: dict[str, str], vocab: Vocabulary) -> str | None:
             return f"{k} {row[k]!r} is not a non-negative integer"
     if row["task"] not in vocab.tasks:
         return f"unknown task {row['task']!r}"
-    if row["protocol"] not in PROTOCOLS:
+    if row["protocol"] not in (*PROTOCOLS, NO_PROTOCOL):
         return f"unknown protocol {row['protocol']!r}"
+    if (row["protocol"] == NO_PROTOCOL) == vocab.tasks[row["task"]].tracks:
+        return f"protocol {row['protocol']!r} in the {row['task']} task" + (
+            "" if vocab.tasks[row["task"]].tracks else f" (it has none: {NO_PROTOCOL!r})"
+        )
     for k, v in row.items():
         if k not in TEXT_COLUMNS and v:
             try:

@@ -11,6 +11,9 @@ from bench.files import write_text_atomic
 from bench.results import DAMAGED, RUNS, VOCABULARY
 from bench.runs import OLD_METHOD, ROW_CHECKSUM, check_runs, csv_lines, read_runs, row_checksum
 from bench.vocabulary import (
+    HEADLINE,
+    NO_PROTOCOL,
+    UNIT_KEY,
     Vocabulary,
     older_fields,
 )
@@ -20,8 +23,9 @@ def upgrade(results: Path, current: Vocabulary) -> list[str]:
     """Bring a results folder written by an older bench up to date, in place (`bench
     upgrade`): the `policy` column of its rows is renamed `method` (`_rename_method`),
     and a recorded vocabulary that lacks this one's fields (`older_fields`) gets the
-    package's declarations of its methods and tasks, by name, and of every metric. What it
-    changed, one item each (empty: the folder was up to date)."""
+    package's declarations of its methods and tasks, by name, and of every metric; the rows
+    of a task without tracks are written once (`_rows_once`). What it changed, one item
+    each (empty: the folder was up to date)."""
     results = Path(results)
     path = results / VOCABULARY
     if not path.is_file():
@@ -41,6 +45,8 @@ def upgrade(results: Path, current: Vocabulary) -> list[str]:
         tasks = {n: current.tasks[n] for n in data["tasks"]}
         write_text_atomic(path, Vocabulary(methods, tasks, current.metrics).to_json())
         changed.append(f"{VOCABULARY}: declared as this bench does ({', '.join(older)})")
+    untracked = {n for n, t in current.tasks.items() if not t.tracks}
+    changed += [c for name in (RUNS, DAMAGED) for c in _rows_once(results / name, untracked)]
     return changed
 
 
@@ -69,6 +75,54 @@ def _rename_method(path: Path) -> list[str]:
         out.append(fields)
     write_text_atomic(path, csv_lines(out))
     return [f"{path.name}: column {OLD_METHOD} renamed method ({len(rows) - 1} rows)"]
+
+
+def _rows_once(path: Path, untracked: set[str]) -> list[str]:
+    """Write the rows of the tasks without tracks (`Task.tracks`: pairs) once per unit,
+    protocol `NO_PROTOCOL`: an older bench wrote one per track protocol, with the same
+    values. The headline protocol's row is kept (else the first), its checksum recomputed
+    where it held (an altered row stays altered); the others are dropped."""
+    if not path.is_file():
+        return []
+    with path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or not {"task", "protocol", *UNIT_KEY} <= set(rows[0]):
+        return []
+    header = rows[0]
+
+    def old(fields: list[str]) -> bool:
+        row = dict(zip(header, fields))
+        return (
+            len(fields) == len(header)
+            and row["task"] in untracked
+            and row["protocol"] != NO_PROTOCOL
+        )
+
+    if not any(old(f) for f in rows[1:]):
+        return []
+    units = [tuple(dict(zip(header, f)).get(k) for k in (*UNIT_KEY, "task")) for f in rows[1:]]
+    keep = {}
+    for n, (fields, unit) in enumerate(zip(rows[1:], units)):
+        if old(fields) and (
+            unit not in keep or dict(zip(header, fields))["protocol"] == HEADLINE[1]
+        ):
+            keep[unit] = n
+    out = [header]
+    for n, (fields, unit) in enumerate(zip(rows[1:], units)):
+        if not old(fields):
+            out.append(fields)
+        elif keep[unit] == n:
+            row = dict(zip(header, fields))
+            held = ROW_CHECKSUM in row and row[ROW_CHECKSUM] == row_checksum(row)
+            row["protocol"] = NO_PROTOCOL
+            if held:
+                row[ROW_CHECKSUM] = row_checksum(row)
+            out.append([row[c] for c in header])
+    write_text_atomic(path, csv_lines(out))
+    return [
+        f"{path.name}: {', '.join(sorted(untracked))} rows written once per unit, protocol "
+        f"{NO_PROTOCOL} ({len(keep)} kept, {len(rows) - len(out)} duplicates dropped)"
+    ]
 
 
 def refuse_damage(results: Path) -> None:

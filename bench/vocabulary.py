@@ -28,6 +28,9 @@ UNIT_KEY = KEY[:4]
 """The columns that identify a unit of work (one selection, matched once per geometry)."""
 PROTOCOLS = {"multiview": 3, "twoview": 2}
 """Track protocols: the fewest views a point's track may have (`bench.backend.reconstruction`)."""
+NO_PROTOCOL = "none"
+"""The protocol of the rows of a task without tracks (`Task.tracks`: pairs): one row per
+unit, read under every track protocol."""
 HEADLINE = ("tri", "multiview")
 """The headline task and track protocol."""
 HEADLINE_BUDGET = 256
@@ -164,6 +167,9 @@ class Task:
     """Whether a (scene, seed) that stock COLMAP with all its features (`REFERENCE_PEER`)
     does not map is left out of this task's means and paired differences (the task's
     rows hold `registered_views` and `maa`, `REFERENCE_MAPS`; the peers run it)."""
+    tracks: bool = True
+    """Whether the track protocol applies (`PROTOCOLS`): a task without tracks (pairs)
+    writes one row per unit, its protocol `NO_PROTOCOL`."""
 
 
 @dataclass(frozen=True)

@@ -131,7 +131,9 @@ TIMING = [
     "row_checksum",
 ]
 POLICIES = ["random", "texture", "grid", "adaptive", "oracle", "colmap-b", "all", "colmap"]
-ROWS = 2 * (6 * 3 * 2 + 2 * 2 * 2)  # scenes x (selections x 3 tasks + peers x 2) x protocols
+ROWS = 2 * (6 * (2 * 2 + 1) + 2 * (2 + 1))
+"""Scenes x (selections x (tri, sfm x protocols + pairs once) + peers x (sfm x protocols +
+pairs once))."""
 
 
 @pytest.fixture(scope="session")

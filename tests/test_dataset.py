@@ -68,7 +68,7 @@ def test_dataset_run_gives_the_metrics_and_the_ranking_of_the_rendered_path(
         renders_dir,
         workers=1,
     )
-    assert len(rendered) == len(data) == 3 * 6 + 4  # tri, sfm, pairs; colmap-b: sfm, pairs
+    assert len(rendered) == len(data) == 3 * 5 + 3  # tri, sfm x 2 protocols, pairs once; colmap-b
     timing = {c for c in rendered if c.endswith("_ms")}
     cols = [c for c in rendered.columns if c not in NOT_COMPARED | timing]
     a = rendered[cols].sort_values(list(KEY[2:]), ignore_index=True)

@@ -56,8 +56,8 @@ def test_quick_run_writes_every_file_with_documented_columns(quick_results):
     assert len(runs) == ROWS and set(runs["method"]) == set(POLICIES)
     assert set(runs.loc[runs["method"] == "all", "budget"]) == {0}  # one run, the whole pool
     assert set(zip(runs["task"], runs["protocol"])) == {
-        (t, p) for t in ("tri", "sfm", "pairs") for p in ("multiview", "twoview")
-    }
+        (t, p) for t in ("tri", "sfm") for p in ("multiview", "twoview")
+    } | {("pairs", "none")}  # pairs has no tracks: one row per unit
     assert set(runs.loc[runs["method"].str.startswith("colmap"), "task"]) == {"sfm", "pairs"}
     pairs = runs[runs["task"] == "pairs"]  # scored from the poses stored with the prediction
     assert pairs["auc_10"].between(0, 1).all() and (pairs["pairs_estimated"] > 0).any()
@@ -159,11 +159,11 @@ def test_interrupted_run_resumes_without_redoing_rows(renders_dir, tmp_path, mon
     monkeypatch.setattr(execute, "predict", interrupt_after_three)
     with pytest.raises(KeyboardInterrupt):
         bench_run(SMALL, tmp_path, renders_dir)
-    assert len(pd.read_csv(tmp_path / "runs.csv")) == 3 * 6  # tasks x protocols
+    assert len(pd.read_csv(tmp_path / "runs.csv")) == 3 * 5  # tri, sfm x protocols; pairs
     # the interrupted invocation is in the manifest with its rows and seconds (it was not:
     # after a resume the page said frontend 0 and listed the resuming invocation alone)
     killed = json.loads((tmp_path / "manifest.json").read_text())["invocations"]
-    assert [(i["rows_now"], i["interrupted"]) for i in killed] == [(18, True)]
+    assert [(i["rows_now"], i["interrupted"]) for i in killed] == [(15, True)]
     assert killed[0]["seconds"]["frontend"] > 0
     monkeypatch.setattr(execute, "predict", real)
     calls.clear()
@@ -198,7 +198,7 @@ def test_growing_a_results_folder_runs_only_the_new_rows(
     bench_run(grown, tmp_path / "r", renders_dir)
     assert sorted(calls) == [(p, 32) for p in sorted(POLICIES[:6])]
     runs = pd.read_csv(tmp_path / "r" / "runs.csv")
-    assert len(runs) == ROWS + 5 * 6 + 4  # the new budget's selections and its colmap-b
+    assert len(runs) == ROWS + 5 * 5 + 3  # the new budget's selections and its colmap-b
     other = dataclasses.replace(SMALL, run=RunConfig(render=dataclasses.replace(MEDIUM, spp=4)))
     with pytest.raises(BenchError, match=r"other settings \(render.spp: 16 there, 4 now\)"):
         bench_run(other, tmp_path / "r", renders_dir)

@@ -294,7 +294,7 @@ def test_a_setting_added_since_the_snapshot_differs_only_off_its_default(
 
 def test_the_published_snapshot_carries_its_checksums():
     rows = read_runs(PUBLISHED / "runs.csv")
-    assert len(rows) == 6320 and rows["row_checksum"].str.len().eq(12).all()
+    assert len(rows) == 5140 and rows["row_checksum"].str.len().eq(12).all()
     # derived on reading from its colmap rows: every view registered with mAA >= 0.5
     ref = rows[(rows["method"] == "colmap") & (rows["task"] == "sfm")]
     ref = ref[ref["protocol"] == "multiview"].set_index(["scene", "seed"])
@@ -573,3 +573,46 @@ def test_written_files_respect_the_umask(tmp_path):
     for p in (entry, tmp_path / "m"):
         assert stat.S_IMODE(p.stat().st_mode) == 0o755, p
     assert stat.S_IMODE((entry / "meta.json").stat().st_mode) == 0o644
+
+
+def _pairs_row(seed: int, protocol: str, task: str = "pairs") -> dict:
+    """A hand-made `ok` row of one unit (table, seed, texture at 64)."""
+    row = {"scene": "table", "seed": seed, "method": "texture", "budget": 64, "task": task}
+    row |= {"protocol": protocol, "render_key": "r", "prediction_hash": "p"}
+    row |= {"evaluation_hash": "e", "status": "ok", "failure": "", "invocation": "i"}
+    if task == "tri":
+        return row | {"wall_ms": 1.0, "points": 9, "acc_completeness_pct": 12.5}
+    return row | {"wall_ms": 1.0, "auc_10": 0.5, "maa_pairs": 0.4, "pairs_scored": 15}
+
+
+def test_pairs_rows_are_written_once_and_an_older_folders_twice_upgraded(tmp_path, capsys):
+    """The pairs task has no tracks: an older bench wrote each unit's row once per track
+    protocol, identical (a 50-unit run reported 100 rows); its folder is refused until `bench
+    upgrade` keeps one row per unit, protocol none, its checksum valid. A row of the pairs
+    task under a track protocol breaks the contract now."""
+    from bench.runs import append_runs
+
+    current = Vocabulary.current()
+    with pytest.raises(BenchError, match="protocol 'multiview' in the pairs task .*'none'"):
+        append_runs(tmp_path / "x.csv", [_pairs_row(0, "multiview")], current)
+    tasks = {n: dataclasses.replace(t, tracks=True) for n, t in current.tasks.items()}
+    older = dataclasses.replace(current, tasks=tasks)
+    data = json.loads(older.to_json())
+    for task in data["tasks"].values():
+        task.pop("tracks")
+    (tmp_path / "vocabulary.json").write_text(json.dumps(data))
+    rows = [_pairs_row(s, p) for s in (0, 1) for p in ("multiview", "twoview")]
+    append_runs(tmp_path / "runs.csv", [*rows, _pairs_row(0, "twoview", "tri")], older)
+    with pytest.raises(BenchError, match="bench upgrade"):
+        read_runs(tmp_path / "runs.csv")
+    assert main(["upgrade", "--results", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "runs.csv: pairs rows written once per unit, protocol none (2 kept, 2 duplicates" in out
+    runs = read_runs(tmp_path / "runs.csv")
+    assert sorted(zip(runs["task"], runs["protocol"], runs["seed"])) == [
+        ("pairs", "none", 0),
+        ("pairs", "none", 1),
+        ("tri", "twoview", 0),  # a task with tracks: as it was
+    ]
+    assert main(["upgrade", "--results", str(tmp_path)]) == 0
+    assert "up to date" in capsys.readouterr().out

@@ -104,10 +104,13 @@ def test_every_task_and_protocol_subset_writes_its_tables_figures_and_page(
     folder = tmp_path / "r"
     shutil.copytree(every_task, folder, ignore=shutil.ignore_patterns("*.csv", "*.png", PAGE))
     runs = pd.read_csv(every_task / "runs.csv", dtype=str, keep_default_na=False)
-    keep = runs["task"].isin(tasks) & runs["protocol"].isin(protocols)
+    keep = runs["task"].isin(tasks) & runs["protocol"].isin([*protocols, "none"])  # pairs: none
     runs[keep].to_csv(folder / "runs.csv", index=False)  # whole rows: their checksums hold
     assert main(["plot", "--results", str(folder)]) == 0
-    table = "table1.csv" if "multiview" in protocols else "table1_twoview.csv"
+    tracked = [t for t in tasks if t != "pairs"]
+    table = "table1.csv" if "multiview" in protocols or not tracked else "table1_twoview.csv"
+    # a pairs-only run has one protocol, none, and no twoview table
+    assert (folder / "table1_twoview.csv").is_file() == bool("twoview" in protocols and tracked)
     t1 = pd.read_csv(folder / table)
     for task in tasks:
         assert any(c == "acc_completeness_pct" or c.startswith(f"{task}_") for c in t1) or (

@@ -183,7 +183,7 @@ def _pairs_rows(scene: str, cells: list[list[float]], methods: list[str]) -> lis
     """Hand-made `ok` pairs rows at B = 256: one per (cell, method), auc_10 its value."""
     return [
         {"scene": scene, "seed": k, "method": m, "budget": 256, "task": "pairs"}
-        | {"protocol": "multiview", "render_key": "r", "prediction_hash": "p"}
+        | {"protocol": "none", "render_key": "r", "prediction_hash": "p"}
         | {"evaluation_hash": "e", "status": "ok", "failure": "", "invocation": "i"}
         | {"wall_ms": 1.0, "auc_10": v, "maa_pairs": v, "pairs_scored": 15}
         for k, row in enumerate(cells)

@@ -11,7 +11,9 @@ DESCRIPTION = (
     "Rename runs.csv's `policy` column `method` (each row's checksum recomputed where it "
     "held), and, where RESULTS/vocabulary.json lacks what this bench records of its "
     "methods, tasks and metrics (a method's kind, a task's metrics, a metric's range and "
-    "direction), record this bench's declarations of the same names. No row is computed "
+    "direction), record this bench's declarations of the same names; write the rows of a "
+    "task without tracks (pairs) once per unit, protocol none, where an older bench wrote "
+    "one per track protocol. No row is computed "
     "again; run `bench plot` afterwards to rewrite the tables."
 )
 

@@ -50,6 +50,7 @@ from bench.scenes.spec import load_spec, scene_names
 from bench.vocabulary import (
     KEY,
     METHODS,
+    NO_PROTOCOL,
     PROTOCOLS,
     REFERENCE_PEER,
     Job,
@@ -187,7 +188,7 @@ class BenchConfig:
     def jobs(self, method: str) -> list[Job]:
         """Every job of a unit of `method`: the tasks its kind runs (`TaskRunner.kinds`;
         a peer runs the tasks that admit peers; a method that needs another detector's
-        pool runs none)."""
+        pool runs none); a task without tracks (`Task.tracks`) one job, `NO_PROTOCOL`."""
         if METHODS[method].pool not in ("", self.run.detector.detector):
             return []
         peer, kind = METHODS[method].role == "peer", METHODS[method].kind
@@ -198,7 +199,11 @@ class BenchConfig:
             if (RUNNERS[t].spec.peers or not peer)
             and (kind in RUNNERS[t].kinds if RUNNERS[t].kinds else kind not in claimed)
         ]
-        return [Job(t, pr) for t in tasks for pr in self.protocols]
+        return [Job(t, pr) for t in tasks for pr in self.protocols_of(t)]
+
+    def protocols_of(self, task: str) -> tuple[str, ...]:
+        """The protocols of a task's rows: the grid's, or `NO_PROTOCOL` without tracks."""
+        return self.protocols if RUNNERS[task].spec.tracks else (NO_PROTOCOL,)
 
     def render(self, task: str | None = None) -> RenderConfig | None:
         """The render settings of the entries a task's units read (`TaskRunner.rig`; the
@@ -468,7 +473,7 @@ def in_grid(cfg: BenchConfig, rows: pd.DataFrame) -> pd.DataFrame:
     """The rows of `cfg`'s grid (a results folder may hold more)."""
     units = {tuple(asdict(u).values()) for u in cfg.units()}
     keep = [
-        (sc, sd, p, b) in units and t in cfg.tasks and pr in cfg.protocols
+        (sc, sd, p, b) in units and t in cfg.tasks and pr in cfg.protocols_of(t)
         for sc, sd, p, b, t, pr in rows[list(KEY)].itertuples(index=False)
     ]
     return rows[keep]

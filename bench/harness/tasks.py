@@ -11,8 +11,8 @@ is declared on its `Task` and read from the results folder's recorded vocabulary
   (`bench.evaluation.poses`).
 * `pairs`: no reconstruction; the relative pose of every pair, as the verification of the
   selection's matches estimated it (stored with the prediction), scored by relative-pose
-  AUC and mAA (`bench.evaluation.relative`). The track protocol does not apply: its rows
-  under each protocol hold the same scores.
+  AUC and mAA (`bench.evaluation.relative`). The track protocol does not apply: one row
+  per unit, its protocol `none` (`Task.tracks`).
 
 The next-views task (`nbv`) is registered where it is run, `bench.harness.nbv`: only the
 view choosers run it (`TaskRunner.kinds`), each unit whole, on the scene's planned path
@@ -254,6 +254,7 @@ register(
             headline=("auc_10", "auc_5", "auc_20", "maa_pairs"),
             summary=("auc_10", "maa_pairs", "pairs_estimated"),
             drawn=("auc_10", "auc_5", "auc_20", "maa_pairs"),
+            tracks=False,
         ),
         reconstruct=relative_poses,
         evaluate=lambda truth, model, names, protocol, poses: evaluate_pairs(truth, poses),

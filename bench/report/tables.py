@@ -6,7 +6,8 @@
   (`<metric>_lo`, `<metric>_hi`; a stratified t-interval over scenes, `bench.report.stats`;
   `note` says why a row has none, e.g. `n/a (1 seed)`). The stock-COLMAP peers have sfm
   and pairs columns only. `table1_twoview.csv`: every task under the `twoview` track
-  protocol, never mixed into the headline.
+  protocol, never mixed into the headline (where rows ran under it). A task without tracks
+  (pairs, protocol `none`) has one row per unit, read under each protocol.
 * `completeness_vs_oracle_pct`: a run's completeness as a percentage of the oracle's in the
   same scene, seed and budget (the oracle is the ground-truth selection under the same
   budget, `bench.evaluation.oracle`).
@@ -60,6 +61,7 @@ from bench.vocabulary import (
     GROUND_TRUTH,
     HEADLINE,
     HEADLINE_POLICY,
+    NO_PROTOCOL,
     PAIRED_PEERS,
     REFERENCE_MAPS,
     UNIT_KEY,
@@ -109,7 +111,8 @@ def headline_frame(
     `<task>_<name>` (a unit without one of the tasks has NaN for it); with a task with the
     exclusion rule (`Task.exclusion_reference`), its `rule_column` and, where the rule is
     applied, `REFERENCE_MAPS` (`dataset`: the rows are of datasets)."""
-    rows = counted(df[df["protocol"] == protocol].copy(), vocab)  # .copy(): its blocks joined
+    under = df["protocol"].isin((protocol, NO_PROTOCOL))  # a task without tracks: under each
+    rows = counted(df[under].copy(), vocab)  # .copy(): its blocks joined
     frame = rows[rows["task"] == HEADLINE[0]].drop(columns=REFERENCE_MAPS, errors="ignore")
     for task in (t for t in vocab.tasks if t != HEADLINE[0]):
         cols = [c for c in (*vocab.tasks[task].metrics, "status", "error") if c in rows]
@@ -391,7 +394,7 @@ def frontend_cost(df: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     pose-free to the posed front end over the units both ran."""
     parts = ["detect_ms", "signals_ms", "select_ms"]
     ranked = vocab.with_role("baseline", "contender")
-    rows = df[(df["protocol"] == HEADLINE[1]) & df["method"].isin(ranked)]
+    rows = df[df["protocol"].isin((HEADLINE[1], NO_PROTOCOL)) & df["method"].isin(ranked)]
     if rows.empty or not set(parts) <= set(rows):
         return pd.DataFrame()
     unit = ["scene", "seed", "budget", "method"]

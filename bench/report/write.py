@@ -2,7 +2,8 @@
 (Figure 2 also reads an exported model and its render). Nothing here renders, selects or
 reconstructs, and nothing here imports the stages that do.
 
-Written files: `table1.csv` (headline task and protocol), `table1_twoview.csv`,
+Written files: `table1.csv` (headline task and protocol), `table1_twoview.csv` (where
+rows ran under that protocol),
 `table2.csv`, `paired.csv`, `paired_sfm.csv`, `table_scenes.csv`, `frontend_cost.csv`,
 `table1_equal.csv` where equal-count methods ran with their peer (`bench.report.tables`), `figure3.png/.pdf`, `figure_budget.png` (with several budgets)
 and `figure2.png` (`bench.report.figures`), `table3.csv` and `figure_views.png` with rows
@@ -71,7 +72,7 @@ from bench.results import (
     png,
     table1_of,
 )
-from bench.vocabulary import Vocabulary
+from bench.vocabulary import HEADLINE, PROTOCOLS, Vocabulary
 
 
 def _drop(*paths: Path) -> None:
@@ -114,7 +115,8 @@ def write_report(
 
 def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> list[pd.DataFrame]:
     """Every table of `results` from the rows `df` (with the report's shares); Table 1 of
-    each track protocol, the headline's first (what the figures draw: the first with rows)."""
+    each track protocol rows ran under (the rows of a task without tracks in each, or in
+    the headline's alone), the headline's first (what the figures draw: the first with rows)."""
     datasets = is_dataset_run(results)
     frame = headline_frame(df, vocab, dataset=datasets)
     t1, pairs = table1(frame, vocab), paired(frame, vocab)
@@ -123,9 +125,12 @@ def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> list[pd.
         log(f"{task} exclusion rule (cells stock COLMAP does not map): {rule}")
     if datasets:
         _write_tables(results, _per_dataset(frame, vocab, results))
+    ran = set(df["protocol"]) & set(PROTOCOLS)  # a task without tracks joins each, or is alone
     tables = {
-        TABLE1: t1,
-        TABLE1_TWOVIEW: table1(headline_frame(df, vocab, "twoview", datasets), vocab),
+        TABLE1: t1 if HEADLINE[1] in ran or not ran else pd.DataFrame(),
+        TABLE1_TWOVIEW: table1(headline_frame(df, vocab, "twoview", datasets), vocab)
+        if "twoview" in ran
+        else pd.DataFrame(),
         TABLE2: table2(frame, pairs, vocab),
         PAIRED: pairs,
         PAIRED_SFM: paired_sfm(frame, vocab),
