@@ -95,6 +95,11 @@ def _new_at_default(older: dict, newer: dict, defaults: dict | None) -> set[str]
     return {k for k, v in newer.items() if k not in older and k in default and default[k] == v}
 
 
+def _renders(settings: dict) -> str:
+    """What a run of these flattened settings is on: datasets render nothing."""
+    return "datasets" if "render" in settings and settings["render"] is None else "rendered scenes"
+
+
 def check_results_dir(
     results: Path, settings: dict, overwrite: bool, defaults: dict | None = None
 ) -> None:
@@ -110,6 +115,12 @@ def check_results_dir(
         # a stored setting this code no longer has (one that moved to its method), or a
         # method's own setting, decides nothing here; nor does a setting added since the
         # folder was made, at its default (a new setting's default is the behaviour before it)
+        kind = [_renders(d) for d in (stored, now)]
+        if kind[0] != kind[1]:
+            raise BenchError(
+                f"{results} holds a grid of {kind[0]}, and this run is on {kind[1]}; give "
+                "another --results folder (or --overwrite to replace them)"
+            )
         added = _new_at_default(stored, now, defaults)
         now = {k: v for k, v in now.items() if k not in added}
         differ = _differing({k: stored.get(k) for k in now}, now)

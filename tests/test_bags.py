@@ -103,6 +103,10 @@ def test_bag_options_default_apply_to_datasets_alone_and_not_to_the_next_views_t
     assert "--bag-size and --bags ignored with --tasks nbv" in capsys.readouterr().err
     bags_arg(Namespace(bag_size=4, bags=None), False, ("sfm",))
     assert "--bag-size ignored without --dataset" in capsys.readouterr().err
+    bags_arg(Namespace(bag_size=None, bags=3), False, ("sfm",))
+    assert "--bags ignored without --dataset: rendered scenes have their rigs" in (
+        capsys.readouterr().err
+    )
     with pytest.raises(BenchError, match="--bags must be at least 1"):
         bags_arg(Namespace(bag_size=4, bags=0), True, ("sfm",))
 

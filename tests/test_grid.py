@@ -8,6 +8,7 @@ import json
 import math
 import os
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -292,7 +293,7 @@ def test_plot_rejects_bad_runs_csv_in_one_line(tmp_path, capsys, content, messag
             ["run", "--protocols", "threeview"],
             "unknown protocol 'threeview'; valid: multiview, twoview",
         ),
-        (["run", "--budget", "0"], "budget must be positive"),
+        (["run", "--budget", "0"], "--budget takes keypoints per view, each at least 1, got 0"),
         (["run", "--budget", "12x"], "--budget takes one comma-separated list"),
         (["run", "--budget", "128,,256"], "e.g. --budget 128,256,512"),
         (["run", "--scenes", "table", "facade"], "list options take one comma-separated list"),
@@ -499,3 +500,82 @@ def test_nothing_to_compute_is_said_in_one_line(tmp_path, capsys):
     assert (
         len(err) == 1 and "nothing to compute" in err[0] and "peers run only sfm, pairs" in err[0]
     )
+
+
+def _tiny_dataset(folder: Path) -> Path:
+    """Three 64x48 noise images and their rig: a dataset in the COLMAP layout."""
+    import cv2
+
+    from bench.camera import Camera, write_colmap_rig
+
+    (folder / "images").mkdir(parents=True)
+    (folder / "sparse").mkdir()
+    names = [f"v{k}.png" for k in range(3)]
+    rng = np.random.default_rng(0)
+    for n in names:
+        cv2.imwrite(str(folder / "images" / n), rng.integers(0, 255, (48, 64, 3), np.uint8))
+    cam = Camera(64, 48, 50.0, 50.0, 32.0, 24.0, np.eye(3), np.zeros(3))
+    write_colmap_rig([cam] * 3, folder / "sparse", names)
+    return folder
+
+
+def test_a_dataset_runs_options_are_checked_before_any_work(tmp_path, capsys):
+    """`--rendered /missing` ran the whole grid and exited 0; a repeated `--dataset` and
+    too few methods for a ranking ended in "share no ranked budget"."""
+    d = str(_tiny_dataset(tmp_path / "set"))
+    where = ["--results", str(tmp_path / "r"), "--renders", str(tmp_path / "renders")]
+    argv = ["run", "--dataset", d, "--rendered", str(tmp_path / "missing"), *where]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        f"bench: error: --rendered {tmp_path / 'missing'}: no runs.csv there; "
+        "give a rendered results folder of `bench run`"
+    ]
+    argv = ["run", "--dataset", d, "--dataset", d, "--methods", "texture,adaptive"]
+    assert main([*argv, "--budget", "0", *where]) == 2
+    err = capsys.readouterr().err
+    assert "--dataset repeats set; each runs once" in err
+    assert "no transfer.csv will be written: --methods gives 2 budgeted method(s) (texture, " in err
+    assert not (tmp_path / "r").exists() and not (tmp_path / "renders").exists()
+
+
+def test_no_transfer_says_what_the_two_sides_share():
+    from bench.report.transfer import why_none
+
+    published = Path(__file__).resolve().parents[1] / "results" / "published"
+    rows = pd.DataFrame({"method": ["texture", "adaptive", "all"], "budget": [256, 256, 0]})
+    assert why_none(rows, [published]) == (
+        "at most 2 budgeted method(s) at one budget (adaptive, texture at 256); a ranking "
+        "needs at least 3"
+    )
+    assert why_none(rows.assign(budget=64), [published]).startswith(
+        "no budget (the datasets ran 64; the rendered results 128, 256, 512)"
+    )
+
+
+def test_a_dataset_run_into_a_rendered_grids_folder_is_refused_for_that_reason(tmp_path):
+    """It named `nbv.between`, the first setting in sort order that differed."""
+    from bench.binding import check_results_dir
+
+    rendered = {"render": {"views": 6}, "nbv": {"between": 3}, "backend": {"ratio": 0.8}}
+    (tmp_path / "config.json").write_text(json.dumps({"settings": rendered}))
+    dataset = {"render": None, "nbv": {"between": 0}, "backend": {"ratio": 0.8}}
+    with pytest.raises(
+        BenchError,
+        match="holds a grid of rendered scenes, and this run is on "
+        "datasets; give another --results folder",
+    ):
+        check_results_dir(tmp_path, dataset, overwrite=False)
+
+
+def test_select_lists_only_the_policies_it_runs(tmp_path, capsys):
+    images = str(_tiny_dataset(tmp_path / "set") / "images")
+    for policy, what in (("nope", "is unknown"), ("colmap-b", "is a method bench select cannot")):
+        assert (
+            main(["select", "--images", images, "--out", str(tmp_path / "o"), "--policy", policy])
+            == 2
+        )
+        (err,) = capsys.readouterr().err.strip().splitlines()
+        assert f"--policy {policy!r} {what}" in err and "adaptive" in err
+        valid = err.split("valid: ")[1].split(", ")
+        assert "colmap-b" not in valid and "random-view" not in valid and "oracle" not in valid

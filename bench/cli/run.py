@@ -338,7 +338,38 @@ def datasets_arg(paths: list[Path]) -> tuple[Path, ...]:
                 continue
         Source.of(path)  # a clear error if it is not a dataset
         out.append(path.resolve())
+    repeated = sorted({p.name for p in out if out.count(p) > 1})
+    if repeated:
+        log(
+            f"--dataset repeats {', '.join(repeated)}; each runs once (a repeat is not a replicate)"
+        )
     return tuple(dict.fromkeys(out))
+
+
+def rendered_arg(paths: list[Path]) -> list[Path]:
+    """The `--rendered` folders, checked before any work: each a results folder of `bench
+    run` (its `runs.csv`)."""
+    from bench.results import RUNS
+
+    for path in paths:
+        if not (Path(path) / RUNS).is_file():
+            raise BenchError(
+                f"--rendered {path}: no {RUNS} there; give a rendered results folder of `bench run`"
+            )
+    return list(paths)
+
+
+def transfer_methods(methods: tuple[str, ...]) -> None:
+    """Say before any work when a dataset run's methods are too few for `transfer.csv`."""
+    from bench.report.transfer import MIN_RANKED
+    from bench.vocabulary import METHODS
+
+    ranked = [m for m in methods if m in METHODS and not METHODS[m].whole_pool]
+    if len(ranked) < MIN_RANKED:
+        log(
+            f"no transfer.csv will be written: --methods gives {len(ranked)} budgeted method(s) "
+            f"({', '.join(ranked) or 'none'}); a ranking needs at least {MIN_RANKED}"
+        )
 
 
 def has_pixel_truth(dataset: Path) -> bool:
@@ -395,6 +426,7 @@ def run(args: argparse.Namespace) -> None:
     tasks = parse_list("--tasks", args.tasks, str, HEADLINE[0])
     if args.rendered is not None and not datasets:
         log("--rendered is ignored without --dataset: it is what datasets are compared with")
+    rendered = rendered_arg(args.rendered) if args.rendered and datasets else None
     regime = args.regime or "sparse"
     if args.regime and datasets:
         log("--regime is ignored with --dataset: a dataset's views are what they are")
@@ -406,6 +438,7 @@ def run(args: argparse.Namespace) -> None:
         truth = all([has_pixel_truth(d) for d in datasets])  # what the oracle selects by
         kinds = {p: METHODS[p].kind for p in methods if p in METHODS}
         methods = tuple(p for p in methods if truth or kinds.get(p) != GROUND_TRUTH)
+        transfer_methods(methods)
     else:
         seeds = parse_list(
             "--seeds",
@@ -442,7 +475,7 @@ def run(args: argparse.Namespace) -> None:
         cluster=Cluster(args.workers or default_workers(), args.scheduler),
     )
     written = []  # the Table 1 the report drew, to print
-    report = partial(write_report, rendered=args.rendered or published_snapshots())
+    report = partial(write_report, rendered=rendered or published_snapshots())
     run_report = lambda *a: written.append(report(*a))  # noqa: E731
     df = run_benchmark(cfg, Workspace(results, args.renders), options, report=run_report)
     if written and written[0] is not None:

@@ -146,7 +146,11 @@ class BenchConfig:
         if not self.seeds or min(self.seeds) < 0:
             raise BenchError(f"seeds must be non-negative integers, got {list(self.seeds)}")
         if not self.budgets or min(self.budgets) <= 0:
-            raise BenchError(f"budget must be positive integers, got {list(self.budgets)}")
+            bad = ", ".join(str(b) for b in self.budgets if b <= 0) or "none"
+            raise BenchError(
+                f"--budget takes keypoints per view, each at least 1, got {bad} (a whole-pool "
+                "method, all or colmap, runs at its own count by itself)"
+            )
         if not self.datasets:
             self.run.render.validate()
         self.run.validate()

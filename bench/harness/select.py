@@ -28,7 +28,6 @@ from bench.backend.reconstruction import camera_ids, write_database
 from bench.console import log
 from bench.files import atomic_path
 from bench.frontend import plugins
-from bench.frontend.policies import check_methods
 from bench.frontend.selection import check_budgets
 from bench.frontend.stage import compute
 from bench.frontend.views import View, load_image_folder
@@ -68,9 +67,10 @@ def select_to_database(request: SelectRequest, out: Path, seconds: dict | None =
             f"detector.detector must be sift, not {cfg.detector.detector}"
         )
     plugins.load(cfg.policy.modules)
-    check_methods([policy])
-    if not runner(policy).photos:
-        raise BenchError(f"{policy} is not a selection policy; valid: a policy of `bench run`")
+    valid = [m for m in METHODS if runner(m).photos]
+    if policy not in valid:
+        what = "a method bench select cannot run" if policy in METHODS else "unknown"
+        raise BenchError(f"--policy {policy!r} is {what}; valid: {', '.join(valid)}")
     t = time.perf_counter()
     views = load_image_folder(request.images, request.cameras)
     clock["read"] = time.perf_counter() - t

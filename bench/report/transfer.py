@@ -53,6 +53,8 @@ DRAWS = 2000
 MOVERS = 2
 MIN_METHODS = 6
 """The fewest methods whose rankings get a Kendall's tau (module docstring)."""
+MIN_RANKED = 3
+"""The fewest budgeted methods both sides ran at a budget for a row of `transfer.csv`."""
 
 
 def kendall_tau(x: np.ndarray, y: np.ndarray) -> float:
@@ -195,7 +197,7 @@ def transfer(
             for budget in real.index.intersection(ref.index):
                 a, b = real.loc[budget].dropna(), ref.loc[budget].dropna()
                 methods = [m for m in a.index if m in b.index]
-                if len(methods) < 3:
+                if len(methods) < MIN_RANKED:
                     continue
                 lower = metric in vocab.lower_better()
                 row, rows_ranked = compare(a[methods], b[methods], lower)
@@ -209,6 +211,30 @@ def transfer(
                 summary.append(key | row)
                 ranks += [key | r for r in rows_ranked]
     return pd.DataFrame(summary), pd.DataFrame(ranks)
+
+
+def why_none(dataset_rows: pd.DataFrame, rendered: Sequence[Path]) -> str:
+    """Why `transfer_regimes` gives no row: the budgets, or the budgeted methods at a
+    budget, that the datasets' rows and the rendered folders' share."""
+
+    def ran(rows: pd.DataFrame) -> dict[int, set[str]]:
+        rows = rows[rows["budget"] > 0]
+        return {int(b): set(g["method"]) for b, g in rows.groupby("budget")}
+
+    mine = ran(dataset_rows)
+    theirs = [ran(read_runs(Path(r) / RUNS)) for r in rendered]
+    shared = {b: mine[b] & t[b] for t in theirs for b in mine.keys() & t.keys()}
+    if not shared:
+        budgets = sorted({b for t in theirs for b in t})
+        return (
+            f"no budget (the datasets ran {', '.join(map(str, sorted(mine)))}; "
+            f"the rendered results {', '.join(map(str, budgets))})"
+        )
+    b = max(shared, key=lambda k: len(shared[k]))
+    return (
+        f"at most {len(shared[b])} budgeted method(s) at one budget "
+        f"({', '.join(sorted(shared[b]))} at {b}); a ranking needs at least {MIN_RANKED}"
+    )
 
 
 def transfer_regimes(

@@ -49,7 +49,7 @@ from bench.report.tables import (
     with_shares,
 )
 from bench.report.transfer import said as transfer_said
-from bench.report.transfer import transfer_regimes, verdicts
+from bench.report.transfer import transfer_regimes, verdicts, why_none
 from bench.results import (
     FIGURE2,
     FIGURE3,
@@ -198,7 +198,9 @@ def _write_transfer(df: pd.DataFrame, vocab: Vocabulary, results: Path, rendered
     _write_tables(results, dict(zip(names, (summary, ranks))))
     if summary.empty:
         _drop(results / png(FIGURE_TRANSFER))
-        log("no transfer.csv: the datasets and the rendered results share no ranked budget")
+        log(
+            f"no transfer.csv: the datasets and the rendered results share {why_none(df, rendered)}"
+        )
         return
     budget = headline_budget(summary)
     matched = summary["matched"], ranks["matched"]
