@@ -19,6 +19,9 @@ LIST_FORM = "one comma-separated list without spaces"
 LATEST, QUICK, PUBLISHED = Path("results/latest"), Path("results/quick"), Path("results/published")
 """Default results folders, relative to the current directory. Runs never write to the
 published snapshot; only `bench publish` does."""
+PHOTOS = "datasets"
+"""The published photo sets' folder is `regime_folder(PUBLISHED, PHOTOS)`,
+results/published-datasets (`bench publish --to` it; the README states its verdicts)."""
 
 REGIMES = {"sparse": (6, "0-4"), "dense": (21, "0,1")}
 """Rig regimes: (views on each scene's path, default seeds). The sparse regime's views are

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from bench.cli.common import (
     LATEST,
+    PHOTOS,
     PUBLISHED,
     REGIMES,
     folder,
@@ -14,6 +16,11 @@ from bench.cli.common import (
     regime_folder,
     results_arg,
 )
+from bench.results import PAGE
+
+README = Path(PAGE)
+"""The repository's README (a results page's name), relative to the current directory (the
+repository root)."""
 
 HELP = "copy a results folder's runs, tables and figures into the published snapshot"
 DESCRIPTION = (
@@ -43,6 +50,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="replace a snapshot of other settings or another grid (refused without it)",
     )
+    parser.add_argument(
+        "--readme",
+        action="store_true",
+        help="only rewrite ./README.md's results section (between its markers) from the "
+        f"published snapshots, ./{PUBLISHED} and ./{dense[1]}, and the photo sets' "
+        f"./{regime_folder(PUBLISHED, PHOTOS)}; publishing into a regime's snapshot rewrites "
+        "it too",
+    )
 
 
 def _defaults() -> dict:
@@ -70,6 +85,33 @@ def regime_grid(name: str) -> dict:
     }
 
 
+def write_readme(readme: Path = README, required: bool = True) -> None:
+    """Rewrite `readme`'s results section from the published snapshots beside it
+    (`bench.report.summary`); not `required` (after a publish): only a README with the
+    section's markers."""
+    from bench import BenchError
+    from bench.files import write_text_atomic
+    from bench.report.summary import BEGIN, with_section
+
+    if not required and not (readme.is_file() and BEGIN in readme.read_text()):
+        return
+    if not readme.is_file():
+        raise BenchError(f"{readme} not found: run bench publish --readme in the repository root")
+    text = with_section(readme.read_text(), readme_section(readme.parent / PUBLISHED))
+    if text != readme.read_text():
+        write_text_atomic(readme, text)
+        print(f"{readme}: results section rewritten from the snapshots in {PUBLISHED.parent}")
+
+
+def readme_section(base: Path = PUBLISHED) -> str:
+    """The README's results section from the regimes' snapshots (`base` the sparse one's
+    folder) and the photo sets' (`bench.report.summary`)."""
+    from bench.report.summary import results_section
+
+    snapshots = {r: regime_folder(base, r) for r in REGIMES}
+    return results_section(snapshots, regime_folder(base, PHOTOS))
+
+
 def run(args: argparse.Namespace) -> None:
     from bench import BenchError
     from bench.binding import snapshot_differences
@@ -78,6 +120,9 @@ def run(args: argparse.Namespace) -> None:
     from bench.results import RUNS, holding
     from bench.runs import runs_file
 
+    if args.readme:
+        write_readme()
+        return
     regime = args.regime or "sparse"
     # named, or its snapshot the target: the folder must hold that regime's grid
     grid = regime_grid(regime) if args.regime or args.to is None else None
@@ -104,3 +149,5 @@ def run(args: argparse.Namespace) -> None:
             "a regime's only with --regime sparse|dense"
         )
     print(f"published {n} files of {args.results} in {args.to}")
+    if args.to.resolve() in {regime_folder(PUBLISHED, r).resolve() for r in (*REGIMES, PHOTOS)}:
+        write_readme(required=False)

@@ -1,0 +1,141 @@
+"""The repository README's results section, written from the published snapshots' files
+alone (`bench publish` rewrites it between `BEGIN` and `END`), so that it cannot go stale.
+
+Per regime snapshot, task (its first headline metric on `Table 1`, `PRIMARY`) and category
+(what a selection sees, `bench.vocabulary.SEES`: `image` or `views`), at `HEADLINE_BUDGET`:
+the policy (a baseline or a contender) with the highest mean leads; beside it the
+category's peer (`PEER`: the stock-COLMAP method that sees what it sees, else `colmap-b`,
+named), the paired difference of the leader minus that peer pooled over the snapshot's
+cells with its 95 % interval, and the cells won, tied and lost (`paired_sfm.csv`). Then,
+from a published folder of photo sets where there is one (its `transfer.csv`), one
+sentence per set (`bench.report.transfer.verdicts`).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pandas as pd
+
+from bench import BenchError
+from bench.binding import read_vocabulary
+from bench.report.transfer import verdicts
+from bench.results import PAIRED_SFM, TABLE1, TRANSFER
+from bench.vocabulary import HEADLINE_BUDGET, IMAGE, VIEWS, Vocabulary
+
+BEGIN = "<!-- results: written by `bench publish --readme` from the published snapshots -->"
+END = "<!-- end of the written results -->"
+PRIMARY = {"sfm": "sfm_maa", "pairs": "pairs_auc_10"}
+"""Each task's metric here, as Table 1 names it (the task's first headline metric)."""
+PEER = {IMAGE: "colmap-b", VIEWS: "colmap-tracks-b"}
+"""The stock-COLMAP peer of each category (DESIGN, seventh wave)."""
+FALLBACK = "colmap-b"
+POOLED = "all scenes"
+
+
+def _num(x: float, signed: bool = False) -> str:
+    return "n/a" if x is None or math.isnan(x) else (f"{x:+.3f}" if signed else f"{x:.3f}")
+
+
+def _leader(t1: pd.DataFrame, vocab: Vocabulary, sees: str, metric: str) -> pd.Series | None:
+    roles = [vocab.methods[m].role if m in vocab.methods else "" for m in t1["method"]]
+    mine = t1[
+        (t1["budget"] == HEADLINE_BUDGET)
+        & pd.Series([r in ("baseline", "contender") for r in roles], index=t1.index)
+        & (t1["method"].map(vocab.sees) == sees)
+        & t1[metric].notna()
+    ]
+    return None if mine.empty else mine.loc[mine[metric].idxmax()]
+
+
+def _rows(snapshot: Path, regime: str) -> list[str]:
+    vocab = read_vocabulary(snapshot)
+    t1 = pd.read_csv(snapshot / TABLE1)
+    paired = pd.read_csv(snapshot / PAIRED_SFM) if (snapshot / PAIRED_SFM).is_file() else None
+    at = t1[t1["budget"] == HEADLINE_BUDGET]
+    out = []
+    for task, metric in PRIMARY.items():
+        if metric not in t1:
+            continue
+        for sees in (IMAGE, VIEWS):
+            lead = _leader(t1, vocab, sees, metric)
+            if lead is None:
+                continue
+            peer = PEER[sees] if (at["method"] == PEER[sees]).any() else FALLBACK
+            absent = "" if peer == PEER[sees] else f" (`{PEER[sees]}` did not run)"
+            peer_mean = at.loc[at["method"] == peer, metric]
+            diff = (math.nan, math.nan, math.nan, "")
+            if paired is not None:
+                p = paired[
+                    (paired["scene"] == POOLED)
+                    & (paired["budget"] == HEADLINE_BUDGET)
+                    & (paired["method"] == lead["method"])
+                    & (paired["baseline"] == peer)
+                    & (paired["metric"] == metric)
+                ]
+                if len(p):
+                    r = p.iloc[0]
+                    diff = (r["mean_diff"], r["lo"], r["hi"], f"{r.wins}/{r.ties}/{r.losses}")
+            d, lo, hi, wtl = diff
+            interval = f" [{_num(lo, True)}, {_num(hi, True)}]" if not math.isnan(lo) else ""
+            out.append(
+                f"| {regime} | {task} ({metric}) | {sees} | `{lead['method']}` "
+                f"{_num(lead[metric])} | `{peer}` "
+                f"{_num(peer_mean.iloc[0] if len(peer_mean) else math.nan)}{absent} | "
+                f"{_num(d, True)}{interval} | {wtl or 'n/a'} |"
+            )
+    return out
+
+
+def results_section(snapshots: dict[str, Path], photos: Path | None) -> str:
+    """The README's results section (module docstring) from the regime snapshots
+    (`{regime name: folder}`, those that exist) and the published photo sets' folder."""
+    found = {r: Path(f) for r, f in snapshots.items() if (Path(f) / TABLE1).is_file()}
+    if not found:
+        raise BenchError("no published snapshot with a table1.csv: nothing to summarise")
+    lines = [
+        f"At {HEADLINE_BUDGET} keypoints per view, the policy that leads each category of what",
+        "its selection sees (`image`: its own view's; `views`: other views, through a first",
+        "pass of matches), and the category's stock-COLMAP peer at the same budget; the",
+        "difference is paired over the snapshot's cells (95 % interval; cells won/tied/lost):",
+        "",
+        "| regime | task (metric) | sees | leads | peer | leader - peer | won/tied/lost |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for regime, folder in found.items():
+        lines += _rows(folder, regime)
+    lines.append("")
+    if photos is not None and (Path(photos) / TRANSFER).is_file():
+        summary = pd.read_csv(Path(photos) / TRANSFER)
+        said = verdicts(summary, HEADLINE_BUDGET)
+        lines.append(
+            f"On the photographs ({Path(photos).as_posix()}/README.md), whether the renders "
+            "rank each set's methods as well as the other sets do:"
+        )
+        lines += [""] + [f"- {s}" for s in said] if said else ["", "- no set has a baseline."]
+    else:
+        where = "none" if photos is None else Path(photos).as_posix()
+        lines += [
+            f"No snapshot of the photo sets is published ({where}): whether the ranking",
+            "holds on photographs is not stated here (docs/datasets.md says how to measure it).",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+def with_section(readme: str, section: str) -> str:
+    """`readme` with the text between its markers replaced by `section`."""
+    if (
+        readme.count(BEGIN) != 1
+        or readme.count(END) != 1
+        or readme.index(BEGIN) > readme.index(END)
+    ):
+        raise BenchError(f"README.md lacks its results markers ({BEGIN} ... {END})")
+    head, rest = readme.split(BEGIN)
+    _, tail = rest.split(END)
+    return f"{head}{BEGIN}\n{section}{END}{tail}"
+
+
+def section_of(readme: str) -> str:
+    """The text between a README's markers."""
+    return readme.split(BEGIN)[1].split(END)[0].lstrip("\n")
