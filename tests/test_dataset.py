@@ -551,3 +551,12 @@ def test_each_dataset_is_matched_with_the_regime_nearest_its_view_count(monkeypa
     rows["views"] = [13.5, 13.5, 13.5]  # equidistant from 6 and 21
     summary, _ = module.transfer_regimes(rows, None, [Path("6"), Path("21")])
     assert set(summary.loc[summary["matched"], "rendered_views"]) == {21}
+
+
+def test_the_biggest_movers_name_which_rank_is_which():
+    """It read "texture 6 -> 3", saying nothing of which rank is the renders'."""
+    from bench.report.transfer import compare
+
+    three = list("abc")
+    row, _ = compare(pd.Series([1.0, 2, 3], three), pd.Series([3.0, 2, 1], three), False)
+    assert row["biggest_movers"] == "a rendered 1 -> set 3; c rendered 3 -> set 1"

@@ -315,3 +315,11 @@ def test_every_policy_selects_nothing_from_an_empty_pool(name):
     inp = replace(inp, candidates=empty, signals=Signals(**{s: np.zeros(0) for s in SIGNALS}))
     budget = 0 if METHODS[name].whole_pool else 8
     assert select(name, inp, budget, np.random.default_rng(0)).size == 0
+
+
+def test_the_failure_note_names_renders_only_where_rows_were_rendered():
+    """A photo run without --quick was told failures were expected "at small budgets and
+    renders (--quick)"."""
+    rows = pd.DataFrame({"status": ["failed", "ok"], "failure": ["no map", ""]})
+    assert outcomes(rows).endswith("at small budgets and renders (--quick)")
+    assert outcomes(rows.assign(bag=["a.png b.png", "a.png b.png"])).endswith("at small budgets")

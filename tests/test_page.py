@@ -169,3 +169,35 @@ def test_table2_counts_the_runs_of_each_column(tmp_path):
     frame = headline_frame(pd.DataFrame(rows), vocab)
     t2 = table2(frame, paired(frame, vocab), vocab).set_index("scene").loc["all scenes"]
     assert (t2["adaptive_rmse_n"], t2["best_baseline_rmse_n"], t2["diff_rmse_n"]) == (4, 3, 3)
+
+
+def test_a_dataset_pages_transfer_section_reads_as_its_csv_and_leaves_out_what_did_not_run(
+    tmp_path,
+):
+    """`matched` read 1/0 on the page and True/False in the CSV, `tau_note` n/a and empty;
+    Table 2 and "Paired: adaptive ..." were printed full of "n/a (no run)" when adaptive did
+    not run; "render variant: []"; nothing said what the columns or the oracle are."""
+    import json
+
+    shutil.copyfile(PUBLISHED / "vocabulary.json", tmp_path / "vocabulary.json")
+    pd.read_csv(PUBLISHED / "runs.csv", nrows=3).to_csv(tmp_path / "runs.csv", index=False)
+    (tmp_path / "manifest.json").write_text(json.dumps({"variant": []}))
+    t1 = {"method": ["texture", "grid", "oracle"], "budget": [256] * 3, "runs": [10] * 3}
+    pd.DataFrame(t1).to_csv(tmp_path / "table1.csv", index=False)
+    pd.DataFrame({"scene": ["all"], "budget": [256], "adaptive_rmse": [None]}).to_csv(
+        tmp_path / "table2.csv", index=False
+    )
+    row = dict(dataset="d", rendered_views=6, matched=True, metric="sfm_maa", budget=256)
+    row |= dict(methods=3, kendall_tau=math.nan, tau_lo=math.nan, tau_hi=math.nan, tau_note="")
+    row |= dict(rel_rendered=0.9, rel_dataset=0.8, ceiling=0.85, tau_photos=math.nan)
+    row |= dict(biggest_movers="texture rendered 2 -> set 1")
+    pd.DataFrame([row]).to_csv(tmp_path / "transfer.csv", index=False)
+    page = results_page(tmp_path)
+    section = page.split("## Transfer")[1]
+    assert "| d | 6 | True | sfm_maa | 256 | 3 | n/a | n/a | n/a |  | 0.9 |" in section
+    assert "- d, sfm_maa, B = 256, against the 6-view renders: no tau; the split-half" in section
+    assert "`rel_rendered` and `rel_dataset` the split-half reliability" in section
+    assert "## Table 2" not in page and "Paired: adaptive" not in page
+    assert "render variant: none (nothing rendered)" in page
+    assert "`oracle` is a reference selection made with the ground truth" in page
+    assert "it is not a bound" in page

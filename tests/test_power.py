@@ -133,7 +133,7 @@ def test_the_verdict_says_whether_the_renders_predict_a_set_as_well_as_the_photo
     from bench.report.transfer import verdicts
 
     row = dict(dataset="d", rendered_views=6, matched=True, budget=256, tau_lo=0.1, tau_hi=0.8)
-    row |= dict(rel_rendered=0.9, rel_dataset=0.8, ceiling=math.sqrt(0.72))
+    row |= dict(rel_rendered=0.9, rel_dataset=0.8, ceiling=math.sqrt(0.72), tau_note="")
     summary = pd.DataFrame(
         [
             row | dict(metric="sfm_maa", kendall_tau=0.5, tau_photos=0.3),
@@ -141,11 +141,39 @@ def test_the_verdict_says_whether_the_renders_predict_a_set_as_well_as_the_photo
             row | dict(matched=False, metric="sfm_maa", kendall_tau=0.0, tau_photos=0.3),
         ]
     )
-    (line,) = verdicts(summary, 256)
-    assert line.startswith("d, B = 256: the 6-view renders predict it as well as the other")
-    assert "sfm_maa (tau 0.50 [0.10, 0.80] against 0.30, within the interval;" in line
-    assert "less well than the other photographs in pairs_auc_10 (tau 0.50" in line
-    assert "against 0.90; reliability 0.90 renders, 0.80 photographs, ceiling 0.85)" in line
+    sfm, pairs = verdicts(summary, 256)  # one sentence per set and task, matched regime
+    assert sfm.startswith("d, sfm_maa, B = 256, against the 6-view renders: tau 0.50 [0.10, 0.80]")
+    assert "(1: the renders order its methods as the set does, 0: no relation" in sfm
+    assert "reliabilities (0.90 renders, 0.80 this set) cap any tau at the ceiling 0.85" in sfm
+    assert sfm.endswith(
+        "the other sets predict it at 0.30, within the interval: the renders predict it as "
+        "well as the other photographs."
+    )
+    assert "at 0.90: the renders predict it less well than the other photographs." in pairs
+
+
+def test_with_one_set_the_verdict_still_says_what_its_tau_means_and_its_ceiling():
+    """With one set `tau_photos` is empty and no sentence was written; an interval above
+    its ceiling had no word."""
+    from bench.report.transfer import verdicts
+
+    row = dict(dataset="d", rendered_views=21, matched=True, budget=256, metric="sfm_maa")
+    row |= dict(kendall_tau=0.7, tau_lo=0.4, tau_hi=1.0, tau_note="", tau_photos=math.nan)
+    row |= dict(rel_rendered=0.95, rel_dataset=0.94, ceiling=math.sqrt(0.95 * 0.94))
+    (line,) = verdicts(pd.DataFrame([row]), 256)
+    assert "tau 0.70 [0.40, 1.00]" in line and "ceiling 0.94 (the interval reaching above" in line
+    assert line.endswith("no other set to compare with (the baseline needs two sets).")
+    (why,) = verdicts(pd.DataFrame([row | dict(kendall_tau=math.nan, tau_note="no tau: 5")]), 256)
+    assert ": no tau: 5; the split-half reliabilities (0.95 renders, 0.94 this set)" in why
+
+
+def test_the_tiers_claim_holds_how_many_units_tell_any_two_methods_apart():
+    from bench.report.power import min_units
+
+    assert (min_units(2), min_units(5), min_units(13)) == (6, 9, 12)
+    values = pd.DataFrame({"a": np.arange(8) + 1.0, "b": np.zeros(8)})  # 2 methods, 8 units
+    assert tiers(values, lower_better=False).to_dict() == {"a": 1, "b": 2}
+    assert set(tiers(values.iloc[:5], lower_better=False)) == {1}  # 5 < 6 units: one tier
 
 
 def test_holms_correction_merges_a_tier_the_raw_p_values_would_split():

@@ -26,11 +26,11 @@ def test_the_readmes_results_section_is_what_the_published_snapshots_give(monkey
 def test_the_photographs_verdicts_come_from_a_published_photo_folder(tmp_path):
     row = dict(dataset="middlebury-temple-sparse", rendered_views=6, matched=True, budget=256)
     row |= dict(metric="sfm_maa", kendall_tau=0.5, tau_lo=0.1, tau_hi=0.8, tau_photos=0.3)
-    row |= dict(rel_rendered=0.9, rel_dataset=0.8, ceiling=math.sqrt(0.72))
+    row |= dict(rel_rendered=0.9, rel_dataset=0.8, ceiling=math.sqrt(0.72), tau_note="")
     pd.DataFrame([row]).to_csv(tmp_path / "transfer.csv", index=False)
     sparse = ROOT / "results" / "published"
     said = results_section({"sparse": sparse}, tmp_path)
-    assert "- middlebury-temple-sparse, B = 256: the 6-view renders predict it as well" in said
+    assert "- middlebury-temple-sparse, sfm_maa, B = 256, against the 6-view renders: tau" in said
     assert "No snapshot of the photo sets" in results_section({"sparse": sparse}, None)
 
 

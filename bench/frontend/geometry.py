@@ -450,7 +450,7 @@ def image_geometry(views: list[View], pools: list[Candidates], cfg: SignalConfig
     alone = [views[i].name for i in range(n) if not overlap[i]]
     if alone:
         log(
-            f"geometry from the images: {', '.join(alone)} overlap(s) no other view; "
-            "their parallax and epipolar signals are 0"
+            f"geometry from the images: {', '.join(alone)} share(s) too few verified matches "
+            "with every other view to estimate its pose; their parallax and epipolar signals are 0"
         )
     return Geometry(IMAGES, overlap, nearest, pair_frame, frames)

@@ -495,7 +495,7 @@ def _computed(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, stage
         def scene_ready(group, info):
             scene, seed = group
             stage_s["frontend"] += info["seconds"]
-            fbar.set_postfix_str(f"{scene} seed {seed}")
+            fbar.set_postfix_str(f"{scene} {'bag' if group in plan.bags else 'seed'} {seed}")
             fbar.update()
             if bar.n == 0:  # the time left counts from the first front end, not before it
                 bar.reset(total=rows)

@@ -10,15 +10,18 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
+from pandas.api.types import is_numeric_dtype
 
 from bench.binding import read_vocabulary
 from bench.failures import outcomes
 from bench.report import nbv
+from bench.report.power import min_units
 from bench.report.text import ci
 from bench.report.text import num as _num
 from bench.report.text import table as _table
-from bench.report.transfer import verdicts
+from bench.report.transfer import TRANSFER_TEXT, verdicts
 from bench.results import (
     CONFIG,
     FIGURE2,
@@ -36,7 +39,14 @@ from bench.results import (
     TRANSFER,
     png,
 )
-from bench.vocabulary import HEADLINE, HEADLINE_BUDGET, HEADLINE_POLICY, PAIRED_PEERS, Vocabulary
+from bench.vocabulary import (
+    HEADLINE,
+    HEADLINE_BUDGET,
+    HEADLINE_POLICY,
+    ORACLE,
+    PAIRED_PEERS,
+    Vocabulary,
+)
 
 POOLED = ("all", "all scenes")
 """How the tables name the pooled rows."""
@@ -50,6 +60,13 @@ NAMES = (
     "rows is `sfm_maa`. `runs`: the runs a task's means count."
 )
 """How the page names methods and metrics, said once above Table 1."""
+ORACLE_SAID = (
+    f" `{ORACLE}` is a reference selection made with the ground truth (per view, the B "
+    "candidates that give the most true tracks of three or more views whose descriptors "
+    "match), scored like every method: it is not a bound, and a policy may map or complete "
+    "more than it (docs/protocol.md, Oracle)."
+)
+"""What the oracle is and is not, said with the names where it ran."""
 FIGURES = {
     png(FIGURE3): "Headline metrics per method at the headline budget, 95% intervals",
     png(FIGURE_BUDGET): "Each headline metric against the budget",
@@ -85,7 +102,8 @@ def _run_section(manifest: dict, runs: pd.DataFrame) -> list[str]:
     commits = ", ".join(c[:7] for c in manifest.get("git_commit", []))
     out = ["## The run", ""]
     out.append(f"- rows: {len(runs)} ({(runs.get('status') == 'failed').sum()} failed)")
-    out.append(f"- commit: {commits or 'n/a'}; render variant: {manifest.get('variant', 'n/a')}")
+    variant = manifest.get("variant") or "none (nothing rendered)"
+    out.append(f"- commit: {commits or 'n/a'}; render variant: {variant}")
     out.append(f"- machine: {host.get('platform', 'n/a')}, {host.get('cpus', 'n/a')} CPUs")
     out.append(f"- versions: {versions or 'n/a'}")
     seconds = manifest.get("seconds", {})
@@ -131,7 +149,7 @@ def _grid_section(runs: pd.DataFrame, config: dict) -> list[str]:
 def _table1_section(t1: pd.DataFrame, vocab: Vocabulary, title: str) -> list[str]:
     if t1.empty:
         return []
-    out = [f"## {title}", "", NAMES, ""]
+    out = [f"## {title}", "", NAMES + (ORACLE_SAID if ORACLE in set(t1["method"]) else ""), ""]
     for task in vocab.tasks.values():
         prefix = "" if task.name == HEADLINE[0] else f"{task.name}_"
         cols = [prefix + c for c in task.metrics[:TASK_COLUMNS] if prefix + c in t1]
@@ -219,7 +237,11 @@ def _tiers_section(t1: pd.DataFrame, vocab: Vocabulary) -> list[str]:
         ranked = at.dropna(subset=[col]).sort_values([col, metric], ascending=best, kind="stable")
         groups = ranked.groupby(col, sort=True)["method"].agg(", ".join)
         tiers = "; ".join(f"{int(k)}: {v}" for k, v in groups.items())
-        out.append(f"- `{metric}`: {tiers}")
+        k = len(ranked)
+        out.append(
+            f"- `{metric}`: {tiers} ({k} methods: with fewer than {min_units(k)} units no "
+            "two of them can be told apart, one tier)"
+        )
     return out + [""]
 
 
@@ -331,10 +353,35 @@ def _transfer_section(transfer: pd.DataFrame) -> list[str]:
     if transfer.empty:
         return []
     shown = [c for c in transfer.columns if not c.startswith("top_")]
-    body = [[_num(v) if not isinstance(v, str) else v for v in r] for r in transfer[shown].values]
+    text = set(TRANSFER_TEXT) | {c for c in shown if not is_numeric_dtype(transfer[c])}
+    body = [[_as_in_csv(v, c in text) for c, v in zip(shown, r)] for r in transfer[shown].values]
     said = verdicts(transfer, _transfer_budget(transfer)) if "matched" in transfer else []
-    out = ["## Transfer: the rendered ranking on each dataset", ""] + _table(shown, body) + [""]
-    return out + [f"- {line}" for line in said] + ([""] if said else [])
+    out = ["## Transfer: the rendered ranking on each dataset", ""]
+    out += [f"- {line}" for line in said] + ([""] if said else [])
+    out += [TRANSFER_COLUMNS, ""]
+    return out + _table(shown, body) + [""]
+
+
+def _as_in_csv(value, text: bool) -> str:
+    """A transfer.csv value as the CSV has it: True/False, empty text, numbers as the page's."""
+    if isinstance(value, bool | np.bool_):
+        return str(bool(value))
+    if text:
+        return "" if pd.isna(value) else str(value)
+    return _num(value)
+
+
+TRANSFER_COLUMNS = (
+    "Per dataset, regime (`rendered_views`; `matched`: the regime nearest the set's view "
+    "count), metric and budget: `kendall_tau` [`tau_lo`, `tau_hi`] of the set's ranking of "
+    "the methods against the renders'; `rel_rendered` and `rel_dataset` the split-half "
+    "reliability of each ranking; `ceiling` the square root of their product, the highest "
+    "tau their noise allows; `tau_photos` the other sets' ranking against this set's (the "
+    "real-to-real baseline, empty with one set); `signs_agree` of `signs_decided` the "
+    "methods whose sign against `colmap-b` is the same on the renders and the set (`_photos`: "
+    "in the other sets); `biggest_movers` the methods whose rank moves most, rendered rank "
+    "-> set rank (1: the best)."
+)
 
 
 def _transfer_budget(transfer: pd.DataFrame) -> int:
@@ -382,14 +429,16 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
     out += _table1_section(t1, vocab, "Table 1: means over runs, 95% intervals")
     out += _tiers_section(t1, vocab)
     out += _equal_section(_read(results, TABLE1_EQUAL))
-    out += _table2_section(_read(results, TABLE2))
-    out += _paired_section(
-        _read(results, PAIRED),
-        vocab,
-        f"Paired: {HEADLINE_POLICY} against every method, all scenes",
-        None,
-    )
-    for peer in PAIRED_PEERS:
+    ran = set(t1["method"]) if "method" in t1 else set()  # a method not run has no section
+    if HEADLINE_POLICY in ran:
+        out += _table2_section(_read(results, TABLE2))
+        out += _paired_section(
+            _read(results, PAIRED),
+            vocab,
+            f"Paired: {HEADLINE_POLICY} against every method, all scenes",
+            None,
+        )
+    for peer in (p for p in PAIRED_PEERS if p in ran):
         out += _paired_section(
             _read(results, PAIRED_SFM),
             vocab,

@@ -120,6 +120,16 @@ def sign_agreement(a: pd.Series, b: pd.Series) -> tuple[int, int]:
     return int((sa[decided] == sb[decided]).sum()), int(decided.sum())
 
 
+def min_units(methods: int, alpha: float = ALPHA) -> int:
+    """The fewest units from which `tiers` can tell two of `methods` apart: Holm's
+    correction multiplies the smallest p by the pairs, and the smallest two-sided exact
+    Wilcoxon p over n units is 2 / 2^n."""
+    pairs, n = methods * (methods - 1) // 2, 1
+    while pairs * 2.0 ** (1 - n) >= alpha:
+        n += 1
+    return n
+
+
 def holm(p) -> np.ndarray:
     """Holm's step-down adjusted p-values (in the order given)."""
     p = np.asarray(p, float)

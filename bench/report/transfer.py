@@ -53,6 +53,9 @@ DRAWS = 2000
 MOVERS = 2
 MIN_METHODS = 6
 """The fewest methods whose rankings get a Kendall's tau (module docstring)."""
+TRANSFER_TEXT = ("dataset", "metric", "tau_note", "winner_dataset", "winner_rendered")
+TRANSFER_TEXT += ("biggest_movers",)
+"""The text columns of `transfer.csv` (empty where a row has none; the rest are numbers)."""
 MIN_RANKED = 3
 """The fewest budgeted methods both sides ran at a budget for a row of `transfer.csv`."""
 
@@ -162,7 +165,7 @@ def compare(dataset: pd.Series, rendered: pd.Series, lower_better: bool) -> tupl
         "winner_dataset": _winner(rank_x),
         "winner_rendered": _winner(rank_y),
         "biggest_movers": "; ".join(
-            f"{m} {rank_y[m]:g} -> {rank_x[m]:g}" for m in movers if shift[m]
+            f"{m} rendered {rank_y[m]:g} -> set {rank_x[m]:g}" for m in movers if shift[m]
         ),
     }
     ranks = [
@@ -273,35 +276,44 @@ def said(summary: pd.DataFrame, budget: int) -> list[str]:
 
 
 def verdicts(summary: pd.DataFrame, budget: int) -> list[str]:
-    """Per dataset, one sentence at `budget` on its matched regime: whether the renders
-    predict its ranking as well as the other datasets do (tau against `tau_photos`), with
-    the reliabilities and the ceiling; none where a dataset has no baseline."""
-    if "tau_photos" not in summary:
+    """Per dataset and ranking metric, one sentence at `budget` on its matched regime: what
+    the tau says, the interval beside the ceiling the two rankings' reliabilities allow,
+    and whether the renders predict the set as well as the other sets do (`tau_photos`)."""
+    if "rel_rendered" not in summary:
         return []
-    lines = []
     rows = summary[summary["matched"] & (summary["budget"] == budget)]
-    for dataset, group in rows.groupby("dataset", sort=False):
-        parts = []
-        for r in group.itertuples():
-            if math.isnan(r.kendall_tau) or math.isnan(r.tau_photos):
-                continue
-            how = "as well as" if r.kendall_tau >= r.tau_photos else "less well than"
-            inside = r.tau_lo <= r.tau_photos <= r.tau_hi
-            parts.append(
-                f"{how} the other photographs in {r.metric} (tau {r.kendall_tau:.2f} "
-                f"[{r.tau_lo:.2f}, {r.tau_hi:.2f}] against {r.tau_photos:.2f}"
-                + (", within the interval" if inside else "")
-                + f"; reliability {r.rel_rendered:.2f} renders, {r.rel_dataset:.2f} "
-                f"photographs, ceiling {r.ceiling:.2f})"
-            )
-        if parts:
-            views = group["rendered_views"].iloc[0]
-            lines.append(
-                f"{dataset}, B = {budget}: the {views}-view renders predict it "
-                + "; ".join(parts)
-                + "."
-            )
-    return lines
+    return [_verdict(r, budget) for r in rows.itertuples()]
+
+
+def _verdict(r, budget: int) -> str:
+    """One row's sentence (`verdicts`)."""
+    head = f"{r.dataset}, {r.metric}, B = {budget}, against the {r.rendered_views}-view renders: "
+    cap = (
+        f"the split-half reliabilities ({r.rel_rendered:.2f} renders, {r.rel_dataset:.2f} this "
+        f"set) cap any tau at the ceiling {r.ceiling:.2f}"
+    )
+    if math.isnan(r.kendall_tau):
+        note = r.tau_note if isinstance(r.tau_note, str) and r.tau_note else "no tau"
+        return head + f"{note}; {cap}."
+    said = (
+        f"tau {r.kendall_tau:.2f} [{r.tau_lo:.2f}, {r.tau_hi:.2f}] (1: the renders order its "
+        f"methods as the set does, 0: no relation, -1: reversed); {cap}"
+    )
+    if r.tau_hi > r.ceiling:
+        said += " (the interval reaching above it is the bootstrap's spread over methods)"
+    photos = getattr(r, "tau_photos", math.nan)
+    if math.isnan(photos):
+        return head + said + "; no other set to compare with (the baseline needs two sets)."
+    how = "as well as" if r.kendall_tau >= photos else "less well than"
+    inside = ", within the interval" if r.tau_lo <= photos <= r.tau_hi else ""
+    return (
+        head
+        + said
+        + (
+            f"; the other sets predict it at {photos:.2f}{inside}: the renders predict it {how} "
+            "the other photographs."
+        )
+    )
 
 
 def _winner(rank: pd.Series) -> str:
