@@ -67,6 +67,11 @@ def equal_parts(name: str) -> tuple[str, str]:
     return policy, peer
 
 
+# The kind of `colmap-tracks-b`: stock COLMAP choosing each view's keypoints by the views
+# its own verified tracks span (`bench.backend.peers` declares it; see `KIND_SEES`).
+TRACKS_PEER = "peer-tracks"
+
+
 KINDS: dict[str, str] = {
     PER_VIEW: "selects from each view's candidate pool alone (`@policy`)",
     MULTI_VIEW: "selects from every view's pool at once, may match its own selections "
@@ -78,6 +83,31 @@ KINDS: dict[str, str] = {
 """How a method works, which decides how its units are run (`bench.harness.methods`: one
 runner per kind) and whether `bench select` can run it; a plugin declares a new kind with
 `declare_kind` and its runner with `bench.harness.methods.register_kind`."""
+# What a method's selection sees (`sees`), derived from its kind (`KIND_SEES`) and the
+# signals it reads (`VIEW_SIGNALS`), never declared apart: each category is judged against
+# a peer that sees what it sees. (Comments, not attribute docstrings, here and below: a
+# bare string in this module enters every row's code hash.)
+IMAGE, VIEWS, TRUTH = "image", "views", "truth"
+SEES = {
+    IMAGE: "its own view's image (and the intrinsics): the field's rule, one keypoint list "
+    "per image, shared by every pair and every bag",
+    VIEWS: "other views of the capture: a first pass matched keypoints of every view "
+    "before it chose",
+    TRUTH: "the ground truth: a reference of the evaluation side, never a policy",
+}
+# The signals that read other views: their candidates and the geometry between views, from
+# the rig's poses or a first pass of matches (`bench.frontend.signals.GEOMETRIC`).
+VIEW_SIGNALS = ("ambiguity", "parallax", "epipolar")
+# What the methods of each kind see at least (`sees`); a kind without an entry (the view
+# choosers) selects no keypoints and sees nothing here. A plugin's kind adds its entry.
+KIND_SEES: dict[str, str] = {
+    PER_VIEW: IMAGE,
+    MULTI_VIEW: VIEWS,
+    GROUND_TRUTH: TRUTH,
+    OWN_PIPELINE: IMAGE,
+    EQUAL_COUNT: IMAGE,
+    TRACKS_PEER: VIEWS,
+}
 PERCENT, FRACTION, DEGREES, AT_LEAST_0 = (0.0, 100.0), (0.0, 1.0), (0.0, 180.0), (0.0, None)
 GRANTS = ("rig", "images")
 """What a task's selection may see of the views' geometry: the rig's poses, or the images
@@ -242,6 +272,15 @@ def declare_kind(name: str, doc: str) -> str:
     return name
 
 
+def sees(method: Method) -> str:
+    """What a method's selection sees (`SEES`): its kind's (`KIND_SEES`), and `views` for a
+    method of an `image` kind that reads a signal of other views (`VIEW_SIGNALS`)."""
+    kind = KIND_SEES.get(method.kind, "")
+    if kind == IMAGE and any(s in VIEW_SIGNALS for s in method.reads):
+        return VIEWS
+    return kind
+
+
 def declare_metric(metric: Metric) -> str:
     """Register a metric under a name no other metric has; its name."""
     if metric.name in METRICS and METRICS[metric.name] != metric:
@@ -271,15 +310,25 @@ class Vocabulary:
     methods: dict[str, Method] = field(default_factory=dict)
     tasks: dict[str, Task] = field(default_factory=dict)
     metrics: dict[str, Metric] = field(default_factory=dict)
+    seen: dict[str, str] = field(default_factory=dict)
+    """What each method's selection sees (`sees`), as recorded where it was computed."""
 
     @classmethod
     def current(cls) -> Vocabulary:
         """The declarations of this process (the compute stages imported)."""
-        return cls(dict(METHODS), dict(TASKS), dict(METRICS))
+        seen = {n: sees(m) for n, m in METHODS.items()}
+        return cls(dict(METHODS), dict(TASKS), dict(METRICS), seen)
 
     def label(self, method: str) -> str:
         m = self.methods.get(method)
         return m.label if m else method
+
+    def sees(self, method: str) -> str:
+        """What a method's selection sees (`SEES`): as recorded, else derived from its
+        recorded kind and reads (a vocabulary recorded before `sees`); empty if unknown."""
+        if method in self.seen:
+            return self.seen[method]
+        return sees(self.methods[method]) if method in self.methods else ""
 
     def column(self, task: str, metric: str) -> str:
         """A task's metric as the report's tables name it: bare for the headline task,
@@ -371,13 +420,16 @@ class Vocabulary:
     def merged(self, older: Vocabulary) -> Vocabulary:
         """This vocabulary, keeping `older`'s entries for names it does not declare."""
         return Vocabulary(
-            older.methods | self.methods, older.tasks | self.tasks, older.metrics | self.metrics
+            older.methods | self.methods,
+            older.tasks | self.tasks,
+            older.metrics | self.metrics,
+            older.seen | self.seen,
         )
 
     def to_json(self) -> str:
         return json.dumps(
             {
-                "methods": {n: asdict(m) for n, m in self.methods.items()},
+                "methods": {n: asdict(m) | {"sees": self.sees(n)} for n, m in self.methods.items()},
                 "tasks": {n: asdict(t) for n, t in self.tasks.items()},
                 "metrics": {n: asdict(m) for n, m in self.metrics.items()},
             },
@@ -387,6 +439,7 @@ class Vocabulary:
     @classmethod
     def from_json(cls, text: str) -> Vocabulary:
         data = json.loads(text)
+        seen = {n: m.pop("sees") for n, m in data["methods"].items() if "sees" in m}
         methods = {
             n: Method(**{**m, "reads": tuple(m["reads"])}) for n, m in data["methods"].items()
         }
@@ -397,7 +450,7 @@ class Vocabulary:
         metrics = {
             n: Metric(**{**m, "range": tuple(m["range"])}) for n, m in data["metrics"].items()
         }
-        return cls(methods, tasks, metrics)
+        return cls(methods, tasks, metrics, seen)
 
 
 def older_fields(data: dict) -> list[str]:

@@ -1,6 +1,8 @@
 """Table 1, Table 2 and the paired comparisons, from the rows of `runs.csv` alone.
 
-* `table1.csv`: per strategy and budget, the headline task and protocol (`tri`,
+* `table1.csv`: per strategy and budget, what its selection sees (`sees`: `image`, its
+  own view's, or `views`, other views through a first pass; `bench.vocabulary.SEES`), the
+  headline task and protocol (`tri`,
   `multiview`) and beside it every other task's metrics (prefixed with its name: `sfm_maa`,
   `pairs_auc_10`, ...): the mean of every metric over runs with a 95% interval
   (`<metric>_lo`, `<metric>_hi`; a stratified t-interval over scenes, `bench.report.stats`;
@@ -182,7 +184,8 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
             )
     none = (math.nan, math.nan, math.nan, "", False)  # no row counts for the metric
     for (policy, budget), g in rows.groupby(["method", "budget"], sort=False):
-        row = {"strategy": vocab.label(policy), "method": policy, "budget": budget}
+        row = {"strategy": vocab.label(policy), "method": policy, "sees": vocab.sees(policy)}
+        row["budget"] = budget
         row["runs"] = len(g)
         errors = {}  # per task: the runs that could not be computed (`counted`)
         for t in (t for t in (HEADLINE[0], *others) if vocab.column(t, "status") in g):

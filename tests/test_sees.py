@@ -1,0 +1,63 @@
+"""What a selection sees (issue 53): `image` (its own view's) or `views` (other views,
+through a first pass), derived from each method's kind and the signals it reads, recorded
+in `vocabulary.json` and shown in Table 1."""
+
+from __future__ import annotations
+
+import json
+
+import pandas as pd
+
+from bench.binding import read_vocabulary
+from bench.frontend.signals import GEOMETRIC
+from bench.harness.declared import package_vocabulary
+from bench.report.tables import headline_frame, table1
+from bench.results import VOCABULARY
+from bench.vocabulary import IMAGE, TRUTH, VIEW_SIGNALS, VIEWS, Method, Vocabulary, sees
+
+OWN_IMAGE = (
+    *("random", "texture", "grid", "response", "ssc", "quadtree", "all"),
+    *("colmap", "colmap-b", "colmap-soft-b", "aliked-b", "disk-b", "response@colmap-soft-b"),
+)
+OTHER_VIEWS = (
+    *("adaptive", "adaptive-fast", "cross-view", "learned", "track-first", "adaptive-loop"),
+    *("cross-view@colmap-soft-b", "track-first@colmap-soft-b"),
+)
+
+
+def test_every_method_sees_its_image_or_the_other_views_as_it_reads():
+    vocab = package_vocabulary()
+    assert {m: vocab.sees(m) for m in OWN_IMAGE} == dict.fromkeys(OWN_IMAGE, IMAGE)
+    assert {m: vocab.sees(m) for m in OTHER_VIEWS} == dict.fromkeys(OTHER_VIEWS, VIEWS)
+    assert vocab.sees("oracle") == TRUTH
+    assert VIEW_SIGNALS == GEOMETRIC  # the signals that read the geometry between views
+
+
+def test_a_per_view_policy_sees_the_views_once_it_reads_one_of_their_signals():
+    plain = Method("p", "p", "contender", reads=("texture", "distinctiveness"))
+    assert sees(plain) == IMAGE
+    for signal in VIEW_SIGNALS:
+        assert sees(Method("p", "p", "contender", reads=("texture", signal))) == VIEWS
+
+
+def test_sees_is_recorded_in_the_vocabulary_and_derived_for_an_older_record(tmp_path):
+    vocab = Vocabulary.current()
+    (tmp_path / VOCABULARY).write_text(vocab.to_json())
+    recorded = json.loads((tmp_path / VOCABULARY).read_text())["methods"]
+    assert recorded["track-first"]["sees"] == VIEWS and recorded["colmap-b"]["sees"] == IMAGE
+    assert read_vocabulary(tmp_path).seen == vocab.seen
+    for entry in recorded.values():  # a record written before `sees`: derived alike
+        entry.pop("sees")
+    older = Vocabulary.from_json(json.dumps({**json.loads(vocab.to_json()), "methods": recorded}))
+    assert not older.seen and all(older.sees(m) == vocab.sees(m) for m in vocab.methods)
+
+
+def test_table1_says_what_each_method_sees():
+    vocab = Vocabulary.current()
+    rows = [
+        dict(scene=s, seed=0, method=m, budget=128, task="sfm", protocol="multiview", maa=v)
+        for s in ("a", "b")
+        for m, v in (("response", 0.2), ("track-first", 0.8), ("colmap-b", 0.3))
+    ]
+    t1 = table1(headline_frame(pd.DataFrame(rows), vocab), vocab).set_index("method")
+    assert t1["sees"].to_dict() == {"response": IMAGE, "track-first": VIEWS, "colmap-b": IMAGE}
