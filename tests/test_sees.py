@@ -21,7 +21,7 @@ OWN_IMAGE = (
 )
 OTHER_VIEWS = (
     *("adaptive", "adaptive-fast", "cross-view", "learned", "track-first", "adaptive-loop"),
-    *("cross-view@colmap-soft-b", "track-first@colmap-soft-b"),
+    *("cross-view@colmap-soft-b", "track-first@colmap-soft-b", "colmap-tracks-b"),
 )
 
 

@@ -10,6 +10,13 @@ a selection policy, on the same images, scored the same way.
 * `colmap-soft-b`: SIFT's maximum number of features set to B. COLMAP's limit is soft: it
   keeps whole scale levels (octaves) until the limit is reached, so a view holds more (up
   to about twice) or fewer features than B; its rows record how many.
+* `colmap-tracks-b`, the peer of the selections that see other views (`sees`: `views`,
+  issue 53): a first pass of the same extraction held to `track-first`'s first pass (4B
+  per view, `hard_cap`), matched exhaustively and verified by COLMAP; then in each view
+  the B keypoints whose verified track (connected component of the verified matches)
+  spans the most views, ties in COLMAP's order (`track_cap`); those B are matched and
+  verified again by COLMAP, and mapped, like `colmap-b`'s. Its rows' `select_ms` is the
+  first pass's matching and the choice.
 
 The modern peers, `aliked-b` and `disk-b`: the learned detector's own B highest-scoring
 keypoints (the pool's strongest B: what a user of hloc keeps at a budget), matched with
@@ -42,7 +49,15 @@ from bench.backend.reconstruction import Reconstruction, map_database, quiet_col
 from bench.camera import Camera
 from bench.frontend.features import strongest_first
 from bench.frontend.policies import register_policy, response_policy
-from bench.vocabulary import OWN_PIPELINE, Method, declare_method, implemented_by
+from bench.frontend.tracks import TrackFirstConfig, track_views
+from bench.vocabulary import (
+    OWN_PIPELINE,
+    TRACKS_PEER,
+    Method,
+    declare_kind,
+    declare_method,
+    implemented_by,
+)
 
 
 @dataclass
@@ -75,15 +90,16 @@ def hard_cap(keypoints: np.ndarray, budget: int) -> np.ndarray:
     return np.sort(order[:budget])
 
 
-def _cap_database(db_path: Path, names: list[str], budget: int) -> None:
-    """Keep exactly min(budget, N) keypoints (and their descriptors) of every image."""
+def _cap_database(db_path: Path, names: list[str], budget: int, choose=None) -> None:
+    """Keep exactly min(budget, N) keypoints (and their descriptors) of every image: the
+    `hard_cap`, or `choose(view, keypoints)`'s indices (ascending)."""
     db = pycolmap.Database.open(str(db_path))
     try:
         ids = {img.name: img.image_id for img in db.read_all_images()}
         kept = {}
-        for name in names:
+        for v, name in enumerate(names):
             kps, desc = db.read_keypoints(ids[name]), db.read_descriptors(ids[name])
-            keep = hard_cap(kps, budget)
+            keep = hard_cap(kps, budget) if choose is None else choose(v, kps)
             kept[ids[name]] = kps[keep], pycolmap.FeatureDescriptors(desc.type, desc.data[keep])
         db.clear_keypoints()
         db.clear_descriptors()
@@ -92,6 +108,45 @@ def _cap_database(db_path: Path, names: list[str], budget: int) -> None:
             db.write_descriptors(image_id, desc)
     finally:
         db.close()
+
+
+def longest_tracks(spans: np.ndarray, budget: int) -> np.ndarray:
+    """Indices of the `budget` keypoints whose tracks span the most views (`spans`), ties
+    in COLMAP's order (by index), ascending."""
+    order = np.lexsort((np.arange(len(spans)), -np.asarray(spans)))
+    return np.sort(order[:budget])
+
+
+def track_cap(db_path: Path, names: list[str], budget: int, matching, verification) -> None:
+    """`colmap-tracks-b`'s choice (module docstring): its first pass (the database's
+    keypoints, `track-first`'s multiple of B) matched and verified by COLMAP, then in each
+    view the `budget` keypoints of the longest verified tracks; the first pass's matches
+    are cleared for the final matching."""
+    _cap_database(db_path, names, TrackFirstConfig().first_pass * budget)
+    pycolmap.match_exhaustive(
+        db_path,
+        matching_options=matching,
+        verification_options=verification,
+        device=pycolmap.Device.cpu,
+    )
+    db = pycolmap.Database.open(str(db_path))
+    try:
+        ids = {img.name: img.image_id for img in db.read_all_images()}
+        views = [ids[n] for n in names]
+        sizes = [db.num_keypoints_for_image(i) for i in views]
+        pairs = []
+        for i, j in combinations(range(len(views)), 2):
+            if db.exists_two_view_geometry(views[i], views[j]):
+                tvg = db.read_two_view_geometry(views[i], views[j])
+                inliers = np.asarray(tvg.inlier_matches, np.int64).reshape(-1, 2)
+                config = pycolmap.TwoViewGeometryConfiguration(int(tvg.config)).name
+                pairs.append(PairMatches(i, j, inliers[:0], inliers, config))
+        db.clear_matches()
+        db.clear_two_view_geometries()
+    finally:
+        db.close()
+    spans = track_views(sizes, pairs)
+    _cap_database(db_path, names, budget, lambda v, _: longest_tracks(spans[v], budget))
 
 
 def verified_pairs(
@@ -157,6 +212,10 @@ def run_peer(
                 _cap_database(db_path, names, budget)
             detect_s = time.perf_counter() - t
             t = time.perf_counter()
+            if cap == TRACKS:
+                track_cap(db_path, names, budget, matching, verification)
+            select_s = time.perf_counter() - t
+            t = time.perf_counter()
             pycolmap.match_exhaustive(
                 db_path,
                 matching_options=matching,
@@ -176,15 +235,23 @@ def run_peer(
             db.close()
         recs = {pr: map_database(db_path, image_dir, cfg, pr) for pr in protocols}
         seconds = {"detect": detect_s, "match": match_s}
+        if cap == TRACKS:
+            seconds["select"] = select_s
         return PeerRun(recs, keypoints, tentative, verified, seconds, pairs, pose_s)
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
 
-HARD, SOFT = "hard", "soft"
-CAPS = {"colmap": None, "colmap-b": HARD, "colmap-soft-b": SOFT}
+HARD, SOFT, TRACKS = "hard", "soft", "tracks"
+CAPS = {"colmap": None, "colmap-b": HARD, "colmap-soft-b": SOFT, "colmap-tracks-b": TRACKS}
 """How each stock-COLMAP peer holds its extraction to the budget: not at all (COLMAP's
-default, budget 0), exactly B keypoints (`hard_cap`), or SIFT's own soft limit."""
+default, budget 0), exactly B keypoints (`hard_cap`), SIFT's own soft limit, or the B of
+the longest verified tracks of a first pass (`track_cap`)."""
+declare_kind(
+    TRACKS_PEER,
+    "extracts and matches with stock COLMAP, keeps in each view the keypoints of the "
+    "longest verified tracks, matches them again and maps (colmap-tracks-b)",
+)
 implemented_by(
     [  # peer rows: `colmap` (budget 0: COLMAP's default), the others one per budget
         declare_method(m).name
@@ -192,6 +259,12 @@ implemented_by(
             Method("colmap", "COLMAP default SIFT (peer)", "peer", True, kind=OWN_PIPELINE),
             Method("colmap-b", "COLMAP SIFT, B largest-scale (peer)", "peer", kind=OWN_PIPELINE),
             Method("colmap-soft-b", "COLMAP SIFT soft limit B (peer)", "peer", kind=OWN_PIPELINE),
+            Method(
+                "colmap-tracks-b",
+                "COLMAP SIFT, B of the longest tracks of 4B (peer)",
+                "peer",
+                kind=TRACKS_PEER,
+            ),
         )
     ],
     run_peer,

@@ -54,7 +54,15 @@ from bench.harness.methods import runner
 from bench.harness.predict import LoadedScene, has_prediction, predict
 from bench.harness.tasks import RUNNERS
 from bench.results import Workspace
-from bench.vocabulary import GROUND_TRUTH, METHODS, MULTI_VIEW, OWN_PIPELINE, Job, Unit
+from bench.vocabulary import (
+    GROUND_TRUTH,
+    METHODS,
+    MULTI_VIEW,
+    OWN_PIPELINE,
+    TRACKS_PEER,
+    Job,
+    Unit,
+)
 
 _HELD: dict = {}
 """The one scene this process holds."""
@@ -207,7 +215,7 @@ def unit_size(unit: Unit, work: Work) -> tuple:
     (Measured on the published dense rows: `all` 40 s a unit, `colmap` 42 s, the COLMAP
     peers 20-27 s, the oracle 24-30 s, the loop 3-12 s, the other policies 1-7 s.)"""
     method = METHODS[unit.method]
-    heavy = {OWN_PIPELINE: 2, GROUND_TRUTH: 2, MULTI_VIEW: 1}.get(method.kind, 0)
+    heavy = {OWN_PIPELINE: 2, TRACKS_PEER: 2, GROUND_TRUTH: 2, MULTI_VIEW: 1}.get(method.kind, 0)
     return (3 if method.whole_pool else heavy, unit.budget, len(work.jobs))
 
 

@@ -38,6 +38,7 @@ from bench.vocabulary import (
     MULTI_VIEW,
     OWN_PIPELINE,
     PER_VIEW,
+    TRACKS_PEER,
 )
 
 
@@ -83,6 +84,7 @@ register_kind(PER_VIEW, KindRunner(store_selection(policy_selection), selection_
 register_kind(MULTI_VIEW, KindRunner(store_selection(policy_selection), selection_shared, True))
 register_kind(GROUND_TRUTH, KindRunner(store_selection(oracle_selection), selection_shared))
 register_kind(OWN_PIPELINE, KindRunner(store_own_pipeline, own_pipeline_shared))
+register_kind(TRACKS_PEER, KindRunner(store_own_pipeline, own_pipeline_shared))
 register_kind(EQUAL_COUNT, KindRunner(store_equal, equal_shared))
 register_kind(
     choosers.CHOOSER, KindRunner(nbv.store_trajectory(nbv.chooser_pick), score=nbv.nbv_rows)
