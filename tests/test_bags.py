@@ -69,13 +69,12 @@ def test_a_dataset_run_scores_each_bag_on_its_own_views_and_reuses_them(
 def test_a_bags_signals_are_those_of_its_views_alone(dataset, tmp_path):
     from bench.frontend.geometry import IMAGES
     from bench.frontend.signals import SIGNALS, compute_signals
-    from bench.frontend.stage import front_end
-    from bench.harness.bags import bag_front
+    from bench.frontend.stage import front_end, subset
     from bench.harness.config import RunConfig
 
     cfg, bag = RunConfig(), (0, 2, 3, 5)
     full = front_end(dataset, cfg.detector, cfg.signals, tmp_path, IMAGES)
-    mine = bag_front(full, bag, cfg.detector, cfg.signals)
+    mine = subset(full, bag, cfg.detector, cfg.signals)
     alone, _ = compute_signals([full.views[i] for i in bag], mine.pools, cfg.detector, cfg.signals)
     assert [v.name for v in mine.views] == [full.views[i].name for i in bag]
     for got, want in zip(mine.signals, alone):

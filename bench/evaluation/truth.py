@@ -210,19 +210,7 @@ class SceneTruth:
         overlapping frustums (poses alone)."""
         if self.track is not None:
             return self.shared_pairs(min_shared), f"ground-truth tracks >= {min_shared}"
-        if self.seen is not None and any(len(s) for s in self.seen):
-            pairs = [
-                (i, j)
-                for i, j in combinations(range(len(self.seen)), 2)
-                if len(np.intersect1d(self.seen[i], self.seen[j])) >= min_shared
-            ]
-            return pairs, f"model tracks >= {min_shared}"
-        pairs = [
-            (i, j)
-            for i, j in combinations(range(len(self.cams)), 2)
-            if _facing(self.cams[i], self.cams[j])
-        ]
-        return pairs, f"viewing directions within {COVISIBLE_DEG:g} deg, frustums overlap"
+        return covisible_pairs(self.cams, self.seen, min_shared)
 
     def correspondences(self, i: int, j: int, ki: np.ndarray, kj: np.ndarray) -> np.ndarray:
         """Whether candidate ki[m] of view i and kj[m] of view j correspond (ground truth)."""
@@ -246,6 +234,21 @@ def scene_truth(source: Path, cams: list[Camera], names: list[str], pools) -> Sc
     if gts is not None:
         truth.kind = "per-pixel"
     return truth
+
+
+def covisible_pairs(
+    cams: list[Camera], seen: list[np.ndarray] | None, min_shared: int
+) -> tuple[list[tuple[int, int]], str]:
+    """The pairs of views (i < j) that see the same surface by a dataset model alone, and by
+    which rule: sharing at least `min_shared` of the model's points (`seen`: those each
+    view observes) where it has points, else viewing directions within `COVISIBLE_DEG`
+    with overlapping frustums (poses alone)."""
+    pairs = combinations(range(len(cams)), 2)
+    if seen is not None and any(len(s) for s in seen):
+        shared = [(i, j) for i, j in pairs if len(np.intersect1d(seen[i], seen[j])) >= min_shared]
+        return shared, f"model tracks >= {min_shared}"
+    facing = [(i, j) for i, j in pairs if _facing(cams[i], cams[j])]
+    return facing, f"viewing directions within {COVISIBLE_DEG:g} deg, frustums overlap"
 
 
 def _facing(a: Camera, b: Camera) -> bool:
