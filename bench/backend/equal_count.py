@@ -10,7 +10,7 @@ per view, not an interpolation of the budget curve (which would be a model).
 
 The peer's count per view is its own extraction at budget B (`peer_counts`: COLMAP's SIFT
 with the peer's settings, on the same images, one thread, so deterministic and equal to
-what the peer's unit holds: the peer's cached extraction, `bench.backend.peers.extract`),
+what the peer's unit holds: the peer's cached extraction, `bench.backend.peers.peer_extraction`),
 read by the unit itself: units stay independent of each other (none waits for another's
 stored prediction), and the one-way flow holds (images
 -> counts -> selection). The peer reads the images only, so the method sees no more
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.backend.peers import CAPS, HARD, SOFT, extract, hard_cap
+from bench.backend.peers import peer_extraction
 from bench.camera import Camera
 from bench.frontend.plugins import firewall
 from bench.frontend.policies import MULTIVIEW, POLICIES, PolicyInput, select, settings_for
@@ -68,11 +68,9 @@ def peer_counts(
     cache_dir: Path | None = None,
 ):
     """The number of keypoints the peer's extraction holds in each view at `budget` (the
-    peer's own, `bench.backend.peers.extract`, read from its cache in `cache_dir`)."""
-    cap = CAPS[peer]
-    extracted = extract(image_dir, names, cams, budget if cap == SOFT else 0, cache_dir)
+    peer's own, `bench.backend.peers.peer_extraction`, read from its cache in `cache_dir`)."""
     return [
-        len(hard_cap(e.keypoints, budget)) if cap == HARD else len(e.keypoints) for e in extracted
+        len(e.keypoints) for e in peer_extraction(image_dir, names, cams, peer, budget, cache_dir)
     ]
 
 

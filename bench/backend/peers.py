@@ -186,24 +186,36 @@ def _extract_now(image_dir: Path, names: list[str], cams: list[Camera], max_feat
     return out
 
 
-def write_extracted(
-    db: pycolmap.Database, cams: list[Camera], extracted: list[Extracted], keep=None
-) -> None:
+def peer_extraction(
+    image_dir: Path,
+    names: list[str],
+    cams: list[Camera],
+    peer: str,
+    budget: int,
+    cache_dir: Path | None = None,
+) -> list[Extracted]:
+    """What a stock-COLMAP peer's database holds of each view at `budget`: `extract` at
+    the peer's SIFT limit, capped as its `CAPS` says (`hard_cap`)."""
+    cap = CAPS[peer]
+    extracted = extract(image_dir, names, cams, budget if cap == SOFT else 0, cache_dir)
+    if cap != HARD:
+        return extracted
+    kept = [hard_cap(e.keypoints, budget) for e in extracted]
+    return [Extracted(e.keypoints[k], e.descriptors[k], e.seconds) for e, k in zip(extracted, kept)]
+
+
+def write_extracted(db: pycolmap.Database, cams: list[Camera], extracted: list[Extracted]) -> None:
     """Into a database holding the views' images (`write_images`, ids 1..n), what COLMAP's
     extractor writes: a rig per camera (its reference sensor), in the order of the images
-    that first use it, then each image's keypoints and descriptors (`keep(keypoints)`: the
-    indices kept, in order; all by default)."""
+    that first use it, then each image's keypoints and descriptors."""
     for cid in dict.fromkeys(camera_ids(cams)):
         rig = pycolmap.Rig()
         rig.add_ref_sensor(pycolmap.sensor_t(pycolmap.SensorType.CAMERA, cid))
         db.write_rig(rig)
     for image_id, e in enumerate(extracted, start=1):
-        idx = np.arange(len(e.keypoints)) if keep is None else keep(e.keypoints)
-        db.write_keypoints(image_id, e.keypoints[idx])
-        db.write_descriptors(
-            image_id,
-            pycolmap.FeatureDescriptors(pycolmap.FeatureExtractorType.SIFT, e.descriptors[idx]),
-        )
+        db.write_keypoints(image_id, e.keypoints)
+        descriptors = pycolmap.FeatureDescriptors(pycolmap.FeatureExtractorType.SIFT, e.descriptors)
+        db.write_descriptors(image_id, descriptors)
 
 
 def verified_pairs(
@@ -231,18 +243,13 @@ def run_peer(
     image_dir: Path,
     names: list[str],
     cams: list[Camera],
-    peer: str,
-    budget: int,
+    extracted: list[Extracted],
     cfg: BackendConfig,
     protocols: list[str],
-    cache_dir: Path | None = None,
 ) -> PeerRun:
-    """Extract (`extract`, cached in `cache_dir`; capped as the peer's `CAPS` says) and
-    match once with stock COLMAP, estimate each verified pair's relative pose, then map
-    under each track protocol (see the module docstring)."""
-    cap = CAPS[peer]
-    extracted = extract(image_dir, names, cams, budget if cap == SOFT else 0, cache_dir)
-    keep = (lambda k: hard_cap(k, budget)) if cap == HARD else None
+    """Match the peer's extraction of the views (`peer_extraction`) once with stock COLMAP,
+    estimate each verified pair's relative pose, then map under each track protocol (see
+    the module docstring)."""
     work = Path(tempfile.mkdtemp(prefix="bench-peer-"))
     db_path = work / "database.db"
     matching = pycolmap.FeatureMatchingOptions()
@@ -252,9 +259,9 @@ def run_peer(
     try:
         t = time.perf_counter()
         db = pycolmap.Database.open(str(db_path))
-        try:  # the known intrinsics, then the extraction (capped, as the peer's `CAPS` says)
+        try:  # the known intrinsics: COLMAP's extractor keeps the camera of an image it finds
             write_images(db, cams, names)
-            write_extracted(db, cams, extracted, keep)
+            write_extracted(db, cams, extracted)
         finally:
             db.close()  # the seconds of extraction as measured when it was computed
         detect_s = time.perf_counter() - t + sum(e.seconds for e in extracted)
