@@ -103,3 +103,26 @@ def test_bag_options_default_apply_to_datasets_alone_and_not_to_the_next_views_t
     assert "--bag-size ignored without --dataset" in capsys.readouterr().err
     with pytest.raises(BenchError, match="--bags must be at least 1"):
         bags_arg(Namespace(bag_size=4, bags=0), True, ("sfm",))
+
+
+@pytest.mark.parametrize("turn_deg", [0.0, 2.0])
+def test_a_forward_sequence_without_points_is_covisible_near_only_and_bagged_in_runs(turn_deg):
+    """Driving forward (KITTI's motion), a model with poses and no points: the optical axes
+    lie along the path, so the point where they pass closest is behind the cameras or
+    undefined (the test said no pair, turning, or every pair, straight); now a view sees
+    the scene at the working distance of its neighbours (5.7 m at 1 m a frame) within a
+    factor 2 of scale, so the views at most 5 frames apart, and a bag is a run of nearby
+    frames, not frames from the whole sequence."""
+    from bench.camera import look_at
+    from bench.evaluation.truth import covisible_pairs
+
+    yaw = np.radians(turn_deg * np.arange(30))  # 1 m a frame, turning by turn_deg a frame
+    heading = np.c_[np.sin(yaw), np.cos(yaw), np.zeros(30)]
+    eyes = np.cumsum(heading, axis=0) - heading
+    cams = [
+        look_at(e, e + 10 * h, width=1241, height=376, fov_x_deg=82) for e, h in zip(eyes, heading)
+    ]
+    pairs, _ = covisible_pairs(cams, None, 15)
+    assert pairs == [(i, j) for i, j in combinations(range(30), 2) if j - i <= 5]
+    for bag in draw_bags(30, pairs, 6, 10):
+        assert bag[-1] - bag[0] <= 25 and max(np.diff(bag)) <= 5
