@@ -204,12 +204,16 @@ class Task:
 
 @dataclass(frozen=True)
 class Unit:
-    """One unit of work: a method at a budget in one scene and seed."""
+    """One unit of work: a method at a budget in one scene and seed (of a dataset scored in
+    bags, one bag)."""
 
     scene: str
     seed: int
     method: str
     budget: int
+    bag: str = ""
+    """A dataset's bag (`bench.harness.bags`): its image names, space-separated, the row
+    column `bag`; empty: every view of the entry."""
 
     @property
     def group(self) -> tuple[str, int]:

@@ -31,13 +31,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tempfile
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import pycolmap
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
@@ -45,8 +43,7 @@ from scipy.spatial import cKDTree
 import bench.harness.declared  # noqa: F401 (every method, as `bench run` has them)
 from bench import BenchError
 from bench.backend.matching import match_and_verify
-from bench.backend.peers import CAPS, HARD, SOFT, hard_cap, keypoint_scales, run_peer
-from bench.backend.reconstruction import quiet_colmap, write_images
+from bench.backend.peers import keypoint_scales, peer_extraction, run_peer
 from bench.evaluation.layers import read_layers
 from bench.evaluation.truth import CORRESPONDENCE_PX, _visible
 from bench.frontend.geometry import IMAGES
@@ -65,32 +62,6 @@ EPIPOLAR_PX = 4.0
 SCALE_BINS = [0, 2, 4, 8, 16, np.inf]
 RESP_BINS = [0, 50, 75, 90, 100.001]
 RADIUS_BINS = [0, 0.33, 0.66, 1.01]
-
-
-def peer_shapes(image_dir: Path, names, cams, peer: str, budget: int) -> list[np.ndarray]:
-    """The peer's keypoints with their affine shapes (N, 6), as `run_peer` keeps them."""
-    with tempfile.TemporaryDirectory() as work:
-        db_path = Path(work) / "database.db"
-        db = pycolmap.Database.open(str(db_path))
-        write_images(db, cams, names)
-        db.close()
-        opts = pycolmap.FeatureExtractionOptions()
-        opts.num_threads = 1
-        if CAPS[peer] == SOFT:
-            opts.sift.max_num_features = budget
-        with quiet_colmap():
-            pycolmap.extract_features(
-                db_path,
-                image_dir,
-                image_names=names,
-                extraction_options=opts,
-                device=pycolmap.Device.cpu,
-            )
-        db = pycolmap.Database.open(str(db_path))
-        ids = {img.name: img.image_id for img in db.read_all_images()}
-        kps = [db.read_keypoints(ids[n]) for n in names]
-        db.close()
-    return [k[hard_cap(k, budget)] if CAPS[peer] == HARD else k for k in kps]
 
 
 def components(n_per_view: list[int], pairs) -> list[np.ndarray]:
@@ -167,9 +138,9 @@ def kept_table(entry: Path, cfg: RunConfig, renders: Path, budgets, methods) -> 
     for budget in budgets:
         for method in methods:
             if method in PEERS:
-                run = run_peer(image_dir, names, cams, method, budget, cfg.backend, ["multiview"])
-                shapes = peer_shapes(image_dir, names, cams, method, budget)
-                assert all(np.allclose(s[:, :2], k) for s, k in zip(shapes, run.keypoints))
+                extracted = peer_extraction(image_dir, names, cams, method, budget)
+                run = run_peer(image_dir, names, cams, extracted, cfg.backend, ["multiview"])
+                shapes = [e.keypoints for e in extracted]  # with their affine shapes (N, 6)
                 xy, pairs = run.keypoints, run.pairs
                 scale = [keypoint_scales(s) for s in shapes]
                 resp = []

@@ -28,7 +28,7 @@ renders = ROOT / "renders"
 entry = render_scene(a.scene, a.seed, cfg.run.render, renders)
 before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 work = {u: Work(tuple(cfg.jobs(u.method))) for u in cfg.units()}
-plan = Plan({(a.scene, a.seed): entry}, work, cfg.budgets)
+plan = Plan({(a.scene, a.seed): entry}, work)
 scene_task((a.scene, a.seed), entry, cfg.run, renders, plan)
 with tempfile.TemporaryDirectory() as tmp:
     for unit in cfg.units():

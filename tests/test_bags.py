@@ -13,7 +13,7 @@ from scipy.sparse.csgraph import connected_components
 from bench.cli import main
 from bench.evaluation.export import export_dataset
 from bench.evaluation.relative import MIN_SHARED
-from bench.harness.bags import BAG, covisible, draw_bags
+from bench.harness.bags import BAG, draw_bags
 
 
 def test_bags_on_a_chain_are_its_runs_of_consecutive_views_each_once():
@@ -70,13 +70,12 @@ def test_a_dataset_run_scores_each_bag_on_its_own_views_and_reuses_them(
 def test_a_bags_signals_are_those_of_its_views_alone(dataset, tmp_path):
     from bench.frontend.geometry import IMAGES
     from bench.frontend.signals import SIGNALS, compute_signals
-    from bench.frontend.stage import front_end
-    from bench.harness.bags import bag_front
+    from bench.frontend.stage import front_end, subset
     from bench.harness.config import RunConfig
 
     cfg, bag = RunConfig(), (0, 2, 3, 5)
     full = front_end(dataset, cfg.detector, cfg.signals, tmp_path, IMAGES)
-    mine = bag_front(full, bag, cfg.detector, cfg.signals)
+    mine = subset(full, bag, cfg.detector, cfg.signals)
     alone, _ = compute_signals([full.views[i] for i in bag], mine.pools, cfg.detector, cfg.signals)
     assert [v.name for v in mine.views] == [full.views[i].name for i in bag]
     for got, want in zip(mine.signals, alone):
@@ -114,4 +113,29 @@ def test_bag_options_default_apply_to_datasets_alone_and_not_to_the_next_views_t
 def test_two_views_are_co_visible_from_exactly_min_shared_common_points():
     """Views 0 and 1 share `MIN_SHARED` model points; view 2 shares one fewer with each."""
     seen = [np.arange(MIN_SHARED), np.arange(MIN_SHARED), np.arange(1, MIN_SHARED)]
-    assert covisible([None] * 3, seen) == {(0, 1)}
+    from bench.evaluation.truth import covisible_pairs
+
+    assert covisible_pairs([None] * 3, seen, MIN_SHARED)[0] == [(0, 1)]
+
+
+@pytest.mark.parametrize("turn_deg", [0.0, 2.0])
+def test_a_forward_sequence_without_points_is_covisible_near_only_and_bagged_in_runs(turn_deg):
+    """Driving forward (KITTI's motion), a model with poses and no points: the optical axes
+    lie along the path, so the point where they pass closest is behind the cameras or
+    undefined (the test said no pair, turning, or every pair, straight); now a view sees
+    the scene at the working distance of its neighbours (5.7 m at 1 m a frame) within a
+    factor 2 of scale, so the views at most 5 frames apart, and a bag is a run of nearby
+    frames, not frames from the whole sequence."""
+    from bench.camera import look_at
+    from bench.evaluation.truth import covisible_pairs
+
+    yaw = np.radians(turn_deg * np.arange(30))  # 1 m a frame, turning by turn_deg a frame
+    heading = np.c_[np.sin(yaw), np.cos(yaw), np.zeros(30)]
+    eyes = np.cumsum(heading, axis=0) - heading
+    cams = [
+        look_at(e, e + 10 * h, width=1241, height=376, fov_x_deg=82) for e, h in zip(eyes, heading)
+    ]
+    pairs, _ = covisible_pairs(cams, None, 15)
+    assert pairs == [(i, j) for i, j in combinations(range(30), 2) if j - i <= 5]
+    for bag in draw_bags(30, pairs, 6, 10):
+        assert bag[-1] - bag[0] <= 25 and max(np.diff(bag)) <= 5

@@ -8,7 +8,7 @@ import pytest
 
 from bench.backend.equal_count import EQUAL, equal_selection, peer_counts
 from bench.backend.matching import BackendConfig, matcher
-from bench.backend.peers import run_peer
+from bench.backend.peers import peer_extraction, run_peer
 from bench.frontend.features import DetectorConfig
 from bench.frontend.geometry import IMAGES, SignalConfig
 from bench.frontend.policies import PolicyConfig, PolicyInput
@@ -38,13 +38,15 @@ def test_the_count_is_the_peers_own_in_every_view(fe):
     names, cams = [v.name for v in front.views], [v.camera for v in front.views]
     images = Source.of(entry).images
     counts = peer_counts(images, names, cams, "colmap-soft-b", BUDGET)
-    run = run_peer(images, names, cams, "colmap-soft-b", BUDGET, BackendConfig(), [])
+    soft = peer_extraction(images, names, cams, "colmap-soft-b", BUDGET)
+    run = run_peer(images, names, cams, soft, BackendConfig(), [])
     assert counts == [len(k) for k in run.keypoints]
     assert any(c != BUDGET for c in counts)
     hard = peer_counts(images, names, cams, "colmap-b", BUDGET)
+    every = peer_extraction(images, names, cams, "colmap", 0)
     assert hard == [
         min(BUDGET, len(k))
-        for k in run_peer(images, names, cams, "colmap", 0, BackendConfig(), []).keypoints
+        for k in run_peer(images, names, cams, every, BackendConfig(), []).keypoints
     ]
 
 

@@ -27,7 +27,7 @@ def test_units_go_scene_by_scene_whole_pool_and_pipelines_first_then_by_budget()
     work = {u: Work(JOBS) for u in units}
     work[Unit("table", 0, "adaptive-loop", 256)] = Work(JOBS)
     work[Unit("table", 0, "grid", 512)] = Work(JOBS[:1])
-    order = [(u.scene, u.method, u.budget) for u in largest_first(Plan(entries, work, (128, 512)))]
+    order = [(u.scene, u.method, u.budget) for u in largest_first(Plan(entries, work))]
     table = [
         ("table", "all", 0),
         ("table", "oracle", 128),  # a tie: in the plan's order

@@ -191,6 +191,23 @@ def test_a_focal_length_the_views_do_not_determine_is_not_estimated():
     assert few.factor is None and few.why == "1 pair(s) of images share 15 matches, 2 needed"
 
 
+@pytest.mark.parametrize("turn_deg", [0.0, 2.0])
+def test_a_focal_length_is_not_estimated_from_forward_motion_and_the_line_says_so(turn_deg):
+    """Driving forward (KITTI's motion) the optical axes lie along the motion, which leaves
+    the focal length undetermined as a ring does (on `kitti-seq2` every window of frames
+    was); the guess stays, and the line names forward motion, not a ring alone."""
+    rng = np.random.default_rng(1)
+    y, side = rng.uniform(6, 40, 600), rng.choice([-4.0, 4.0], 600)  # a street's walls
+    X = np.c_[side + rng.normal(0, 0.2, 600), y, rng.uniform(0, 4, 600)]
+    yaw = np.radians(turn_deg * np.arange(4))  # 1 m a frame, turning by turn_deg a frame
+    heading = np.c_[np.sin(yaw), np.cos(yaw), np.zeros(4)]
+    eyes = np.cumsum(heading, axis=0) - heading + [0, 0, 1.6]
+    cams = [look_at(e, e + 10 * h, fov_x_deg=82) for e, h in zip(eyes, heading)]
+    found = estimate_focal(*_seen(cams, X), SignalConfig())
+    assert found.factor is None and found.pairs == 6
+    assert "or lie along the motion, as driving forward" in found.why
+
+
 def test_a_database_already_in_out_is_kept_under_the_name_said(tmp_path, capsys):
     """A second `bench select --out` into a folder replaced its database.db ("replacing
     ..."): the first one was lost."""

@@ -10,8 +10,9 @@ per view, not an interpolation of the budget curve (which would be a model).
 
 The peer's count per view is its own extraction at budget B (`peer_counts`: COLMAP's SIFT
 with the peer's settings, on the same images, one thread, so deterministic and equal to
-what the peer's unit holds), computed by the unit itself: units stay independent of each
-other (none waits for another's stored prediction), and the one-way flow holds (images
+what the peer's unit holds: the peer's cached extraction, `bench.backend.peers.peer_extraction`),
+read by the unit itself: units stay independent of each other (none waits for another's
+stored prediction), and the one-way flow holds (images
 -> counts -> selection). The peer reads the images only, so the method sees no more
 than the sfm task grants. It selects, matches and is scored like its policy
 (`bench.harness.equal`); its own settings are its policy's, set under its own name
@@ -22,16 +23,12 @@ peers run (role `peer`: sfm and pairs) and the report compares them with the pee
 
 from __future__ import annotations
 
-import shutil
-import tempfile
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-import pycolmap
 
-from bench.backend.peers import CAPS, HARD, SOFT, hard_cap
-from bench.backend.reconstruction import quiet_colmap, write_images
+from bench.backend.peers import peer_extraction
 from bench.camera import Camera
 from bench.frontend.plugins import firewall
 from bench.frontend.policies import MULTIVIEW, POLICIES, PolicyInput, select, settings_for
@@ -62,38 +59,19 @@ def equal_name(policy: str, peer: str) -> str:
     return f"{policy}@{peer}"
 
 
-def peer_counts(image_dir: Path, names: list[str], cams: list[Camera], peer: str, budget: int):
-    """The number of keypoints the peer's extraction holds in each view at `budget`."""
-    cap = CAPS[peer]
-    work = Path(tempfile.mkdtemp(prefix="bench-count-"))
-    try:
-        db_path = work / "database.db"
-        db = pycolmap.Database.open(str(db_path))
-        try:
-            write_images(db, cams, names)
-        finally:
-            db.close()
-        extraction = pycolmap.FeatureExtractionOptions()
-        extraction.num_threads = 1
-        if cap == SOFT:
-            extraction.sift.max_num_features = budget
-        with quiet_colmap():
-            pycolmap.extract_features(
-                db_path,
-                image_dir,
-                image_names=names,
-                extraction_options=extraction,
-                device=pycolmap.Device.cpu,
-            )
-        db = pycolmap.Database.open(str(db_path))
-        try:
-            ids = {img.name: img.image_id for img in db.read_all_images()}
-            kps = [db.read_keypoints(ids[n]) for n in names]
-        finally:
-            db.close()
-        return [len(hard_cap(k, budget)) if cap == HARD else len(k) for k in kps]
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
+def peer_counts(
+    image_dir: Path,
+    names: list[str],
+    cams: list[Camera],
+    peer: str,
+    budget: int,
+    cache_dir: Path | None = None,
+):
+    """The number of keypoints the peer's extraction holds in each view at `budget` (the
+    peer's own, `bench.backend.peers.peer_extraction`, read from its cache in `cache_dir`)."""
+    return [
+        len(e.keypoints) for e in peer_extraction(image_dir, names, cams, peer, budget, cache_dir)
+    ]
 
 
 def equal_selection(

@@ -29,11 +29,17 @@ matches (COLMAP's own verification, read back from its database) by the policies
 verification (`bench.backend.matching.verify`: COLMAP's calibrated two-view geometry with
 the known intrinsics, seeded); COLMAP's matcher stores no pose.
 
+COLMAP's extraction of an image depends on that image alone (and SIFT's limit), so it is
+done once per image and limit and cached (`extract`: beside the front-end cache, under
+`COLMAP_SIFT`), with the seconds it took; every database of a peer, one per unit (a
+dataset's bags among them), is built from it as COLMAP's extractor builds it.
+
 The peers read the images and the intrinsics only, like every back end.
 """
 
 from __future__ import annotations
 
+import hashlib
 import shutil
 import tempfile
 import time
@@ -45,8 +51,15 @@ import numpy as np
 import pycolmap
 
 from bench.backend.matching import BackendConfig, PairMatches, verify
-from bench.backend.reconstruction import Reconstruction, map_database, quiet_colmap, write_images
+from bench.backend.reconstruction import (
+    Reconstruction,
+    camera_ids,
+    map_database,
+    quiet_colmap,
+    write_images,
+)
 from bench.camera import Camera
+from bench.files import atomic_path, content_key
 from bench.frontend.features import strongest_first
 from bench.frontend.policies import register_policy, response_policy
 from bench.frontend.tracks import TrackFirstConfig, track_views
@@ -108,6 +121,136 @@ def _cap_database(db_path: Path, names: list[str], budget: int, choose=None) -> 
             db.write_descriptors(image_id, desc)
     finally:
         db.close()
+
+
+COLMAP_SIFT = "colmap-sift"
+"""The folder of `extract`'s cache, beside the front end's (`--renders`)."""
+
+
+@dataclass
+class Extracted:
+    """COLMAP's SIFT extraction of one image: what its database holds of it."""
+
+    keypoints: np.ndarray
+    """N x 6 affine keypoints (COLMAP's pixel convention), float32."""
+    descriptors: np.ndarray
+    """N x 128 SIFT descriptors, uint8."""
+    seconds: float
+    """The seconds its extraction took when it was computed (cached with it)."""
+
+
+def extract(
+    image_dir: Path,
+    names: list[str],
+    cams: list[Camera],
+    max_features: int = 0,
+    cache_dir: Path | None = None,
+) -> list[Extracted]:
+    """Stock COLMAP's SIFT extraction of each image (single-threaded, on the CPU) at SIFT's
+    limit `max_features` (0: COLMAP's default), each image read from `cache_dir` where it
+    holds it (keyed by the image's bytes, the limit and pycolmap's version), the others
+    extracted together and cached there; without `cache_dir`, extracted every call."""
+    keys = [_extraction_key(Path(image_dir) / n, max_features) for n in names]
+    paths = [None if cache_dir is None else Path(cache_dir) / f"{k}.npz" for k in keys]
+    out: list[Extracted | None] = [_read_extracted(p) for p in paths]
+    missing = [k for k, e in enumerate(out) if e is None]
+    if missing:
+        new = _extract_now(
+            image_dir, [names[k] for k in missing], [cams[k] for k in missing], max_features
+        )
+        for k, e in zip(missing, new):
+            out[k] = e
+            if paths[k] is not None:
+                paths[k].parent.mkdir(parents=True, exist_ok=True)
+                with atomic_path(paths[k]) as tmp:
+                    np.savez(
+                        tmp, keypoints=e.keypoints, descriptors=e.descriptors, seconds=e.seconds
+                    )
+    return out
+
+
+def _extraction_key(image: Path, max_features: int) -> str:
+    digest = hashlib.sha256(image.read_bytes()).hexdigest()
+    return content_key({"image": digest, "max": max_features, "pycolmap": pycolmap.__version__})
+
+
+def _read_extracted(path: Path | None) -> Extracted | None:
+    if path is None or not path.is_file():
+        return None
+    try:
+        with np.load(path) as z:
+            return Extracted(z["keypoints"], z["descriptors"], float(z["seconds"]))
+    except (OSError, ValueError, KeyError):
+        return None  # damaged: extracted again
+
+
+def _extract_now(image_dir: Path, names: list[str], cams: list[Camera], max_features: int):
+    """COLMAP's extraction of the images, each timed alone (into a database of its own)."""
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.num_threads = 1
+    if max_features:
+        extraction.sift.max_num_features = max_features
+    out = []
+    work = Path(tempfile.mkdtemp(prefix="bench-sift-"))
+    try:
+        for k, (name, cam) in enumerate(zip(names, cams)):
+            db_path = work / f"{k}.db"
+            db = pycolmap.Database.open(str(db_path))
+            try:  # the known intrinsics: COLMAP's extractor keeps the camera it finds
+                write_images(db, [cam], [name])
+            finally:
+                db.close()
+            t = time.perf_counter()
+            with quiet_colmap():
+                pycolmap.extract_features(
+                    db_path,
+                    image_dir,
+                    image_names=[name],
+                    extraction_options=extraction,
+                    device=pycolmap.Device.cpu,
+                )
+            seconds = time.perf_counter() - t
+            db = pycolmap.Database.open(str(db_path))
+            try:
+                kps, desc = db.read_keypoints(1), db.read_descriptors(1)
+            finally:
+                db.close()
+            out.append(Extracted(np.asarray(kps, np.float32), np.asarray(desc.data), seconds))
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return out
+
+
+def peer_extraction(
+    image_dir: Path,
+    names: list[str],
+    cams: list[Camera],
+    peer: str,
+    budget: int,
+    cache_dir: Path | None = None,
+) -> list[Extracted]:
+    """What a stock-COLMAP peer's database holds of each view at `budget`: `extract` at
+    the peer's SIFT limit, capped as its `CAPS` says (`hard_cap`)."""
+    cap = CAPS[peer]
+    extracted = extract(image_dir, names, cams, budget if cap == SOFT else 0, cache_dir)
+    if cap != HARD:
+        return extracted
+    kept = [hard_cap(e.keypoints, budget) for e in extracted]
+    return [Extracted(e.keypoints[k], e.descriptors[k], e.seconds) for e, k in zip(extracted, kept)]
+
+
+def write_extracted(db: pycolmap.Database, cams: list[Camera], extracted: list[Extracted]) -> None:
+    """Into a database holding the views' images (`write_images`, ids 1..n), what COLMAP's
+    extractor writes: a rig per camera (its reference sensor), in the order of the images
+    that first use it, then each image's keypoints and descriptors."""
+    for cid in dict.fromkeys(camera_ids(cams)):
+        rig = pycolmap.Rig()
+        rig.add_ref_sensor(pycolmap.sensor_t(pycolmap.SensorType.CAMERA, cid))
+        db.write_rig(rig)
+    for image_id, e in enumerate(extracted, start=1):
+        db.write_keypoints(image_id, e.keypoints)
+        descriptors = pycolmap.FeatureDescriptors(pycolmap.FeatureExtractorType.SIFT, e.descriptors)
+        db.write_descriptors(image_id, descriptors)
 
 
 def longest_tracks(spans: np.ndarray, budget: int) -> np.ndarray:
@@ -174,43 +317,29 @@ def run_peer(
     image_dir: Path,
     names: list[str],
     cams: list[Camera],
-    peer: str,
-    budget: int,
+    extracted: list[Extracted],
     cfg: BackendConfig,
     protocols: list[str],
 ) -> PeerRun:
-    """Extract (and cap, as the peer's `CAPS` says) and match once with stock COLMAP,
+    """Match the peer's extraction of the views (`peer_extraction`) once with stock COLMAP,
     estimate each verified pair's relative pose, then map under each track protocol (see
     the module docstring)."""
-    cap = CAPS[peer]
     work = Path(tempfile.mkdtemp(prefix="bench-peer-"))
     db_path = work / "database.db"
-    db = pycolmap.Database.open(str(db_path))
-    try:  # the known intrinsics: COLMAP's extractor keeps the camera of an image it finds
-        write_images(db, cams, names)
-    finally:
-        db.close()
-    extraction = pycolmap.FeatureExtractionOptions()
-    extraction.num_threads = 1
-    if cap == SOFT:
-        extraction.sift.max_num_features = budget
     matching = pycolmap.FeatureMatchingOptions()
     matching.num_threads = 1
     verification = pycolmap.TwoViewGeometryOptions()
     verification.ransac.random_seed = cfg.seed
     try:
         t = time.perf_counter()
+        db = pycolmap.Database.open(str(db_path))
+        try:  # the known intrinsics: COLMAP's extractor keeps the camera of an image it finds
+            write_images(db, cams, names)
+            write_extracted(db, cams, extracted)
+        finally:
+            db.close()  # the seconds of extraction as measured when it was computed
+        detect_s = time.perf_counter() - t + sum(e.seconds for e in extracted)
         with quiet_colmap():
-            pycolmap.extract_features(
-                db_path,
-                image_dir,
-                image_names=names,
-                extraction_options=extraction,
-                device=pycolmap.Device.cpu,
-            )
-            if cap == HARD:
-                _cap_database(db_path, names, budget)
-            detect_s = time.perf_counter() - t
             t = time.perf_counter()
             if cap == TRACKS:
                 track_cap(db_path, names, budget, matching, verification)

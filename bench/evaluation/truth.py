@@ -23,6 +23,7 @@ from bench.evaluation.layers import (
 )
 from bench.frontend.colmap_model import points_seen
 from bench.frontend.features import Candidates
+from bench.frontend.geometry import saturation_depth
 from bench.frontend.views import Source
 
 CORRESPONDENCE_PX = 3.0
@@ -32,6 +33,13 @@ COVISIBLE_DEG = 60.0
 most this far apart (SIFT's matching repeatability falls below a fifth past about 60
 degrees of viewpoint change: Mikolajczyk et al., IJCV 2005) and their view frustums
 overlap."""
+SCALE_CHANGE = 2.0
+"""Without tracks to count or optical axes that meet in both images (views on a path, or
+driving forward), two views are covisible when the point at the working distance on one's
+optical axis lies inside the other's image at most this factor nearer or farther (one
+octave of SIFT's scale space); the working distance is the one the rig's geometry takes
+without points (`bench.frontend.geometry.saturation_depth` of the median distance from a
+view to its nearest view)."""
 BLOCK = 16384
 """Surface samples per block of `Surface`."""
 
@@ -210,19 +218,7 @@ class SceneTruth:
         overlapping frustums (poses alone)."""
         if self.track is not None:
             return self.shared_pairs(min_shared), f"ground-truth tracks >= {min_shared}"
-        if self.seen is not None and any(len(s) for s in self.seen):
-            pairs = [
-                (i, j)
-                for i, j in combinations(range(len(self.seen)), 2)
-                if len(np.intersect1d(self.seen[i], self.seen[j])) >= min_shared
-            ]
-            return pairs, f"model tracks >= {min_shared}"
-        pairs = [
-            (i, j)
-            for i, j in combinations(range(len(self.cams)), 2)
-            if _facing(self.cams[i], self.cams[j])
-        ]
-        return pairs, f"viewing directions within {COVISIBLE_DEG:g} deg, frustums overlap"
+        return covisible_pairs(self.cams, self.seen, min_shared)
 
     def correspondences(self, i: int, j: int, ki: np.ndarray, kj: np.ndarray) -> np.ndarray:
         """Whether candidate ki[m] of view i and kj[m] of view j correspond (ground truth)."""
@@ -248,27 +244,60 @@ def scene_truth(source: Path, cams: list[Camera], names: list[str], pools) -> Sc
     return truth
 
 
-def _facing(a: Camera, b: Camera) -> bool:
+def covisible_pairs(
+    cams: list[Camera], seen: list[np.ndarray] | None, min_shared: int
+) -> tuple[list[tuple[int, int]], str]:
+    """The pairs of views (i < j) that see the same surface by a dataset model alone, and by
+    which rule: sharing at least `min_shared` of the model's points (`seen`: those each
+    view observes) where it has points, else viewing directions within `COVISIBLE_DEG`
+    with overlapping frustums (poses alone, `_facing`)."""
+    pairs = combinations(range(len(cams)), 2)
+    if seen is not None and any(len(s) for s in seen):
+        shared = [(i, j) for i, j in pairs if len(np.intersect1d(seen[i], seen[j])) >= min_shared]
+        return shared, f"model tracks >= {min_shared}"
+    depth = _working_distance(cams)
+    facing = [(i, j) for i, j in pairs if _facing(cams[i], cams[j], depth)]
+    return facing, f"viewing directions within {COVISIBLE_DEG:g} deg, frustums overlap"
+
+
+def _working_distance(cams: list[Camera]) -> float:
+    """The working distance of views without points (`SCALE_CHANGE`)."""
+    if len(cams) < 2:
+        return 1.0
+    centres = np.array([c.center for c in cams])
+    gaps = np.linalg.norm(centres[:, None] - centres[None], axis=2) + np.diag([np.inf] * len(cams))
+    return saturation_depth(float(np.median(gaps.min(1))))
+
+
+def _facing(a: Camera, b: Camera, depth: float) -> bool:
     """Viewing directions within `COVISIBLE_DEG`, and frustums that overlap: the point
     where the two optical axes pass closest lies in front of both cameras and inside both
-    images (axes nearly parallel: each camera in front of the other's image plane or
-    beside it, as on a path)."""
+    images (axes that meet, as on a ring around an object); else (axes parallel or apart,
+    as on a path or driving forward) the point at the working distance `depth` on one's
+    axis lies inside the other's image, within `SCALE_CHANGE` of that distance."""
     da, db = a.R[2], b.R[2]  # optical axes (world)
     if np.degrees(np.arccos(np.clip(da @ db, -1, 1))) > COVISIBLE_DEG:
         return False
     w = a.center - b.center
     cross = np.cross(da, db)
-    if np.linalg.norm(cross) < 1e-3:  # parallel axes: the same view direction
-        return True
-    # closest points of the two axes: a.center + s da and b.center + u db
-    m = np.array([[da @ da, -(da @ db)], [da @ db, -(db @ db)]])
-    s, u = np.linalg.solve(m, [-(w @ da), -(w @ db)])
-    P = (a.center + s * da + b.center + u * db) / 2
-    for cam in (a, b):
-        uv, z = cam.project(P[None])
-        if not (z[0] > 0 and 0 <= uv[0, 0] < cam.width and 0 <= uv[0, 1] < cam.height):
-            return False
-    return True
+    if np.linalg.norm(cross) >= 1e-3:  # closest points of the axes: a.c + s da, b.c + u db
+        m = np.array([[da @ da, -(da @ db)], [da @ db, -(db @ db)]])
+        s, u = np.linalg.solve(m, [-(w @ da), -(w @ db)])
+        P = (a.center + s * da + b.center + u * db) / 2
+        if _inside(a, P) and _inside(b, P):
+            return True
+    for near, far in ((a, b), (b, a)):
+        X = near.center + depth * near.R[2]
+        z = float(far.to_camera(X[None])[0, 2])
+        if _inside(far, X) and max(z / depth, depth / z) <= SCALE_CHANGE:
+            return True
+    return False
+
+
+def _inside(cam: Camera, P: np.ndarray) -> bool:
+    """Whether the point P lies in front of the camera and inside its image."""
+    uv, z = cam.project(P[None])
+    return bool(z[0] > 0 and 0 <= uv[0, 0] < cam.width and 0 <= uv[0, 1] < cam.height)
 
 
 def _tracks(cams, gts, points, pool_xy) -> tuple[list[np.ndarray], np.ndarray]:

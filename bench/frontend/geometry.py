@@ -55,6 +55,13 @@ FOCAL_FACTORS = np.geomspace(0.3, 3.0, 241)
 FOCAL_MIN_PAIRS = 2
 FOCAL_STEPS = (1.05, 1.02)
 """The factors by which `estimate_focal` refines its estimate (coarse, then fine)."""
+CRITICAL = (
+    "views whose optical axes meet, as on a ring around an object, or lie along the motion, "
+    "as driving forward, leave it undetermined"
+)
+"""The motions that do not determine the focal length (`estimate_focal` says so): measured
+on the Middlebury rings and on `kitti-seq2` (`benchmarks/focal_estimate.py`: every window
+of 3 to 8 frames left undetermined, 1.0 to 1.5 times the matches at 1.5 x off)."""
 FOCAL_OFF, FOCAL_PEAK = 1.5, 1.5
 """An estimate is determined when its calibrated relative poses explain at least FOCAL_PEAK
 times the matches they explain at FOCAL_OFF times and 1 / FOCAL_OFF times it (measured on
@@ -367,7 +374,9 @@ def estimate_focal(views: list[View], pools: list[Candidates], cfg: SignalConfig
     best = int(np.average(costs, axis=0, weights=weights).argmin())
     if best in (0, len(FOCAL_FACTORS) - 1):
         lo, hi = FOCAL_FACTORS[[0, -1]]
-        why = f"the best fit lies at the end of the range searched, {lo:.1f} to {hi:.1f}"
+        why = (
+            f"the best fit lies at the end of the range searched, {lo:.1f} to {hi:.1f} ({CRITICAL})"
+        )
         return FocalEstimate(None, len(costs), why=why)
     factor, score = _most_support(pairs, float(FOCAL_FACTORS[best]))
     off = max(_support(pairs, factor * FOCAL_OFF), _support(pairs, factor / FOCAL_OFF))
@@ -375,8 +384,7 @@ def estimate_focal(views: list[View], pools: list[Candidates], cfg: SignalConfig
         why = (
             f"their relative poses explain {score} matches at {factor:.2f} x max(width, "
             f"height) and {off} at {FOCAL_OFF:g} times or 1/{FOCAL_OFF:g} of that ({FOCAL_PEAK:g} "
-            "times as many needed at the estimate; views whose optical axes meet, as on a "
-            "ring around an object, leave it undetermined)"
+            f"times as many needed at the estimate; {CRITICAL})"
         )
         return FocalEstimate(None, len(costs), (score, off), why)
     return FocalEstimate(factor, len(costs), (score, off))

@@ -9,7 +9,7 @@ length is a guess (photographs without EXIF) get the focal length estimated from
 images (`bench.frontend.geometry.estimate_focal`) before the signals read the geometry.
 `compute` is this stage for any views (`bench select` calls it on a folder of
 photographs, with the signals its policy reads); `front_end` caches it for a render
-entry or dataset.
+entry or dataset; `subset` is the front end of some of its views alone (a dataset's bag).
 
 Cached (npz beside the render cache) by the render entry, the geometry granted, the
 detector and signal settings (and a learned detector's package versions) and the code
@@ -39,6 +39,10 @@ from bench.frontend.signals import SIGNALS, TIMED, Signals, compute_signals
 from bench.frontend.views import View, load_views, source_key
 
 _CAND = [f.name for f in fields(Candidates)]
+VIEW_ALONE = ("repeatability_redetect",)
+"""The costly signal that reads one view alone (four perturbed re-detections of it):
+`subset` takes the whole front end's (`compute_signals` computes the others cheaply, or,
+as ambiguity, parallax and epipolar, from the other views)."""
 
 
 @dataclass
@@ -108,6 +112,27 @@ def front_end(
             np.savez(tmp, **arrays)
     except OSError as e:
         raise BenchError(f"cannot write the front-end cache {path}: {e.strerror}") from e
+    return FrontEnd(views, pools, sigs, seconds, cached=False)
+
+
+def subset(full: FrontEnd, keep: tuple[int, ...], det: DetectorConfig, sig: SignalConfig):
+    """The front end of the views `keep` of `full` alone: their candidates and the signals
+    that read a view alone (`VIEW_ALONE`) as `full` holds them, the others computed on
+    these views alone as `compute` computes them (on each view downscaled to
+    `det.max_image_size`); their seconds are `full`'s share per view of detection and the
+    view-alone signals, and their own of the others."""
+    views = [full.views[i] for i in keep]
+    work = [v.scale_to(det.max_image_size) for v in views]
+    pools = [full.pools[i] for i in keep]
+    scaled = [c.scaled(sx, sy) for c, (_, sx, sy) in zip(pools, work)]
+    wanted = tuple(s for s in SIGNALS if s not in VIEW_ALONE)
+    sigs, seconds = compute_signals([v for v, _, _ in work], scaled, det, sig, wanted)
+    sigs = [
+        replace(g, **{s: getattr(full.signals[i], s) for s in VIEW_ALONE})
+        for g, i in zip(sigs, keep)
+    ]
+    share = len(keep) / len(full.views)
+    seconds |= {k: full.seconds[k] * share for k in ("detect", *VIEW_ALONE)}
     return FrontEnd(views, pools, sigs, seconds, cached=False)
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from bench.backend.equal_count import EQUAL, equal_selection, peer_counts
 from bench.backend.matching import matcher
+from bench.backend.peers import COLMAP_SIFT
 from bench.frontend.policies import PolicyInput
 from bench.frontend.views import Source
 from bench.harness.evaluate import selection_shared
@@ -24,7 +25,8 @@ def store_equal(scene, unit, jobs, cfg, ws, record) -> None:
     fe = next(iter(scene.fronts.values()))
     names, cams = [v.name for v in fe.views], [v.camera for v in fe.views]
     peer = EQUAL[unit.method][1]
-    counts = peer_counts(Source.of(scene.entry).images, names, cams, peer, unit.budget)
+    images, sift = Source.of(scene.entry).images, ws.renders / COLMAP_SIFT
+    counts = peer_counts(images, names, cams, peer, unit.budget, sift)
 
     def select(fe, truth, unit, cfg):
         inputs = [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]

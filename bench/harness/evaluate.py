@@ -26,6 +26,7 @@ from bench.evaluation.truth import scene_truth
 from bench.frontend.colmap_model import read_model
 from bench.frontend.signals import seconds_of
 from bench.frontend.views import Source, source_key
+from bench.harness.bags import BAG
 from bench.harness.config import RunConfig
 from bench.harness.predict import (
     LoadedScene,
@@ -128,14 +129,15 @@ def selection_shared(scene: LoadedScene, unit: Unit, record: dict, grant: str, f
 
 
 def identities(entry: Path, unit: Unit, jobs: list[Job], cfg: RunConfig) -> list[dict]:
-    """For each job, the columns that say which run its row is and which code and settings
-    computed it (what they share, computed once for the unit)."""
+    """For each job, the columns that say which run its row is (a dataset's bag among them,
+    `Unit.bag`) and which code and settings computed it (what they share, computed once
+    for the unit)."""
     shared = {
         "render_key": source_key(entry),
-        "views": len(read_model(Source.of(entry).model)),
+        "views": len(unit.bag.split()) or len(read_model(Source.of(entry).model)),
         "prediction_hash": prediction_hash(cfg, unit.method),
         "evaluation_hash": evaluation_hash(),
-    }
+    } | ({BAG: unit.bag} if unit.bag else {})
     return [
         {
             "scene": unit.scene,

@@ -10,8 +10,8 @@ process: with N local workers, N scenes side by side, each in a process of its o
 variant the GPU, and the developing step of one scene runs while another is traced).
 Each worker process holds one thread per library (`one_thread_per_library`). Units are
 submitted scene by scene, the costliest of each scene first (`largest_first`). A worker
-holds one scene at a time (`_scene`; a dataset's bag is a scene of its own,
-`bench.harness.bags`, its rows tagged with the bag). Rows come
+holds one scene at a time (`_scene`; a dataset's bag, `Unit.bag`, is a scene of its own,
+`bench.harness.bags`). Rows come
 back to the main process, which alone writes `runs.csv`. A method that fails (its policy
 raises or breaks the contract: `PolicyFailed`) is a value, in process as on a worker: the
 unit's rows are recorded as failed, saying what and where, and the grid goes on. A unit
@@ -35,7 +35,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from bench import BenchError
@@ -83,17 +83,6 @@ class Plan:
 
     entries: dict[tuple[str, int], Path]
     work: dict[Unit, Work]
-    bags: dict[tuple[str, int], tuple[int, ...]] = field(default_factory=dict)
-    """The views of a dataset's bag per (scene, seed) (`bench.harness.bags`); a group
-    without one reads every view of its entry."""
-
-    def tagged(self, unit: Unit, rows: list[dict]) -> list[dict]:
-        """A bag's rows with its identity (`bags.BAG`) and size (`views`)."""
-        bag = self.bags.get(unit.group)
-        if bag is None:
-            return rows
-        tag = {bags.BAG: bags.bag_names(str(self.entries[unit.group]), bag), "views": len(bag)}
-        return [r | tag for r in rows]
 
     @property
     def budgets(self) -> tuple[int, ...]:
@@ -124,15 +113,15 @@ def _front_ends(entry: Path, cfg: RunConfig, renders: Path, grants) -> dict[str,
     }
 
 
-def _scene(entry: Path, cfg: RunConfig, renders: Path, grants, bag=None) -> LoadedScene:
+def _scene(entry: Path, cfg: RunConfig, renders: Path, grants, bag: str = "") -> LoadedScene:
     key = (str(entry), repr(cfg), tuple(grants), bag)
     if _HELD.get("key") != key:
         _HELD.clear()  # let the previous scene go before loading the next
         fronts = _front_ends(entry, cfg, renders, grants)
-        if bag is not None and len(bag) < len(next(iter(fronts.values())).views):
+        if len(bag.split()) not in (0, len(next(iter(fronts.values())).views)):
             # a bag's views alone (`bench.harness.bags`); a bag of every view is the entry
             fronts = bags.bag_fronts(fronts, bag, cfg.detector, cfg.signals)
-            truth = bags.bag_truth(entry, fronts, bag)
+            truth = bags.bag_truth(entry, fronts)
         else:  # the evaluation side may read the poses: the rig's front end holds them
             posed = fronts[RIG].views if RIG in fronts else load_views(entry)
             cams, names = [v.camera for v in posed], [v.name for v in posed]
@@ -172,9 +161,8 @@ def compute_unit(
 
 def unit_task(unit: Unit, plan: Plan, cfg: RunConfig, ws: Workspace, *_after) -> list[dict]:
     """The rows of one unit of a plan (`_after`: what it waits for)."""
-    bag = plan.bags.get(unit.group)
-    scene = _scene(plan.entries[unit.group], cfg, ws.renders, plan.grants, bag)
-    return plan.tagged(unit, compute_unit(scene, unit, plan.work[unit], cfg, ws))
+    scene = _scene(plan.entries[unit.group], cfg, ws.renders, plan.grants, unit.bag)
+    return compute_unit(scene, unit, plan.work[unit], cfg, ws)
 
 
 def failed_rows(entry: Path, unit: Unit, jobs, cfg: RunConfig, why: str) -> list[dict]:
@@ -383,7 +371,7 @@ def _on_dask(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, on_sce
             if exc is not None:
                 why = f"failed on a worker, retried once: {type(exc).__name__}: {exc}"
                 failed = failed_rows(plan.entries[unit.group], unit, plan.work[unit].jobs, cfg, why)
-                yield plan.tagged(unit, failed)
+                yield failed
             else:
                 yield _result(future)
     finally:

@@ -20,7 +20,7 @@ import json
 import os
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, astuple, dataclass, field
 from functools import partial
 from pathlib import Path
 
@@ -35,7 +35,7 @@ from bench.files import entry_problem
 from bench.frontend import plugins
 from bench.frontend.policies import check_methods, learned_weights
 from bench.frontend.views import source_key
-from bench.harness.bags import BAG, bag_names, dataset_bags
+from bench.harness.bags import BAG, dataset_bags
 from bench.harness.config import RunConfig
 from bench.harness.evaluate import evaluation_hash
 from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
@@ -96,7 +96,7 @@ class BenchConfig:
     run: RunConfig = field(default_factory=RunConfig)
     datasets: tuple[str, ...] = ()
     """Dataset folders (`bench run --dataset`) instead of rendered scenes: each is one
-    scene, named by its folder; its seeds are its bags (`bag_size`)."""
+    scene, named by its folder; its seeds number its bags (`bag_size`)."""
     bag_size: int = 0
     """The images of a dataset's bag (`bench.harness.bags`); 0: the whole dataset, seed 0.
     A dataset's seeds are its bags' numbers, up to `max(seeds) + 1` bags."""
@@ -163,9 +163,9 @@ class BenchConfig:
         """The folder of a dataset scene (None: a rendered scene)."""
         return next((Path(d) for d in self.datasets if Path(d).name == scene), None)
 
-    def bags(self, scene: str) -> dict[int, tuple[int, ...]]:
-        """The bags of a dataset scene by seed (`bench.harness.bags`; none: a rendered scene,
-        or a dataset scored whole)."""
+    def bags(self, scene: str) -> dict[int, str]:
+        """The bags of a dataset scene by seed (`Unit.bag`, `bench.harness.bags`; none: a
+        rendered scene, or a dataset scored whole)."""
         folder = self.dataset(scene)
         if folder is None or not self.bag_size:
             return {}
@@ -179,9 +179,10 @@ class BenchConfig:
 
     def units(self) -> list[Unit]:
         """Every unit of the grid that has a job; a whole-pool method (`all`, `colmap`)
-        is one unit per scene and seed, with budget 0."""
+        is one unit per scene and seed (of a bagged dataset, per bag), with budget 0."""
+        bags = {sc: self.bags(sc) for sc in self.scenes}
         return [
-            Unit(sc, sd, m, b)
+            Unit(sc, sd, m, b, bags[sc].get(sd, ""))
             for sc in self.scenes
             for sd in self.seeds_of(sc)
             for m in self.methods
@@ -293,7 +294,6 @@ def _current_rows(
                 "computed; computing them again"
             )
         stale |= changed
-        stale |= _other_bag(cfg, df, scene) & ~stale
     for scene in set(df["scene"]) & set(cfg.scenes) - {Path(d).name for d in cfg.datasets}:
         rows = ~stale & (df["scene"] == scene)
         tasked = rows & df["task"].isin(RUNNERS)  # a row of each task against its own rig
@@ -319,21 +319,15 @@ def _current_rows(
     return df, rescore
 
 
-def _other_bag(cfg: BenchConfig, df: pd.DataFrame, scene: str) -> pd.Series:
-    """The rows of a dataset scene whose bag is not the one its seed draws now (another
-    `--bag-size`, or the whole dataset): computed again, said in one line."""
-    folder, bags = cfg.dataset(scene), cfg.bags(scene)
-    want = {sd: bag_names(str(folder), b) for sd, b in bags.items()}
-    have = df[BAG] if BAG in df else pd.Series(pd.NA, index=df.index)
-    expected = df["seed"].map(want)
-    other = (df["scene"] == scene) & (
-        have.astype(object).fillna("") != expected.astype(object).fillna("")
-    )
-    if other.any():
-        log(
-            f"{int(other.sum())} row(s) of {scene} were computed on other bags; computing them again"
-        )
-    return other
+def _keys(frame: pd.DataFrame) -> set[tuple]:
+    """The rows' keys as a unit's job is keyed (`_job_key`): `KEY` with the unit's bag."""
+    bag = frame[BAG].astype(object).fillna("") if BAG in frame else pd.Series("", frame.index)
+    cols = [*(frame[k] for k in KEY[:4]), bag, *(frame[k] for k in KEY[4:])]
+    return set(zip(*cols))
+
+
+def _job_key(unit: Unit, job: Job) -> tuple:
+    return (*astuple(unit), *job)
 
 
 def _run_in(
@@ -346,14 +340,18 @@ def _run_in(
     }
     check_results_dir(ws.results, cfg.run.as_dict(), options.overwrite, RunConfig().as_dict())
     df, rescore = _current_rows(cfg, ws, options)
-    keys = lambda frame: set(map(tuple, frame[list(KEY)].itertuples(index=False)))  # noqa: E731
-    done, again = keys(df[~rescore]), keys(df[rescore])
-    work = {}
+    done, again = _keys(df[~rescore]), _keys(df[rescore])
+    work, bag_of = {}, {}
     for unit in cfg.units():
-        missing = [j for j in cfg.jobs(unit.method) if (*asdict(unit).values(), *j) not in done]
+        missing = [j for j in cfg.jobs(unit.method) if _job_key(unit, j) not in done]
         if missing:
-            redo = all((*asdict(unit).values(), *j) in again for j in missing)
+            redo = all(_job_key(unit, j) in again for j in missing)
             work[unit] = Work(tuple(missing), rescore=redo)
+        bag_of |= {(unit.scene, unit.seed, unit.method, unit.budget, *j): unit.bag for j in missing}
+    other = {k for k in done | again if bag_of.get((*k[:4], *k[5:]), k[4]) != k[4]}
+    if other:
+        log(f"{len(other)} row(s) were computed on other bags; computing them again")
+    done = {(*k[:4], *k[5:]) for k in done - other}  # as `runs.csv` keys its rows
     n_rows = sum(len(w.jobs) for w in work.values())
     if not cfg.units():
         only = [f"the {', '.join(r.kinds)} methods only {t}" for t, r in RUNNERS.items() if r.kinds]
@@ -376,8 +374,7 @@ def _run_in(
     wall = {"render": time.perf_counter()}
     entries = _rendered(cfg, ws, groups, options.cluster, stage_s)
     wall["render"] = time.perf_counter() - wall["render"]
-    bagged = {(sc, sd): b for sc in cfg.scenes for sd, b in cfg.bags(sc).items()}
-    plan = Plan(entries, work, {g: b for g, b in bagged.items() if g in entries})
+    plan = Plan(entries, work)
     t_runs = time.perf_counter()
     try:
         with models_replaced(ws.results, options.overwrite) as state:
@@ -475,7 +472,7 @@ def _cluster_record(cluster: Cluster) -> dict:
 
 def in_grid(cfg: BenchConfig, rows: pd.DataFrame) -> pd.DataFrame:
     """The rows of `cfg`'s grid (a results folder may hold more)."""
-    units = {tuple(asdict(u).values()) for u in cfg.units()}
+    units = {(u.scene, u.seed, u.method, u.budget) for u in cfg.units()}
     keep = [
         (sc, sd, p, b) in units and t in cfg.tasks and pr in cfg.protocols_of(t)
         for sc, sd, p, b, t, pr in rows[list(KEY)].itertuples(index=False)

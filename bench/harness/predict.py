@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.backend.matching import PairMatches
-from bench.backend.peers import run_peer
+from bench.backend.peers import COLMAP_SIFT, peer_extraction, run_peer
 from bench.codehash import code_hash
 from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.evaluation.truth import SceneTruth
@@ -262,7 +262,9 @@ def store_own_pipeline(scene, unit, jobs, cfg, ws, record) -> None:
     names, cams = [v.name for v in fe.views], [v.camera for v in fe.views]
     image_dir = Source.of(scene.entry).images
     mapped = list(dict.fromkeys(j.protocol for j in jobs if RUNNERS[j.task].maps))
-    run = run_peer(image_dir, names, cams, unit.method, unit.budget, cfg.backend, mapped)
+    sift = ws.renders / COLMAP_SIFT
+    extracted = peer_extraction(image_dir, names, cams, unit.method, unit.budget, sift)
+    run = run_peer(image_dir, names, cams, extracted, cfg.backend, mapped)
     record["names"] = names
     record["peer"] = {
         "tentative": run.tentative,

@@ -1,0 +1,81 @@
+"""Stock COLMAP's extraction done once per image (`bench.backend.peers.extract`): every
+peer database built from it is the one COLMAP's own extractor builds."""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+import pytest
+
+from bench.backend import peers
+from bench.backend.peers import extract, write_extracted
+from bench.backend.reconstruction import quiet_colmap, write_images
+from bench.frontend.views import Source, load_views
+
+
+def _database(path: Path, images: Path, names, cams, extracted=None, max_features=0) -> dict:
+    """What a database holds after extraction: stock (`extracted` None) or built from
+    `extract`; then matched exhaustively as the peers match."""
+    db = pycolmap.Database.open(str(path))
+    write_images(db, cams, names)
+    if extracted is not None:
+        write_extracted(db, cams, extracted)
+    db.close()
+    if extracted is None:
+        options = pycolmap.FeatureExtractionOptions()
+        options.num_threads = 1
+        if max_features:
+            options.sift.max_num_features = max_features
+        with quiet_colmap():
+            pycolmap.extract_features(
+                path, images, image_names=names, extraction_options=options,
+                device=pycolmap.Device.cpu,
+            )  # fmt: skip
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = 1
+    with quiet_colmap():
+        pycolmap.match_exhaustive(path, matching_options=matching, device=pycolmap.Device.cpu)
+    db = pycolmap.Database.open(str(path))
+    try:
+        return {
+            "rigs": [str(r.todict()) for r in db.read_all_rigs()],
+            "cameras": [str(c.todict()) for c in db.read_all_cameras()],
+            "keypoints": [db.read_keypoints(k + 1) for k in range(len(names))],
+            "descriptors": [db.read_descriptors(k + 1).data for k in range(len(names))],
+            "matches": (db.num_matches(), db.num_inlier_matches()),
+        }
+    finally:
+        db.close()
+
+
+@pytest.mark.parametrize("max_features", [0, 64])
+def test_a_database_built_from_the_cached_extraction_is_colmaps_own(
+    medium_entry, tmp_path, monkeypatch, max_features
+):
+    entry = medium_entry("table")
+    images, views = Source.of(entry).images, load_views(entry)
+    names, cams = [v.name for v in views], [v.camera for v in views]
+    cache = tmp_path / "sift"
+    ours = extract(images, names, cams, max_features, cache)
+    assert len(list(cache.iterdir())) == len(names) and all(e.seconds > 0 for e in ours)
+    work = Path(tempfile.mkdtemp(dir=tmp_path))
+    stock = _database(work / "stock.db", images, names, cams, max_features=max_features)
+    built = _database(work / "built.db", images, names, cams, ours)
+    assert built["rigs"] == stock["rigs"] and built["cameras"] == stock["cameras"]
+    for key in ("keypoints", "descriptors"):
+        for a, b in zip(built[key], stock[key]):
+            np.testing.assert_array_equal(a, b)
+    assert built["matches"] == stock["matches"] and stock["matches"][1] > 0
+
+    def never(*args):
+        raise AssertionError("extracted again")
+
+    monkeypatch.setattr(peers, "_extract_now", never)  # a bag of some images: all cached
+    bag = [2, 0, 3]
+    again = extract(images, [names[k] for k in bag], [cams[k] for k in bag], max_features, cache)
+    for e, k in zip(again, bag):
+        np.testing.assert_array_equal(e.keypoints, ours[k].keypoints)
+        assert e.seconds == ours[k].seconds  # the seconds measured when it was computed
