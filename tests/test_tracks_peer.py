@@ -8,13 +8,13 @@ import pandas as pd
 import pytest
 
 from bench.backend.matching import BackendConfig
-from bench.backend.peers import longest_tracks, run_peer
+from bench.backend.peers import CAPS, TRACKS, longest_tracks, peer_extraction, run_peer
 from bench.cli import main
 from bench.evaluation.export import export_dataset
 from bench.frontend.views import load_views
 from bench.harness.grid import BenchConfig, default_methods
 from bench.harness.methods import runner
-from bench.vocabulary import VIEWS, Job, Vocabulary
+from bench.vocabulary import NO_PROTOCOL, VIEWS, Job, Vocabulary
 from tests.test_policies import _dataset
 
 PEER = "colmap-tracks-b"
@@ -25,7 +25,9 @@ def _run(folder, budget=BUDGET, peer=PEER, protocols=()):
     views = load_views(folder)
     names, cams = [v.name for v in views], [v.camera for v in views]
     images = folder / "images" if (folder / "images").is_dir() else folder
-    return run_peer(images, names, cams, peer, budget, BackendConfig(), list(protocols))
+    extracted = peer_extraction(images, names, cams, peer, budget)
+    keep = budget if CAPS[peer] == TRACKS else 0
+    return run_peer(images, names, cams, extracted, BackendConfig(), list(protocols), keep)
 
 
 def test_the_longest_tracks_are_kept_ties_in_colmaps_order():
@@ -62,7 +64,7 @@ def test_it_keeps_exactly_b_per_view_of_a_4b_first_pass_and_sees_no_poses(rig):
 def test_it_is_in_the_default_grid_for_sfm_and_pairs_at_every_budget():
     grid = BenchConfig(tasks=("tri", "sfm", "pairs"))
     assert PEER in default_methods() and Vocabulary.current().sees(PEER) == VIEWS
-    assert grid.jobs(PEER) == [Job(t, p) for t in ("sfm", "pairs") for p in grid.protocols]
+    assert grid.jobs(PEER) == [*(Job("sfm", p) for p in grid.protocols), Job("pairs", NO_PROTOCOL)]
     budgets = {u.budget for u in grid.units() if u.method == PEER}
     assert budgets == set(grid.budgets) == {128, 256, 512}
     assert runner(PEER).read is not None and not runner(PEER).photos

@@ -103,16 +103,16 @@ def hard_cap(keypoints: np.ndarray, budget: int) -> np.ndarray:
     return np.sort(order[:budget])
 
 
-def _cap_database(db_path: Path, names: list[str], budget: int, choose=None) -> None:
-    """Keep exactly min(budget, N) keypoints (and their descriptors) of every image: the
-    `hard_cap`, or `choose(view, keypoints)`'s indices (ascending)."""
+def _keep_in_database(db_path: Path, names: list[str], choose) -> None:
+    """Keep of every image only the keypoints (and descriptors) `choose(view, keypoints)`
+    names (ascending indices)."""
     db = pycolmap.Database.open(str(db_path))
     try:
         ids = {img.name: img.image_id for img in db.read_all_images()}
         kept = {}
         for v, name in enumerate(names):
             kps, desc = db.read_keypoints(ids[name]), db.read_descriptors(ids[name])
-            keep = hard_cap(kps, budget) if choose is None else choose(v, kps)
+            keep = choose(v, kps)
             kept[ids[name]] = kps[keep], pycolmap.FeatureDescriptors(desc.type, desc.data[keep])
         db.clear_keypoints()
         db.clear_descriptors()
@@ -233,9 +233,10 @@ def peer_extraction(
     the peer's SIFT limit, capped as its `CAPS` says (`hard_cap`)."""
     cap = CAPS[peer]
     extracted = extract(image_dir, names, cams, budget if cap == SOFT else 0, cache_dir)
-    if cap != HARD:
+    if cap not in (HARD, TRACKS):
         return extracted
-    kept = [hard_cap(e.keypoints, budget) for e in extracted]
+    keep = budget if cap == HARD else TrackFirstConfig().first_pass * budget
+    kept = [hard_cap(e.keypoints, keep) for e in extracted]
     return [Extracted(e.keypoints[k], e.descriptors[k], e.seconds) for e, k in zip(extracted, kept)]
 
 
@@ -265,7 +266,6 @@ def track_cap(db_path: Path, names: list[str], budget: int, matching, verificati
     keypoints, `track-first`'s multiple of B) matched and verified by COLMAP, then in each
     view the `budget` keypoints of the longest verified tracks; the first pass's matches
     are cleared for the final matching."""
-    _cap_database(db_path, names, TrackFirstConfig().first_pass * budget)
     pycolmap.match_exhaustive(
         db_path,
         matching_options=matching,
@@ -289,7 +289,7 @@ def track_cap(db_path: Path, names: list[str], budget: int, matching, verificati
     finally:
         db.close()
     spans = track_views(sizes, pairs)
-    _cap_database(db_path, names, budget, lambda v, _: longest_tracks(spans[v], budget))
+    _keep_in_database(db_path, names, lambda v, _: longest_tracks(spans[v], budget))
 
 
 def verified_pairs(
@@ -320,6 +320,7 @@ def run_peer(
     extracted: list[Extracted],
     cfg: BackendConfig,
     protocols: list[str],
+    keep_tracks: int = 0,
 ) -> PeerRun:
     """Match the peer's extraction of the views (`peer_extraction`) once with stock COLMAP,
     estimate each verified pair's relative pose, then map under each track protocol (see
@@ -341,8 +342,8 @@ def run_peer(
         detect_s = time.perf_counter() - t + sum(e.seconds for e in extracted)
         with quiet_colmap():
             t = time.perf_counter()
-            if cap == TRACKS:
-                track_cap(db_path, names, budget, matching, verification)
+            if keep_tracks:
+                track_cap(db_path, names, keep_tracks, matching, verification)
             select_s = time.perf_counter() - t
             t = time.perf_counter()
             pycolmap.match_exhaustive(
@@ -364,7 +365,7 @@ def run_peer(
             db.close()
         recs = {pr: map_database(db_path, image_dir, cfg, pr) for pr in protocols}
         seconds = {"detect": detect_s, "match": match_s}
-        if cap == TRACKS:
+        if keep_tracks:
             seconds["select"] = select_s
         return PeerRun(recs, keypoints, tentative, verified, seconds, pairs, pose_s)
     finally:

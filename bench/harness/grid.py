@@ -484,6 +484,7 @@ def _computed(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, stage
     """The rows of each unit as it finishes, with progress bars; the stage seconds added
     to `stage_s`."""
     rows = sum(len(w.jobs) for w in plan.work.values())
+    bagged = {u.group for u in plan.work if u.bag}
     with (
         progress("frontend", len(plan.entries), "scene") as fbar,
         progress("runs", rows, "rows") as bar,
@@ -492,7 +493,7 @@ def _computed(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, stage
         def scene_ready(group, info):
             scene, seed = group
             stage_s["frontend"] += info["seconds"]
-            fbar.set_postfix_str(f"{scene} {'bag' if group in plan.bags else 'seed'} {seed}")
+            fbar.set_postfix_str(f"{scene} {'bag' if group in bagged else 'seed'} {seed}")
             fbar.update()
             if bar.n == 0:  # the time left counts from the first front end, not before it
                 bar.reset(total=rows)

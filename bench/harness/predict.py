@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.backend.matching import PairMatches
-from bench.backend.peers import COLMAP_SIFT, peer_extraction, run_peer
+from bench.backend.peers import CAPS, COLMAP_SIFT, TRACKS, peer_extraction, run_peer
 from bench.codehash import code_hash
 from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.evaluation.truth import SceneTruth
@@ -264,7 +264,8 @@ def store_own_pipeline(scene, unit, jobs, cfg, ws, record) -> None:
     mapped = list(dict.fromkeys(j.protocol for j in jobs if RUNNERS[j.task].maps))
     sift = ws.renders / COLMAP_SIFT
     extracted = peer_extraction(image_dir, names, cams, unit.method, unit.budget, sift)
-    run = run_peer(image_dir, names, cams, extracted, cfg.backend, mapped)
+    keep_tracks = unit.budget if CAPS[unit.method] == TRACKS else 0
+    run = run_peer(image_dir, names, cams, extracted, cfg.backend, mapped, keep_tracks)
     record["names"] = names
     record["peer"] = {
         "tentative": run.tentative,
