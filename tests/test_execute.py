@@ -72,7 +72,7 @@ def test_a_unit_failing_on_a_worker_is_retried_once_then_recorded(
     assert calls.count("texture") == 2  # tried, then retried once
     runs = read_runs(tmp_path / "runs.csv")
     failed = runs[runs["method"] == "texture"]
-    assert len(failed) == 6 and (failed["status"] == "failed").all()
+    assert len(failed) == 5 and (failed["status"] == "failed").all()
     assert failed["failure"].str.contains("retried once: RuntimeError: worker lost").all()
     assert (runs.loc[runs["method"] != "texture", "status"] == "ok").any()
 

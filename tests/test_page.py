@@ -51,8 +51,8 @@ def test_the_page_shows_each_interval_and_no_interval_where_a_table_has_none(tmp
         }
     ).to_csv(tmp_path / "table1.csv", index=False)
     page = results_page(tmp_path)
-    assert "| texture | 256 | 5 | 0.5 [0.25, 0.75] |" in page  # the key, as --methods takes
-    assert "| random | 256 | 1 | 0.125 |" in page  # one run: the mean alone
+    assert "| texture | 256 | 5 | 0.50 [0.25, 0.75] |" in page  # the key, as --methods takes
+    assert "| random | 256 | 1 | 0.12 |" in page  # one run: the mean alone; one format a column
     assert "Texture-only" not in page
     assert "figure3.png" not in page  # no figure drawn, none shown
 
@@ -194,10 +194,27 @@ def test_a_dataset_pages_transfer_section_reads_as_its_csv_and_leaves_out_what_d
     pd.DataFrame([row]).to_csv(tmp_path / "transfer.csv", index=False)
     page = results_page(tmp_path)
     section = page.split("## Transfer")[1]
-    assert "| d | 6 | True | sfm_maa | 256 | 3 | n/a | n/a | n/a |  | 0.9 |" in section
+    assert "| d | 6 | True | sfm_maa | 256 | 3 | n/a | n/a | n/a |  | 0.90 |" in section
     assert "- d, sfm_maa, B = 256, against the 6-view renders: no tau; the split-half" in section
     assert "`rel_rendered` and `rel_dataset` the split-half reliability" in section
     assert "## Table 2" not in page and "Paired: adaptive" not in page
     assert "render variant: none (nothing rendered)" in page
     assert "`oracle` is a reference selection made with the ground truth" in page
     assert "it is not a bound" in page
+
+
+def test_a_columns_numbers_share_one_format_that_tells_them_apart():
+    """Three significant figures mixed 0.03, 0.0333 and 0.243 in one column and printed
+    0.9995 as "1"."""
+    from bench.report.text import ci, column_format
+
+    fmt = column_format([0.03, 0.0333, 0.243, 0.9995])
+    assert [fmt(v) for v in (0.03, 0.0333, 0.243, 0.9995)] == [
+        "0.0300",
+        "0.0333",
+        "0.2430",
+        "0.9995",
+    ]
+    fmt = column_format([0.25, 0.5], [0.1, 0.75])
+    assert ci(0.5, 0.1, 0.75, fmt=fmt) == "0.50 [0.10, 0.75]" and fmt(math.nan) == "n/a"
+    assert column_format([3, 12, 20])(12) == "12"  # whole numbers stay whole

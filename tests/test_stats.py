@@ -273,7 +273,7 @@ def test_a_dataset_run_with_colmap_keeps_its_sfm_means_and_its_transfer_table(
     assert main(argv) == 0
     err = capsys.readouterr().err
     assert "no rendered results" not in err
-    assert "share no ranked budget" in err  # it was read: budget 64 is not in it
+    assert "share no budget (the datasets ran 64; the rendered results 128" in err  # it was read
     assert main(["plot", "--results", str(out), "--rendered", "nowhere"]) == 0
     missing = "no transfer.csv: no rendered results to compare with (nowhere/runs.csv is missing"
     assert missing in capsys.readouterr().err

@@ -18,7 +18,7 @@ from bench.binding import read_vocabulary
 from bench.failures import outcomes
 from bench.report import nbv
 from bench.report.power import min_units
-from bench.report.text import ci
+from bench.report.text import ci, column_format
 from bench.report.text import num as _num
 from bench.report.text import table as _table
 from bench.report.transfer import TRANSFER_TEXT, verdicts
@@ -90,10 +90,22 @@ def _text(x, missing: str = "n/a") -> str:
     return x if isinstance(x, str) else missing
 
 
-def _interval(row: pd.Series, col: str, lo: str = "", hi: str = "", note: str = "") -> str:
-    """`mean [lo, hi]`, or the mean and the table's note on why it has no interval."""
+def _interval(
+    row: pd.Series, col: str, lo: str = "", hi: str = "", note: str = "", fmt=_num
+) -> str:
+    """`mean [lo, hi]` in the column's format `fmt`, or the mean and the table's note on
+    why it has no interval."""
     why = row.get(note) if note else None
-    return ci(row.get(col), row.get(lo or f"{col}_lo"), row.get(hi or f"{col}_hi"), why)
+    return ci(row.get(col), row.get(lo or f"{col}_lo"), row.get(hi or f"{col}_hi"), why, fmt)
+
+
+def _format(frame: pd.DataFrame, cols, bounds=()):
+    """One format for the numbers of the columns `cols` of `frame`, and of its intervals'
+    `bounds` columns (`bench.report.text.column_format`)."""
+    values = [frame[c].to_numpy(object) for c in cols if c in frame]
+    return column_format(
+        np.concatenate(values) if values else [], *(frame[c] for c in bounds if c in frame)
+    )
 
 
 def _run_section(manifest: dict, runs: pd.DataFrame) -> list[str]:
@@ -157,10 +169,11 @@ def _table1_section(t1: pd.DataFrame, vocab: Vocabulary, title: str) -> list[str
         if rows.empty:
             continue
         header = ["method", "budget", "runs", *cols, "why an interval is missing"]
+        fmt = {c: _format(rows, [c], [f"{c}_lo", f"{c}_hi"]) for c in cols}
         body = {
             b: [
                 [str(r["method"]), _num(r["budget"]), _runs(r, vocab, task.name)]
-                + [_interval(r, c) for c in cols]
+                + [_interval(r, c, fmt=fmt[c]) for c in cols]
                 + [_why(r.get("note"), cols)]
                 for _, r in at.iterrows()
             ]
@@ -255,10 +268,14 @@ def _table2_section(t2: pd.DataFrame) -> list[str]:
     at = t2[t2["budget"] == HEADLINE_BUDGET] if (t2["budget"] == HEADLINE_BUDGET).any() else t2
     header = ["scene", "metric", HEADLINE_POLICY, "best baseline", "difference [95%]", "w/t/l"]
     header.append(f"runs ({HEADLINE_POLICY} / baseline / paired)")
+    mine = _format(at, [f"{HEADLINE_POLICY}_{m}" for m in metrics])
+    best = _format(at, [f"best_baseline_{m}" for m in metrics])
+    bounds = [f"diff_{m}{s}" for m in metrics for s in ("_lo", "_hi")]
+    diff = _format(at, [f"diff_{m}" for m in metrics], bounds)
     body = []
     for _, r in at.iterrows():
         for m in metrics:
-            best = r.get(
+            winner = r.get(
                 f"best_baseline_{m}_policy", r.get(f"best_baseline_{m.removesuffix('_pct')}_policy")
             )
             runs = [f"{HEADLINE_POLICY}_{m}_n", f"best_baseline_{m}_n", f"diff_{m}_n"]
@@ -266,9 +283,9 @@ def _table2_section(t2: pd.DataFrame) -> list[str]:
                 [
                     str(r["scene"]),
                     m,
-                    _num(r.get(f"{HEADLINE_POLICY}_{m}")),
-                    f"{_num(r.get(f'best_baseline_{m}'))} ({_text(best)})",
-                    _interval(r, f"diff_{m}", note=f"diff_{m}_note"),
+                    mine(r.get(f"{HEADLINE_POLICY}_{m}")),
+                    f"{best(r.get(f'best_baseline_{m}'))} ({_text(winner)})",
+                    _interval(r, f"diff_{m}", note=f"diff_{m}_note", fmt=diff),
                     _text(r.get(f"diff_{m}_wtl")),
                     " / ".join(_num(r.get(c)) for c in runs),
                 ]
@@ -297,13 +314,14 @@ def _paired_section(
     if rows.empty:
         return []
     header = ["method", "baseline", "metric", "n", "mean difference [95%]", "w/t/l"]
+    fmt = _format(rows, ["mean_diff"], ["lo", "hi"])
     body = [
         [
             str(r["method"]),
             str(r["baseline"]),
             str(r["metric"]),
             _num(r["n"]),
-            _interval(r, "mean_diff", "lo", "hi", "note"),
+            _interval(r, "mean_diff", "lo", "hi", "note", fmt),
             f"{_num(r['wins'])}/{_num(r['ties'])}/{_num(r['losses'])}",
         ]
         for _, r in rows.iterrows()
@@ -320,8 +338,9 @@ def _equal_section(equal: pd.DataFrame) -> list[str]:
         return []
     first = rows["metric"].iloc[0]
     head = rows[(rows["budget"] == HEADLINE_BUDGET) & (rows["metric"] == first)]
+    fmt = _format(rows, ["mean_diff"], ["lo", "hi"])
     said = "; ".join(
-        f"`{r['method']}` {_interval(r, 'mean_diff', 'lo', 'hi', 'note')} against "
+        f"`{r['method']}` {_interval(r, 'mean_diff', 'lo', 'hi', 'note', fmt)} against "
         f"`{r['peer']}` ({_num(r['method_kpv'])} and {_num(r['peer_kpv'])} keypoints per view)"
         for _, r in head.iterrows()
     )
@@ -341,7 +360,7 @@ def _equal_section(equal: pd.DataFrame) -> list[str]:
             str(r["metric"]),
             f"{_num(r['method_kpv'])} / {_num(r['peer_kpv'])}",
             _num(r["n"]),
-            _interval(r, "mean_diff", "lo", "hi", "note"),
+            _interval(r, "mean_diff", "lo", "hi", "note", fmt),
             f"{_num(r['wins'])}/{_num(r['ties'])}/{_num(r['losses'])}",
         ]
         for _, r in rows.iterrows()
@@ -354,7 +373,10 @@ def _transfer_section(transfer: pd.DataFrame) -> list[str]:
         return []
     shown = [c for c in transfer.columns if not c.startswith("top_")]
     text = set(TRANSFER_TEXT) | {c for c in shown if not is_numeric_dtype(transfer[c])}
-    body = [[_as_in_csv(v, c in text) for c, v in zip(shown, r)] for r in transfer[shown].values]
+    fmt = {c: _num if c in text else column_format(transfer[c]) for c in shown}
+    body = [
+        [_as_in_csv(v, c in text, fmt[c]) for c, v in zip(shown, r)] for r in transfer[shown].values
+    ]
     said = verdicts(transfer, _transfer_budget(transfer)) if "matched" in transfer else []
     out = ["## Transfer: the rendered ranking on each dataset", ""]
     out += [f"- {line}" for line in said] + ([""] if said else [])
@@ -362,13 +384,14 @@ def _transfer_section(transfer: pd.DataFrame) -> list[str]:
     return out + _table(shown, body) + [""]
 
 
-def _as_in_csv(value, text: bool) -> str:
-    """A transfer.csv value as the CSV has it: True/False, empty text, numbers as the page's."""
+def _as_in_csv(value, text: bool, fmt) -> str:
+    """A transfer.csv value as the CSV has it: True/False, empty text, numbers in their
+    column's format."""
     if isinstance(value, bool | np.bool_):
         return str(bool(value))
     if text:
         return "" if pd.isna(value) else str(value)
-    return _num(value)
+    return fmt(value)
 
 
 TRANSFER_COLUMNS = (
