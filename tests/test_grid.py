@@ -216,8 +216,8 @@ def test_rows_computed_by_other_code_are_computed_again(
     bench_run(dataclasses.replace(SMALL, scenes=("table",)), tmp_path / "r", renders_dir)
     assert len(calls) == 8  # every unit of the table scene, again
     runs = pd.read_csv(tmp_path / "r" / "runs.csv")
-    assert len(runs) == ROWS // 2  # one hash per method: its own code and settings
-    assert runs.groupby("method")["prediction_hash"].nunique().max() == 1
+    assert len(runs) == ROWS // 2  # one hash per method and task: their code and settings
+    assert runs.groupby(["method", "task"])["prediction_hash"].nunique().max() == 1
 
 
 def test_a_changed_scene_is_computed_again_and_no_other(

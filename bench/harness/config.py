@@ -75,6 +75,10 @@ QUICK_NBV = NbvConfig(between=1)
 """The nbv task of `--quick` runs: five candidates on an 11-view path."""
 
 
+PREDICTION = ("detector", "signals", "policy", "backend")
+"""The sections of the settings a unit's prediction reads: the front end's, the
+selection's and the back end's (the render settings decide the render entry, which a row
+records as its `render_key`)."""
 METHODS_SECTION = "methods"
 """The key of the methods' own settings in `RunConfig.as_dict` (and `config.json`)."""
 
@@ -101,6 +105,12 @@ class RunConfig:
         settings = asdict(self)
         del settings["policy"]["modules"], settings[METHODS_SECTION]
         return settings
+
+    def prediction(self, extra: tuple[str, ...] = ()) -> dict:
+        """The shared settings a task's predicted rows read: `PREDICTION` and `extra` (the
+        task's own sections, `bench.harness.tasks.TaskRunner.settings`)."""
+        shared = self.shared()
+        return {k: shared[k] for k in (*PREDICTION, *extra)}
 
     def own(self, method: str) -> dict:
         """A method's own settings, its defaults filled in ({} if it has none)."""

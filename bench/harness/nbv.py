@@ -390,6 +390,7 @@ register(
         kinds=(CHOOSER, VIEW_ORACLE),
         rig=lambda cfg: replace(cfg.render, views=cfg.nbv.path),
         default=False,
+        settings=("nbv",),
     )
 )
 implemented_by(
