@@ -97,9 +97,10 @@ def _alias_pairs(path: Path) -> tuple[tuple[str, str], ...]:
         return ()
 
 
-def accepted(new: str, path: Path = ALIASES) -> set[str]:
-    """`new` and every older hash aliased to it (through any chain of aliases)."""
-    pairs, out, todo = _alias_pairs(Path(path)), {new}, [new]
+def accepted(new: str, path: Path | None = None) -> set[str]:
+    """`new` and every older hash aliased to it (through any chain of aliases) in `path`
+    (default `ALIASES`)."""
+    pairs, out, todo = _alias_pairs(Path(path or ALIASES)), {new}, [new]
     while todo:
         h = todo.pop()
         for old, to in pairs:

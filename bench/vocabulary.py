@@ -119,8 +119,8 @@ class Metric:
     """Measured on the reconstructed points alone: a run whose task failed has none (rmse,
     median error)."""
     peers: bool = field(default=False, metadata=DISPLAY)
-    """Whether a stock-COLMAP peer's rows hold it (the peers' own metrics:
-    `bench.evaluation.metrics.pipeline_metrics`)."""
+    """Whether a stock-COLMAP peer's rows hold it (the metrics of a peer's own keypoints
+    and matches: `bench.harness.evaluate.own_pipeline_shared`)."""
     share_of: str = field(default="", metadata=DISPLAY)
     """The report's own: this metric is `share_of` as a percentage of the ground-truth
     method's (`GROUND_TRUTH`) in the same scene, seed, budget, task and protocol."""

@@ -428,3 +428,21 @@ def test_a_scenes_render_key_covers_its_own_generator_and_the_render_code_alone(
     )
     assert ("bench.scenes.generators", "facade") not in parts
     assert len({render_code_hash(s) for s in ("table", "facade", "corridor")}) == 3
+
+
+def test_a_render_entry_under_an_aliased_key_is_current(tmp_path, monkeypatch):
+    """A render entry under an older render key aliased to the current one is the scene's
+    entry (nothing is rendered again); without the alias the current key's name."""
+    from bench import codehash
+    from bench.render.config import RenderConfig
+    from bench.render.entry import entry_name, entry_names
+
+    cfg = RenderConfig(width=96, height=72, spp=4, max_depth=2, variant="scalar_rgb")
+    current = entry_name("table", 0, cfg, tmp_path)
+    assert entry_names("table", 0, cfg, tmp_path) == [current]
+    (tmp_path / "table-s0-0123456789ab").mkdir()
+    aliases = tmp_path / "aliases.json"
+    aliases.write_text(json.dumps([["0123456789ab", current.rpartition("-")[2]]]))
+    monkeypatch.setattr(codehash, "ALIASES", aliases)
+    assert entry_name("table", 0, cfg, tmp_path) == "table-s0-0123456789ab"
+    assert entry_names("table", 0, cfg, tmp_path) == [current, "table-s0-0123456789ab"]

@@ -94,6 +94,26 @@ def _cap_database(db_path: Path, names: list[str], budget: int) -> None:
         db.close()
 
 
+def extract(db_path: Path, image_dir: Path, names: list[str], peer: str, budget: int) -> None:
+    """The peer's extraction into its database (its images written): COLMAP's SIFT on
+    one thread (deterministic), held to `budget` as the peer's `CAPS` says."""
+    cap = CAPS[peer]
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.num_threads = 1
+    if cap == SOFT:
+        extraction.sift.max_num_features = budget
+    with quiet_colmap():
+        pycolmap.extract_features(
+            db_path,
+            image_dir,
+            image_names=names,
+            extraction_options=extraction,
+            device=pycolmap.Device.cpu,
+        )
+        if cap == HARD:
+            _cap_database(db_path, names, budget)
+
+
 def verified_pairs(
     db: pycolmap.Database,
     ids: list[int],
@@ -127,7 +147,6 @@ def run_peer(
     """Extract (and cap, as the peer's `CAPS` says) and match once with stock COLMAP,
     estimate each verified pair's relative pose, then map under each track protocol (see
     the module docstring)."""
-    cap = CAPS[peer]
     work = Path(tempfile.mkdtemp(prefix="bench-peer-"))
     db_path = work / "database.db"
     db = pycolmap.Database.open(str(db_path))
@@ -135,27 +154,15 @@ def run_peer(
         write_images(db, cams, names)
     finally:
         db.close()
-    extraction = pycolmap.FeatureExtractionOptions()
-    extraction.num_threads = 1
-    if cap == SOFT:
-        extraction.sift.max_num_features = budget
     matching = pycolmap.FeatureMatchingOptions()
     matching.num_threads = 1
     verification = pycolmap.TwoViewGeometryOptions()
     verification.ransac.random_seed = cfg.seed
     try:
         t = time.perf_counter()
+        extract(db_path, image_dir, names, peer, budget)
+        detect_s = time.perf_counter() - t
         with quiet_colmap():
-            pycolmap.extract_features(
-                db_path,
-                image_dir,
-                image_names=names,
-                extraction_options=extraction,
-                device=pycolmap.Device.cpu,
-            )
-            if cap == HARD:
-                _cap_database(db_path, names, budget)
-            detect_s = time.perf_counter() - t
             t = time.perf_counter()
             pycolmap.match_exhaustive(
                 db_path,

@@ -25,9 +25,10 @@ class NbvConfig:
     a view chooser adds views one at a time from the candidate poses of the planned path."""
 
     policy: str = "cross-view"
-    """The keypoint policy in every view, at the grid's budgets: the budgeted pose-free
+    """The keypoint policy in every view, at the grid's budgets: the per-view pose-free
     policy with the highest sfm mAA at 256 in the published sparse snapshot (cross-view,
-    0.27; results/published/table1.csv)."""
+    0.62; results/published/table1.csv; the multi-view track-first ranks above it there,
+    0.98)."""
     added: tuple[int, ...] = (1, 2, 4)
     """After how many added views the capture is scored (increasing, 1 to 8); the report's
     headline is the gain at 2."""

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench import MethodFailed
 from bench.backend.matching import PairMatches
 from bench.backend.peers import run_peer
 from bench.codehash import accepted, code_hash
@@ -44,7 +45,6 @@ from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.evaluation.truth import SceneTruth
 from bench.files import atomic_path, content_key, temp_dir_beside, write_text_atomic
 from bench.frontend import plugins
-from bench.frontend.policies import PolicyFailed
 from bench.frontend.stage import FrontEnd, compute
 from bench.frontend.views import Source
 from bench.harness import select_match
@@ -236,7 +236,7 @@ def _store_selection(scene, unit, jobs, cfg, ws, record, select) -> None:
             t = time.perf_counter()
             selections, rounds = select(fe, scene.truth, unit, cfg)
             select_s = time.perf_counter() - t
-        except PolicyFailed as e:
+        except MethodFailed as e:
             e.tasks = tuple(
                 dict.fromkeys(j.task for j in jobs if RUNNERS[j.task].spec.grant == grant)
             )
