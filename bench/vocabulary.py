@@ -115,6 +115,19 @@ PERCENT, FRACTION, DEGREES, AT_LEAST_0 = (0.0, 100.0), (0.0, 1.0), (0.0, 180.0),
 GRANTS = ("rig", "images")
 """What a task's selection may see of the views' geometry: the rig's poses, or the images
 and intrinsics only (`bench.frontend.geometry`)."""
+DISPLAY = {"display": True}
+"""The metadata of a declaration's display field: what the report shows, never what
+decides a row's values (`deciding`: what a row's cache key holds of a declaration)."""
+
+
+def deciding(declaration) -> dict:
+    """The fields of a declaration (`Method`, `Task`, `Metric`) that decide a row's values:
+    all but its display fields."""
+    return {
+        f.name: getattr(declaration, f.name)
+        for f in fields(declaration)
+        if not f.metadata.get("display")
+    }
 
 
 @dataclass(frozen=True)
@@ -126,9 +139,9 @@ class Metric:
     name: str
     range: tuple[float, float | None] = AT_LEAST_0
     """(low, high; None: no bound): a value outside it is refused (`bench.results`)."""
-    lower_better: bool = False
+    lower_better: bool = field(default=False, metadata=DISPLAY)
     """Its direction: the paired wins, the best baseline, the transfer's ranking."""
-    title: str = ""
+    title: str = field(default="", metadata=DISPLAY)
     """Its panel title in the figures (empty: its name)."""
     failure: float | None = None
     """What a run scores whose method failed (raised, broke its contract, lost its worker):
@@ -138,22 +151,22 @@ class Metric:
     of_model: bool = False
     """Measured on the reconstructed points alone: a run whose task failed has none (rmse,
     median error)."""
-    peers: bool = False
-    """Whether a stock-COLMAP peer's rows hold it (the peers' own metrics:
-    `bench.evaluation.metrics.pipeline_metrics`)."""
-    share_of: str = ""
+    peers: bool = field(default=False, metadata=DISPLAY)
+    """Whether a stock-COLMAP peer's rows hold it (the metrics of a peer's own keypoints
+    and matches: `bench.harness.evaluate.own_pipeline_shared`)."""
+    share_of: str = field(default="", metadata=DISPLAY)
     """The report's own: this metric is `share_of` as a percentage of the ground-truth
     method's (`GROUND_TRUTH`) in the same scene, seed, budget, task and protocol."""
-    doc: str = ""
+    doc: str = field(default="", metadata=DISPLAY)
 
 
 @dataclass(frozen=True)
 class Method:
-    """A row's `policy`: how it is shown and what it is for."""
+    """A row's `policy`: how it is shown and what it is for (display fields: `DISPLAY`)."""
 
     name: str
-    label: str
-    role: str
+    label: str = field(metadata=DISPLAY)
+    role: str = field(metadata=DISPLAY)
     whole_pool: bool = False
     """Runs once per scene and seed, as budget 0 (the whole pool, or COLMAP's default)."""
     reads: tuple[str, ...] = ()
@@ -170,7 +183,8 @@ class Method:
 
 @dataclass(frozen=True)
 class Task:
-    """A reconstruction task: what its selection may see and what its rows must hold."""
+    """A reconstruction task: what its selection may see and what its rows must hold
+    (display fields: `DISPLAY`)."""
 
     name: str
     grant: str
@@ -182,18 +196,18 @@ class Task:
     than the headline's as `<task>_<metric>`)."""
     peers: bool = False
     """Whether the stock-COLMAP peers run it (they have no known-pose mode)."""
-    doc: str = ""
-    headline: tuple[str, ...] = ()
+    doc: str = field(default="", metadata=DISPLAY)
+    headline: tuple[str, ...] = field(default=(), metadata=DISPLAY)
     """The metrics the report compares methods in: `paired.csv` and `table2.csv`, the
     figures and the page; its first is the one the results page shows paired and the one
     `transfer.csv` ranks by."""
-    summary: tuple[str, ...] = ()
+    summary: tuple[str, ...] = field(default=(), metadata=DISPLAY)
     """Its metrics in `table_scenes.csv` and, for a task the peers run, in the paired
     comparison with them (`paired_sfm.csv`); empty: the headline."""
-    drawn: tuple[str, ...] = ()
+    drawn: tuple[str, ...] = field(default=(), metadata=DISPLAY)
     """The metrics the figures draw (each under its `Metric.title`), in drawing order,
     before the headline metrics not among them."""
-    exclusion_reference: bool = False
+    exclusion_reference: bool = field(default=False, metadata=DISPLAY)
     """Whether a (scene, seed) that stock COLMAP with all its features (`REFERENCE_PEER`)
     does not map is left out of this task's means and paired differences (the task's
     rows hold `registered_views` and `maa`, `REFERENCE_MAPS`; the peers run it)."""

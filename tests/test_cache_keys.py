@@ -1,6 +1,8 @@
-"""Cache keys as narrow as what they protect: a docstring or comment changes no hash, an
-edit inside a stage's code changes that stage's hash alone, a method's rows depend on its
-own code and settings, a scene's render key on its own generator."""
+"""Cache keys as narrow as what they protect, by content: a rename, a move, a docstring
+or string, an annotation, a display label or an unused function changes no hash; an edit
+in one policy changes that policy's rows alone, an edit in the shared back end every row;
+a method's rows depend on its own code and settings, a scene's render key on its own
+generator."""
 
 from __future__ import annotations
 
@@ -13,10 +15,22 @@ import textwrap
 import pytest
 
 from bench import BenchError
-from bench.codehash import code_hash, covered, object_digest
+from bench.codehash import accepted, code_hash, covered, object_digest
 
-SHARED = '''
-"""Helpers of the synthetic stage."""
+REGISTRY = """
+POLICIES = {}
+
+
+def policy(name, label):
+    def register(fn):
+        POLICIES[name] = fn
+        return fn
+
+    return register
+"""
+
+BACKEND = '''
+"""The synthetic back end."""
 
 SCALE = 2  # the scale
 
@@ -26,8 +40,12 @@ def helper(x):
     return SCALE * x
 
 
+def match(x):
+    return helper(x) + 1
+
+
 def colmap_io(path):
-    """Not reached by the stage."""
+    """Not reached by any row."""
     return open(path).read()
 
 
@@ -35,46 +53,74 @@ def lazy(x):
     return x * 3
 '''
 
+POLICIES = '''
+"""Two synthetic policies."""
+
+from dataclasses import dataclass
+
+from ckpkg.registry import policy
+
+
+@dataclass(frozen=True)
+class Settings:
+    """A policy's settings."""
+
+    shift: int = 1
+    """How far it shifts."""
+
+
+@policy("a", "Policy A")
+def policy_a(x: int) -> int:
+    return _order(x) + Settings().shift
+
+
+@policy("b", "Policy B")
+def policy_b(x):
+    return _order(x) - 1
+
+
+def _order(x):
+    return x * 2
+'''
+
 STAGE = '''
-"""A synthetic stage."""
+"""The synthetic shared path."""
 
-from ckpkg import shared
-from ckpkg.shared import helper
+from ckpkg import backend
+from ckpkg.registry import POLICIES
 
 
-def run(x):
+def run(name, x):
     """Runs."""
-    return helper(x) + shared.SCALE + method_a(x) + late(x)
+    return backend.match(POLICIES[name](x)) + late(x)
 
 
 def late(x):
-    from ckpkg.shared import lazy
+    from ckpkg.backend import lazy
 
     return lazy(x)
-
-
-def method_a(x):
-    return x + 1
-
-
-def method_b(x):
-    return x - 1
 '''
+
+MODULES = {"registry": REGISTRY, "backend": BACKEND, "policies": POLICIES, "stage": STAGE}
 
 
 @pytest.fixture
 def pkg(tmp_path, monkeypatch):
-    """A package of two modules written to tmp_path and imported; `edit(module, old,
-    new)` rewrites one of its files (the imported modules are hashed from their files)."""
+    """The synthetic package written to tmp_path and imported; `edit(module, old, new)`
+    rewrites one of its files (the imported modules are hashed from their files), `rows()`
+    each policy's row key: the shared path's hash and the policy's own."""
     root = tmp_path / "ckpkg"
     root.mkdir()
     (root / "__init__.py").write_text("")
-    (root / "shared.py").write_text(SHARED)
-    (root / "stage.py").write_text(STAGE)
+    for name, text in MODULES.items():
+        (root / f"{name}.py").write_text(text)
     monkeypatch.syspath_prepend(str(tmp_path))
-    for name in ("ckpkg", "ckpkg.shared", "ckpkg.stage"):
+    names = ["ckpkg", *(f"ckpkg.{m}" for m in MODULES)]
+    for name in names:
         sys.modules.pop(name, None)
+    importlib.import_module("ckpkg.policies")
     stage = importlib.import_module("ckpkg.stage")
+    importlib.import_module("ckpkg.registry")
 
     def edit(module: str, old: str, new: str) -> None:
         path = root / f"{module}.py"
@@ -82,84 +128,162 @@ def pkg(tmp_path, monkeypatch):
         assert old in text
         path.write_text(text.replace(old, new))
 
-    yield stage, edit
-    for name in ("ckpkg", "ckpkg.shared", "ckpkg.stage"):
+    def rows() -> dict[str, tuple[str, str]]:
+        """Each policy's row key, the package imported anew (a process of the code now)."""
+        for name in names:
+            sys.modules.pop(name, None)
+        importlib.import_module("ckpkg.policies")
+        stage = importlib.import_module("ckpkg.stage")
+        registry = importlib.import_module("ckpkg.registry")
+        shared = code_hash([stage.run], packages=("ckpkg",))
+        own = {p: code_hash([fn], packages=("ckpkg",)) for p, fn in registry.POLICIES.items()}
+        return {p: (shared, h) for p, h in own.items()}
+
+    yield stage, edit, rows
+    for name in names:
         sys.modules.pop(name, None)
 
 
-def _hash(stage, cut=()):
-    return code_hash([stage.run], cut=cut, packages=("ckpkg",))
+MOVE_ORDER = [
+    ("policies", "\n\ndef _order(x):\n    return x * 2\n", "\n"),
+    (
+        "policies",
+        "from ckpkg.registry import policy",
+        "from ckpkg.backend import _order\nfrom ckpkg.registry import policy",
+    ),
+    ("backend", "\ndef lazy(x):", "\ndef _order(x):\n    return x * 2\n\n\ndef lazy(x):"),
+]
+
+
+@pytest.mark.parametrize(
+    "edits",
+    [
+        [("backend", "helper", "twice")],  # a rename: its definition and its uses
+        [("policies", "_order", "_sorted")],
+        [("policies", "policy_a", "select_a")],  # a policy's function renamed
+        [("backend", "SCALE", "FACTOR")],  # a constant renamed
+        MOVE_ORDER,  # a helper moved to another module
+        [("backend", '"""Doubles."""', '"""Twice its argument, a corrected docstring."""')],
+        [("policies", '"""How far it shifts."""', '"""How far, a field docstring."""')],
+        [("stage", "    return lazy(x)", '    "a string statement"\n    return lazy(x)')],
+        [("backend", "# the scale", "# the scale factor, a longer comment")],
+        [("stage", "def run(name, x):", "\n\ndef run(name, x):  # blank lines")],
+        [("policies", "def policy_a(x: int) -> int:", "def policy_a(x: float) -> float:")],
+        [("policies", '"Policy A"', '"Policy A, its display label"')],  # registration
+        [("backend", "def colmap_io(path):", "def colmap_io(path, mode='r'):")],  # unreached
+        [("backend", "\ndef lazy", "\ndef unused(x):\n    return 0\n\n\ndef lazy")],  # new
+    ],
+)
+def test_renames_moves_strings_and_unused_code_change_no_hash(pkg, edits):
+    stage, edit, rows = pkg
+    before = rows()
+    for module, old, new in edits:
+        edit(module, old, new)
+    assert rows() == before
 
 
 @pytest.mark.parametrize(
     "module, old, new",
     [
-        ("shared", '"""Doubles."""', '"""Twice its argument, a corrected docstring."""'),
-        ("shared", "# the scale", "# the scale factor, a longer comment"),
-        ("stage", '"""A synthetic stage."""', '"""A synthetic stage, documented anew."""'),
-        ("stage", "def run(x):", "\n\ndef run(x):  # a comment and blank lines"),
-        ("shared", "def colmap_io(path):", "def colmap_io(path, mode='r'):"),  # not reached
-        ("stage", "return x - 1", "return x - 2"),  # method_b: not reached
-        ("stage", "\ndef method_b", "\ndef method_c(x):\n    return 0\n\n\ndef method_b"),  # new
+        ("backend", "return SCALE * x", "return SCALE * x + 1"),  # a function the path calls
+        ("backend", "SCALE = 2", "SCALE = 3"),  # a constant it reads, through the module
+        ("backend", "return x * 3", "return x * 4"),  # imported inside a function
+        ("stage", "+ late(x)", "- late(x)"),
     ],
 )
-def test_docstrings_comments_and_unreached_code_change_no_hash(pkg, module, old, new):
-    stage, edit = pkg
-    before = _hash(stage)
+def test_an_edit_in_the_back_end_changes_every_rows_key(pkg, module, old, new):
+    stage, edit, rows = pkg
+    before = rows()
     edit(module, old, new)
-    assert _hash(stage) == before
+    after = rows()
+    assert all(after[p] != before[p] for p in before)
 
 
 @pytest.mark.parametrize(
-    "module, old, new",
+    "old, new",
     [
-        ("shared", "return SCALE * x", "return SCALE * x + 1"),  # a function the stage calls
-        ("shared", "SCALE = 2", "SCALE = 3"),  # a constant it reads, through the module
-        ("stage", "return x + 1", "return x + 10"),  # a function of its own module
-        ("shared", "return x * 3", "return x * 4"),  # imported inside a function
+        ("return _order(x) + Settings().shift", "return _order(x) + Settings().shift + 1"),
+        ("shift: int = 1", "shift: int = 2"),  # its settings class
     ],
 )
-def test_an_edit_in_a_stage_closure_changes_its_hash(pkg, module, old, new):
-    stage, edit = pkg
-    before = _hash(stage)
-    edit(module, old, new)
-    assert _hash(stage) != before
+def test_an_edit_in_one_policy_changes_its_rows_alone(pkg, old, new):
+    stage, edit, rows = pkg
+    before = rows()
+    edit("policies", old, new)
+    after = rows()
+    assert after["a"] != before["a"] and after["b"] == before["b"]
+    edit("policies", "return x * 2", "return x * 3")  # a helper both policies call
+    assert all(rows()[p] != after[p] for p in after)
 
 
 def test_a_cut_function_belongs_to_its_own_hash(pkg):
-    """A method's function cut out of the shared hash: editing it changes its own hash
-    and not the shared one."""
-    stage, edit = pkg
-    shared, own = _hash(stage, cut=[stage.method_a]), code_hash([stage.method_a])
-    edit("stage", "return x + 1", "return x + 10")
-    assert _hash(stage, cut=[stage.method_a]) == shared
-    assert code_hash([stage.method_a]) != own
+    """A function cut out of a hash: editing it changes its own hash and not the other."""
+    stage, edit, rows = pkg
+    from ckpkg import backend
+
+    cut = code_hash([stage.run], cut=[backend.helper], packages=("ckpkg",))
+    own = code_hash([backend.helper], packages=("ckpkg",))
+    edit("backend", "return SCALE * x", "return SCALE * x + 1")
+    assert code_hash([stage.run], cut=[backend.helper], packages=("ckpkg",)) == cut
+    assert code_hash([backend.helper], packages=("ckpkg",)) != own
+
+
+def test_a_lambda_is_a_root_of_its_own(pkg, tmp_path):
+    """A function registered as a lambda (a task's `reconstruct`) is hashed by its code,
+    not by the statement that registers it."""
+    stage, edit, rows = pkg
+    edit(
+        "registry",
+        "POLICIES = {}",
+        "POLICIES = {}\nTASKS = {\n    't': lambda x: x + 1,\n    'u': lambda x: x - 1,\n}",
+    )
+    registry = importlib.reload(sys.modules["ckpkg.registry"])
+    before = code_hash([registry.TASKS["t"]], packages=("ckpkg",))
+    edit("registry", "lambda x: x - 1", "lambda x: x - 2")
+    assert code_hash([registry.TASKS["t"]], packages=("ckpkg",)) == before
+    edit("registry", "lambda x: x + 1", "lambda x: x + 2")
+    assert code_hash([registry.TASKS["t"]], packages=("ckpkg",)) != before
+
+
+def test_an_aliased_hash_is_accepted(tmp_path):
+    """A hash aliased to the current one (values proven identical) is accepted for it,
+    through a chain of aliases, and no other."""
+    aliases = tmp_path / "aliases.json"
+    aliases.write_text(json.dumps([["old", "mid"], ["mid", "new"], ["other", "elsewhere"]]))
+    assert accepted("new", aliases) == {"new", "mid", "old"}
+    assert accepted("elsewhere", aliases) == {"elsewhere", "other"}
+    assert accepted("unknown", aliases) == {"unknown"}
 
 
 def test_a_digest_ignores_docstrings_and_comments(pkg):
-    stage, edit = pkg
+    stage, edit, rows = pkg
     before = object_digest(stage)
     edit("stage", '"""Runs."""', '"""Runs the stage (a longer docstring)."""  # and a comment')
     assert object_digest(stage) == before
-    edit("stage", "return x + 1", "return x + 10")
+    edit("stage", "+ late(x)", "- late(x)")
     assert object_digest(stage) != before
 
 
-def test_the_shared_prediction_code_is_derived_and_leaves_the_methods_and_scoring_out():
+def test_the_shared_prediction_code_is_the_select_and_match_path_alone():
     from bench.frontend import policies
     from bench.harness import predict
 
-    parts = covered(predict.SHARED_CODE, cut=(predict.SCORING, *predict._method_roots()))
+    parts = covered(predict.SHARED_CODE)
     modules = {m for m, _ in parts}
-    assert "bench.frontend.colmap_model" in modules  # missing from the hand-kept lists
-    assert {"bench.frontend.signals", "bench.backend.reconstruction"} <= modules
-    assert not any(m.startswith("bench.evaluation") for m in modules)
+    assert {"bench.frontend.signals", "bench.backend.matching"} <= modules
+    assert not any(m.startswith(("bench.evaluation", "bench.report")) for m in modules)
+    assert ("bench.codehash", "code_hash") not in parts  # the caching around it
+    assert ("bench.harness.predict", "read_record") not in parts
+    assert ("bench.frontend.stage", "front_end") not in parts
     assert ("bench.frontend.policies", "adaptive_policy") not in parts
     assert ("bench.frontend.policies", "select") in parts  # the contract every policy meets
     assert ("bench.frontend.feedback", "feedback_select") not in parts
-    own = covered([policies.POLICIES["adaptive"]], cut=predict._method_roots("adaptive"))
+    own = covered([policies.POLICIES["adaptive"]])
     assert ("bench.frontend.policies", "capped_greedy") in own
     assert ("bench.frontend.policies", "random_policy") not in own
+    tri = covered(predict.task_code("tri"))
+    assert ("bench.backend.reconstruction", "known_pose_task") in tri
+    assert ("bench.backend.reconstruction", "mapping_task") not in tri
 
 
 def test_every_method_has_its_own_code_hash():
@@ -185,8 +309,8 @@ def test_a_new_policy_or_a_methods_own_setting_changes_that_methods_rows_alone(t
     from bench.vocabulary import CODE, METHODS
 
     cfg = RunConfig()
-    names = [m for m in METHODS]
-    before = {m: predict.prediction_hash(cfg, m) for m in names}
+    names = [(m, t) for m in METHODS for t in ("tri", "sfm")]
+    before = {n: predict.prediction_hash(cfg, *n) for n in names}
     module = tmp_path / "new_policy.py"
     module.write_text(
         textwrap.dedent(
@@ -203,18 +327,35 @@ def test_a_new_policy_or_a_methods_own_setting_changes_that_methods_rows_alone(t
     try:
         predict.shared_code_hash.cache_clear()
         predict._own_code_hash.cache_clear()
-        assert {m: predict.prediction_hash(cfg, m) for m in names} == before
+        assert {n: predict.prediction_hash(cfg, *n) for n in names} == before
     finally:  # the registry as it was, for the other tests
         for registry in (METHODS, POLICIES, CODE, plugins.ORIGIN):
             registry.pop("cache-keys-new", None)
         plugins.load_module.cache_clear()
     looped = cfg.with_own("adaptive-loop", loop_rounds=3)
-    changed = {m for m in names if predict.prediction_hash(looped, m) != before[m]}
+    changed = {m for m, t in names if predict.prediction_hash(looped, m, t) != before[(m, t)]}
     assert changed == {"adaptive-loop"}
     weights = tmp_path / "w.json"
     weights.write_text("{}")
     other = cfg.with_own("learned", learned_weights=str(weights))
-    assert {m for m in names if predict.prediction_hash(other, m) != before[m]} == {"learned"}
+    changed = {m for m, t in names if predict.prediction_hash(other, m, t) != before[(m, t)]}
+    assert changed == {"learned"}
+
+
+def test_each_task_and_stage_hashes_what_it_reads():
+    """A task's rows depend on its own reconstruction and on the settings it reads: an nbv
+    setting or a display field changes no tri row; the tasks' keys differ."""
+    from bench.harness import predict
+    from bench.harness.config import NbvConfig, RunConfig
+    from bench.vocabulary import METHODS, deciding
+
+    cfg = RunConfig()
+    tri = {m: predict.prediction_hash(cfg, m, "tri") for m in METHODS}
+    nbv = dataclasses.replace(cfg, nbv=NbvConfig(initial=4))
+    assert {m: predict.prediction_hash(nbv, m, "tri") for m in METHODS} == tri
+    assert tri["texture"] != predict.prediction_hash(cfg, "texture", "sfm")
+    assert "label" not in deciding(METHODS["texture"])
+    assert "matcher" in deciding(METHODS["texture"])
 
 
 def test_a_methods_own_setting_does_not_bind_the_folder(tmp_path):
@@ -287,3 +428,21 @@ def test_a_scenes_render_key_covers_its_own_generator_and_the_render_code_alone(
     )
     assert ("bench.scenes.generators", "facade") not in parts
     assert len({render_code_hash(s) for s in ("table", "facade", "corridor")}) == 3
+
+
+def test_a_render_entry_under_an_aliased_key_is_current(tmp_path, monkeypatch):
+    """A render entry under an older render key aliased to the current one is the scene's
+    entry (nothing is rendered again); without the alias the current key's name."""
+    from bench import codehash
+    from bench.render.config import RenderConfig
+    from bench.render.entry import entry_name, entry_names
+
+    cfg = RenderConfig(width=96, height=72, spp=4, max_depth=2, variant="scalar_rgb")
+    current = entry_name("table", 0, cfg, tmp_path)
+    assert entry_names("table", 0, cfg, tmp_path) == [current]
+    (tmp_path / "table-s0-0123456789ab").mkdir()
+    aliases = tmp_path / "aliases.json"
+    aliases.write_text(json.dumps([["0123456789ab", current.rpartition("-")[2]]]))
+    monkeypatch.setattr(codehash, "ALIASES", aliases)
+    assert entry_name("table", 0, cfg, tmp_path) == "table-s0-0123456789ab"
+    assert entry_names("table", 0, cfg, tmp_path) == [current, "table-s0-0123456789ab"]

@@ -6,12 +6,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.backend.equal_count import EQUAL, equal_selection, peer_counts
+from bench.backend.equal_count import EQUAL, peer_counts
 from bench.backend.matching import BackendConfig, matcher
 from bench.backend.peers import peer_extraction, run_peer
 from bench.frontend.features import DetectorConfig
 from bench.frontend.geometry import IMAGES, SignalConfig
-from bench.frontend.policies import PolicyConfig, PolicyInput
+from bench.frontend.policies import PolicyConfig, PolicyInput, settings_for
+from bench.frontend.selection import select_views
 from bench.frontend.stage import front_end
 from bench.frontend.views import Source
 from bench.harness.config import RunConfig
@@ -58,7 +59,9 @@ def test_the_selection_holds_the_count_of_each_view_at_most_the_pool(fe, method)
     counts = [0, 1, 17, 100, pools[4] + 5, 64][: len(inputs)]
     cams = [v.camera for v in front.views]
     match = matcher(cams, front.pools, BackendConfig(), "sift")
-    sel = equal_selection(method, inputs, counts, 0, PolicyConfig(), match)
+    own = settings_for(method, PolicyConfig())
+    sel, rounds = select_views(EQUAL[method][0], inputs, counts, 0, own, match)
+    assert rounds == []
     assert [len(s) for s in sel] == [min(c, n) for c, n in zip(counts, pools)]
     assert all(len(np.unique(s)) == len(s) for s in sel)
 

@@ -217,8 +217,41 @@ def test_rows_computed_by_other_code_are_computed_again(
     bench_run(dataclasses.replace(SMALL, scenes=("table",)), tmp_path / "r", renders_dir)
     assert len(calls) == 8  # every unit of the table scene, again
     runs = pd.read_csv(tmp_path / "r" / "runs.csv")
-    assert len(runs) == ROWS // 2  # one hash per method: its own code and settings
-    assert runs.groupby("method")["prediction_hash"].nunique().max() == 1
+    assert len(runs) == ROWS // 2  # one hash per method and task: their code and settings
+    assert runs.groupby(["method", "task"])["prediction_hash"].nunique().max() == 1
+
+
+def test_rows_under_an_aliased_hash_are_current(quick_results, renders_dir, tmp_path, monkeypatch):
+    """Rows and stored predictions under older hashes proven to give the same values (the
+    alias file, `bench.codehash.accepted`) are current: nothing is predicted or scored
+    again. Without the aliases every unit is predicted again."""
+    from bench import codehash
+    from bench.runs import ROW_CHECKSUM, row_checksum
+
+    folder = tmp_path / "r"
+    shutil.copytree(quick_results, folder)
+    runs = pd.read_csv(folder / "runs.csv", dtype=str, keep_default_na=False)
+    old = {h: f"old{h}" for c in ("prediction_hash", "evaluation_hash") for h in runs[c]}
+    for c in ("prediction_hash", "evaluation_hash"):
+        runs[c] = runs[c].map(old)
+    runs[ROW_CHECKSUM] = [row_checksum(r) for r in runs.to_dict("records")]
+    runs.to_csv(folder / "runs.csv", index=False)
+    for record in (folder / "models").rglob("prediction.json"):
+        stored = json.loads(record.read_text())
+        for job in stored["jobs"].values():
+            job["hash"] = old[job["hash"]]
+        record.write_text(json.dumps(stored))
+    aliases = tmp_path / "aliases.json"
+    aliases.write_text(json.dumps([[o, h] for h, o in old.items()]))
+    monkeypatch.setattr(codehash, "ALIASES", aliases)
+    calls = []
+    spy(monkeypatch, calls)
+    again = bench_run(SMALL, folder, renders_dir)
+    assert calls == [] and again["prediction_hash"].str.startswith("old").all()
+    assert again["evaluation_hash"].str.startswith("old").all()  # none scored again
+    monkeypatch.setattr(codehash, "ALIASES", tmp_path / "none.json")
+    bench_run(SMALL, folder, renders_dir)
+    assert len(calls) == 2 * 8  # every unit of both scenes
 
 
 def test_a_changed_scene_is_computed_again_and_no_other(

@@ -12,18 +12,7 @@ import pytest
 import bench
 
 PACKAGE = Path(bench.__file__).parent
-STAGES = (
-    "scenes",
-    "render",
-    "frontend",
-    "backend",
-    "acquisition",
-    "evaluation",
-    "harness",
-    "report",
-    "cli",
-)
-"""The subpackages in data-flow order; the modules directly in `bench/` are shared."""
+STAGES = bench.STAGES
 FIREWALLED = ("frontend", "backend", "acquisition")
 GROUND_TRUTH = ("bench.scenes", "bench.render", "bench.evaluation")
 """What holds or produces ground truth: scene geometry, the renderer, the evaluation."""

@@ -53,12 +53,12 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from bench import BenchError
+from bench import BenchError, MethodFailed
 from bench.backend.matching import PairMatches
 from bench.camera import Camera
 from bench.frontend.features import Candidates
 from bench.frontend.plugins import firewall
-from bench.frontend.policies import PolicyFailed, code_line
+from bench.frontend.policies import code_line
 from bench.frontend.signals import Signals
 from bench.frontend.views import View
 from bench.vocabulary import Method, declare_kind, declare_method
@@ -143,12 +143,11 @@ def chooser(name: str, label: str, role: str = "contender") -> Callable[[Chooser
     return register
 
 
-class ChooserFailed(PolicyFailed):
-    """A chooser raised or broke its contract: its rows fail, the grid goes on."""
+class ChooserFailed(MethodFailed):
+    """A view chooser failed (`MethodFailed`): its rows fail, the grid goes on."""
 
     def __init__(self, name: str, what: str, where: str):
-        BenchError.__init__(self, f"view chooser {name} {what} (at {where})")
-        self.policy, self.what, self.view, self.where = name, what, None, where
+        super().__init__(name, what, where, f"view chooser {name} {what} (at {where})")
 
 
 def chooser_rng(seed: int, name: str, step: int) -> np.random.Generator:

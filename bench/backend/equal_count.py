@@ -8,14 +8,14 @@ per-view policy at budget B with, in view v, exactly the number of keypoints the
 holds there at budget B (all of the view's pool where it holds fewer): the same count
 per view, not an interpolation of the budget curve (which would be a model).
 
-The peer's count per view is its own extraction at budget B (`peer_counts`: COLMAP's SIFT
-with the peer's settings, on the same images, one thread, so deterministic and equal to
-what the peer's unit holds: the peer's cached extraction, `bench.backend.peers.peer_extraction`),
-read by the unit itself: units stay independent of each other (none waits for another's
-stored prediction), and the one-way flow holds (images
+The peer's count per view is its own extraction at budget B (`peer_counts`: the peer's
+cached extraction, `bench.backend.peers.peer_extraction`, on the same images, one thread, so
+deterministic and equal to what the peer's unit holds), read by the unit itself: units stay
+independent of each other (none waits for another's stored prediction), and the one-way flow holds (images
 -> counts -> selection). The peer reads the images only, so the method sees no more
-than the sfm task grants. It selects, matches and is scored like its policy
-(`bench.harness.equal`); its own settings are its policy's, set under its own name
+than the sfm task grants. It selects (`bench.frontend.selection.select_views` with a
+budget per view), matches and is scored like its policy (`bench.harness.equal`); its own
+settings are its policy's, set under its own name
 (`--set cross-view@colmap-soft-b.epipolar_weight=...`). Its rows run the tasks the
 peers run (role `peer`: sfm and pairs) and the report compares them with the peer
 (`table1_equal.csv`, `bench.report.tables.equal_keypoints`).
@@ -23,18 +23,12 @@ peers run (role `peer`: sfm and pairs) and the report compares them with the pee
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
-
-import numpy as np
 
 from bench.backend.peers import peer_extraction
 from bench.camera import Camera
-from bench.frontend.plugins import firewall
-from bench.frontend.policies import MULTIVIEW, POLICIES, PolicyInput, select, settings_for
-from bench.frontend.selection import DeclaredSignals, policy_rng
+from bench.frontend.policies import MULTIVIEW, POLICIES
 from bench.frontend.tracks import NAME as TRACK_FIRST
-from bench.frontend.tracks import track_first_select
 from bench.vocabulary import EQUAL_COUNT as EQUAL_KIND
 from bench.vocabulary import METHODS, SETTINGS, Method, declare_kind, declare_method
 
@@ -46,10 +40,7 @@ EQUAL_PEERS = ("colmap-soft-b",)
 """The peers that hold more keypoints than B (the rest hold exactly B or fewer)."""
 EQUAL_POLICIES = ("response", "adaptive-fast", "cross-view", TRACK_FIRST)
 """The policies run at each peer's count: any declared per-view policy, and a multi-view
-one that takes a budget per view (`BY_VIEW`)."""
-BY_VIEW = {TRACK_FIRST: track_first_select}
-"""Multi-view policies with one budget per view: (inputs, budgets, settings, match) ->
-each view's selection."""
+one that takes a budget per view (`bench.frontend.selection.BY_VIEW`)."""
 EQUAL: dict[str, tuple[str, str]] = {}
 """(policy, peer) of each equal-count method, by name."""
 
@@ -74,30 +65,6 @@ def peer_counts(
     ]
 
 
-def equal_selection(
-    method: str, inputs: list[PolicyInput], counts: list[int], seed: int, cfg, match=None
-) -> list[np.ndarray]:
-    """Each view's selection by the method's policy at the peer's count there (at most the
-    view's pool), behind the firewall and reading only the policy's declared signals
-    (`match`: the back end's, for a multi-view policy)."""
-    policy, cfg = EQUAL[method][0], settings_for(method, cfg)
-    reads = METHODS[policy].reads
-    inputs = [replace(i, signals=DeclaredSignals(i.signals, policy, reads)) for i in inputs]
-    counts = [min(int(n), len(i.candidates)) for i, n in zip(inputs, counts)]
-    if policy in BY_VIEW:
-        with firewall():
-            return BY_VIEW[policy](inputs, counts, cfg, match)
-    out = []
-    for inp, n in zip(inputs, counts):
-        if n == 0:
-            out.append(np.zeros(0, np.int64))
-            continue
-        rng = policy_rng(seed, policy, n, inp.view.index)
-        with firewall():
-            out.append(select(policy, inp, n, rng, cfg))
-    return out
-
-
 def declare_equal(policy: str, peer: str) -> str:
     """Declare `<policy>@<peer>` (module docstring)."""
     base, name = METHODS[policy], equal_name(policy, peer)
@@ -110,7 +77,7 @@ def declare_equal(policy: str, peer: str) -> str:
         kind=EQUAL_COUNT,
         matcher=base.matcher,
     )
-    code = (equal_selection, peer_counts, POLICIES.get(policy) or MULTIVIEW[policy])
+    code = (peer_counts, POLICIES.get(policy) or MULTIVIEW[policy])
     declare_method(method, code=code, settings=SETTINGS.get(policy))
     EQUAL[name] = (policy, peer)
     return name

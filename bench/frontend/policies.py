@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench import BenchError
+from bench import BenchError, MethodFailed
 from bench.frontend.features import Candidates, strongest_first, tile_of
 from bench.frontend.signals import SIGNALS, Signals
 from bench.frontend.views import View
@@ -189,14 +189,13 @@ def contract_violation(idx: np.ndarray, want: int, n: int) -> str | None:
     return None
 
 
-class PolicyFailed(BenchError):
-    """A policy raised or broke its contract: the method failed, not the input. Says
-    what, in which view, and where in the policy's code (`file:line`); a grid records it
-    in the unit's rows and goes on (`bench.harness.execute`)."""
+class PolicyFailed(MethodFailed):
+    """A policy failed (`MethodFailed`), in a view (`view`)."""
 
     def __init__(self, policy: str, what: str, view: View, where: str):
-        self.policy, self.what, self.view, self.where = policy, what, view, where
-        super().__init__(f"policy {policy} {what} (view {view.index} {view.name!r}, at {where})")
+        message = f"policy {policy} {what} (view {view.index} {view.name!r}, at {where})"
+        super().__init__(policy, what, where, message)
+        self.view = view
 
 
 def code_line(fn: Callable, error: BaseException | None = None) -> str:

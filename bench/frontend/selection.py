@@ -24,7 +24,13 @@ from bench.frontend.policies import (
     select,
 )
 from bench.frontend.signals import SIGNALS, Signals
+from bench.frontend.tracks import NAME as TRACK_FIRST
+from bench.frontend.tracks import track_first_select
 from bench.vocabulary import METHODS
+
+BY_VIEW = {TRACK_FIRST: track_first_select}
+"""The multi-view policies that take a budget per view: (inputs, budgets, settings, match)
+-> each view's selection."""
 
 
 def check_budgets(pools: list[int], budgets, where: str) -> None:
@@ -69,16 +75,19 @@ def policy_rng(seed: int, policy: str, budget: int, view: int) -> np.random.Gene
 def select_views(
     policy: str,
     inputs: list[PolicyInput],
-    budget: int,
+    budget: int | list[int],
     seed: int,
     cfg: PolicyConfig,
     match,
 ) -> tuple[list[np.ndarray], list[dict]]:
     """Every view's selection and a multi-view policy's rounds (none for a per-view
     policy); the policy runs behind the ground-truth firewall
-    (`bench.frontend.plugins.firewall`) and reads only the signals it declares."""
+    (`bench.frontend.plugins.firewall`) and reads only the signals it declares. `budget`:
+    one for every view, or one per view (`by_view`)."""
     reads = METHODS[check_methods([policy])[0]].reads
     inputs = [replace(i, signals=DeclaredSignals(i.signals, policy, reads)) for i in inputs]
+    if isinstance(budget, list):
+        return by_view(policy, inputs, budget, seed, cfg, match), []
     if policy in MULTIVIEW:
         with firewall():
             return MULTIVIEW[policy](inputs, budget, cfg, match)
@@ -87,3 +96,22 @@ def select_views(
     rngs = [policy_rng(seed, policy, budget, i.view.index) for i in inputs]
     with firewall():
         return [select(policy, i, budget, r, cfg) for i, r in zip(inputs, rngs)], []
+
+
+def by_view(policy, inputs, budgets: list[int], seed: int, cfg, match) -> list[np.ndarray]:
+    """Each view's selection at its own budget, at most its pool (a view at 0 selects
+    nothing): a per-view policy view by view, a multi-view one of `BY_VIEW` at once (the
+    equal-count kind's peer counts, `bench.backend.equal_count`)."""
+    budgets = [min(int(n), len(i.candidates)) for i, n in zip(inputs, budgets)]
+    if policy in BY_VIEW:
+        with firewall():
+            return BY_VIEW[policy](inputs, budgets, cfg, match)
+    out = []
+    for inp, n in zip(inputs, budgets):
+        if n == 0:
+            out.append(np.zeros(0, np.int64))
+            continue
+        rng = policy_rng(seed, policy, n, inp.view.index)
+        with firewall():
+            out.append(select(policy, inp, n, rng, cfg))
+    return out

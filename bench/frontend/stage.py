@@ -13,8 +13,8 @@ entry or dataset; `subset` is the front end of some of its views alone (a datase
 
 Cached (npz beside the render cache) by the render entry, the geometry granted, the
 detector and signal settings (and a learned detector's package versions) and the code
-that computes them (`front_end` and what it
-reaches, `bench.codehash`); the seconds measured when it was computed are stored with
+that computes them (`compute` and what it reaches, `bench.codehash`; not this caching
+around it); the seconds measured when it was computed are stored with
 it, so reported front-end times do not depend on whether the cache was warm.
 """
 
@@ -59,8 +59,8 @@ class FrontEnd:
 
 @cache
 def frontend_code_hash() -> str:
-    """Hash of the front end's code: `front_end` and what it reaches."""
-    return code_hash([front_end])
+    """Hash of the front end's code: `compute` and what it reaches."""
+    return code_hash([compute])
 
 
 def front_end(

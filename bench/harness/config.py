@@ -25,9 +25,10 @@ class NbvConfig:
     a view chooser adds views one at a time from the candidate poses of the planned path."""
 
     policy: str = "cross-view"
-    """The keypoint policy in every view, at the grid's budgets: the budgeted pose-free
+    """The keypoint policy in every view, at the grid's budgets: the per-view pose-free
     policy with the highest sfm mAA at 256 in the published sparse snapshot (cross-view,
-    0.27; results/published/table1.csv)."""
+    0.62; results/published/table1.csv; the multi-view track-first ranks above it there,
+    0.98)."""
     added: tuple[int, ...] = (1, 2, 4)
     """After how many added views the capture is scored (increasing, 1 to 8); the report's
     headline is the gain at 2."""
@@ -75,6 +76,10 @@ QUICK_NBV = NbvConfig(between=1)
 """The nbv task of `--quick` runs: five candidates on an 11-view path."""
 
 
+PREDICTION = ("detector", "signals", "policy", "backend")
+"""The sections of the settings a unit's prediction reads: the front end's, the
+selection's and the back end's (the render settings decide the render entry, which a row
+records as its `render_key`)."""
 METHODS_SECTION = "methods"
 """The key of the methods' own settings in `RunConfig.as_dict` (and `config.json`)."""
 
@@ -101,6 +106,12 @@ class RunConfig:
         settings = asdict(self)
         del settings["policy"]["modules"], settings[METHODS_SECTION]
         return settings
+
+    def prediction(self, extra: tuple[str, ...] = ()) -> dict:
+        """The shared settings a task's predicted rows read: `PREDICTION` and `extra` (the
+        task's own sections, `bench.harness.tasks.TaskRunner.settings`)."""
+        shared = self.shared()
+        return {k: shared[k] for k in (*PREDICTION, *extra)}
 
     def own(self, method: str) -> dict:
         """A method's own settings, its defaults filled in ({} if it has none)."""

@@ -1,6 +1,7 @@
 """How an equal-count unit (`bench.backend.equal_count`) computes and stores its
 prediction: the peer's count per view from the unit's images, then its policy's selection
-at those counts, matched, verified and reconstructed like any selection
+at those counts through the one select-and-match path (`bench.harness.select_match`, with
+the method's own settings), matched, verified and reconstructed like any selection
 (`bench.harness.predict.store_selection`)."""
 
 from __future__ import annotations
@@ -9,15 +10,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from bench.backend.equal_count import EQUAL, equal_selection, peer_counts
-from bench.backend.matching import matcher
+from bench.backend.equal_count import EQUAL, peer_counts
 from bench.backend.peers import COLMAP_SIFT
-from bench.frontend.policies import PolicyInput
 from bench.frontend.views import Source
+from bench.harness import select_match
 from bench.harness.evaluate import selection_shared
 from bench.harness.predict import store_selection
 from bench.results import PREDICTION
-from bench.vocabulary import METHODS, implemented_by
+from bench.vocabulary import implemented_by
 
 
 def store_equal(scene, unit, jobs, cfg, ws, record) -> None:
@@ -29,14 +29,12 @@ def store_equal(scene, unit, jobs, cfg, ws, record) -> None:
     counts = peer_counts(images, names, cams, peer, unit.budget, sift)
 
     def select(fe, truth, unit, cfg):
-        inputs = [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
-        policy_cfg = cfg.policy_config(unit.method)
-        backend = cfg.backend
-        if METHODS[unit.method].matcher:
-            backend = replace(backend, matcher=METHODS[unit.method].matcher)
-        match = matcher(cams, fe.pools, backend, cfg.detector.detector)
-        sel = equal_selection(unit.method, inputs, counts, unit.seed, policy_cfg, match)
-        return sel, []
+        policy = EQUAL[unit.method][0]  # given the method's own settings
+        own = replace(cfg, methods=cfg.methods | {policy: cfg.own(unit.method)})
+        selections, rounds, _ = select_match.select(
+            fe.views, fe.pools, fe.signals, policy, counts, unit.seed, own
+        )
+        return selections, rounds
 
     record["counts"] = counts
     store_selection(select)(scene, unit, jobs, cfg, ws, record)

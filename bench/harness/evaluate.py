@@ -11,7 +11,6 @@ beside a model (`TaskRunner.keep`: tri's point errors, for Figure 2) is written 
 from __future__ import annotations
 
 import math
-import sys
 import time
 from collections.abc import Callable
 from functools import cache
@@ -23,6 +22,7 @@ import pycolmap
 from bench.codehash import code_hash
 from bench.evaluation.metrics import coverage_pct, match_metrics
 from bench.evaluation.truth import scene_truth
+from bench.files import content_key
 from bench.frontend.colmap_model import read_model
 from bench.frontend.signals import seconds_of
 from bench.frontend.views import Source, source_key
@@ -38,18 +38,25 @@ from bench.harness.predict import (
 from bench.harness.tasks import RUNNERS
 from bench.render.entry import entry_meta
 from bench.results import PREDICTION, Workspace
-from bench.vocabulary import CODE, METHODS, METRICS, Job, Unit
+from bench.vocabulary import METHODS, METRICS, TASKS, Job, Unit, deciding
 
-SCORING_CODE = (sys.modules[__name__], scene_truth)
-"""Where the scoring's code starts: this module and the loading of the ground truth."""
+
+def scoring_code() -> tuple:
+    """Where the scoring's code starts: the ground truth, each task's evaluation and what
+    it keeps, the readers of a stored prediction and the making of a row."""
+    tasks = [f for r in RUNNERS.values() for f in (r.evaluate, r.keep) if f is not None]
+    return (scene_truth, selection_shared, own_pipeline_shared, make_row, *tasks)
 
 
 @cache
 def evaluation_hash() -> str:
-    """The `evaluation_hash` of every row: the code `SCORING_CODE` reaches (the
-    prediction's hash, a column of its own, and the methods' code cut out)."""
-    methods = [f for code in CODE.values() for f in code]
-    return code_hash(SCORING_CODE, cut=(prediction_hash, *methods))
+    """The `evaluation_hash` of every row: the code `scoring_code` reaches and the fields
+    of the tasks and metrics that decide a row's values (`bench.vocabulary.deciding`)."""
+    declared = {
+        "tasks": {n: deciding(t) for n, t in sorted(TASKS.items())},
+        "metrics": {n: deciding(m) for n, m in sorted(METRICS.items())},
+    }
+    return content_key([code_hash(scoring_code()), declared])[:12]
 
 
 Shared = Callable[[LoadedScene, Unit, dict, str, Path], tuple[dict, dict, dict]]
@@ -135,8 +142,6 @@ def identities(entry: Path, unit: Unit, jobs: list[Job], cfg: RunConfig) -> list
     shared = {
         "render_key": source_key(entry),
         "views": len(unit.bag.split()) or len(read_model(Source.of(entry).model)),
-        "prediction_hash": prediction_hash(cfg, unit.method),
-        "evaluation_hash": evaluation_hash(),
     } | ({BAG: unit.bag} if unit.bag else {})
     return [
         {
@@ -147,6 +152,8 @@ def identities(entry: Path, unit: Unit, jobs: list[Job], cfg: RunConfig) -> list
             "task": job.task,
             "protocol": job.protocol,
             **shared,
+            "prediction_hash": prediction_hash(cfg, unit.method, job.task),
+            "evaluation_hash": evaluation_hash(),
         }
         for job in jobs
     ]

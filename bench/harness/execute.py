@@ -13,7 +13,7 @@ submitted scene by scene, the costliest of each scene first (`largest_first`). A
 holds one scene at a time (`_scene`; a dataset's bag, `Unit.bag`, is a scene of its own,
 `bench.harness.bags`). Rows come
 back to the main process, which alone writes `runs.csv`. A method that fails (its policy
-raises or breaks the contract: `PolicyFailed`) is a value, in process as on a worker: the
+raises or breaks the contract: `bench.MethodFailed`) is a value, in process as on a worker: the
 unit's rows are recorded as failed, saying what and where, and the grid goes on. A unit
 whose worker dies is retried once, then recorded the same way. The failure of such a row
 starts with `ERROR` (a task's outcome, such as a mapper that registered no view, does not).
@@ -38,12 +38,11 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-from bench import BenchError
+from bench import BenchError, MethodFailed
 from bench.evaluation.truth import scene_truth
 from bench.failures import ERROR
 from bench.frontend import plugins
 from bench.frontend.geometry import RIG
-from bench.frontend.policies import PolicyFailed
 from bench.frontend.selection import check_budgets
 from bench.frontend.stage import FrontEnd, front_end
 from bench.frontend.views import load_views
@@ -152,8 +151,8 @@ def compute_unit(
     try:
         if not (work.rescore and has_prediction(ws, unit, jobs, cfg)):
             predict(scene, unit, jobs, cfg, ws, run.store)
-    except PolicyFailed as e:
-        tasks = ", ".join(getattr(e, "tasks", ())) or "?"
+    except MethodFailed as e:
+        tasks = ", ".join(e.tasks) or "?"
         why = f"{e} in {unit.scene} seed {unit.seed}, task {tasks}"
         return failed_rows(scene.entry, unit, jobs, cfg, why)
     return run.score(scene, unit, jobs, cfg, ws, run.read)

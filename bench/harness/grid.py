@@ -29,6 +29,7 @@ import pandas as pd
 
 from bench import BenchError
 from bench.binding import bind_results_dir, check_results_dir, models_replaced
+from bench.codehash import accepted
 from bench.console import log, progress
 from bench.failures import ERROR, exclusions, failures, outcomes
 from bench.files import entry_problem
@@ -43,7 +44,7 @@ from bench.harness.manifest import git_commit, write_manifest
 from bench.harness.predict import prediction_hash
 from bench.harness.tasks import RUNNERS
 from bench.render.config import RenderConfig
-from bench.render.entry import entry_name, render_scene, render_scenes
+from bench.render.entry import entry_name, entry_names, render_scene, render_scenes
 from bench.results import DAMAGED, Workspace, holding
 from bench.runs import append_runs, keep_runs, read_runs, set_aside_damaged
 from bench.scenes.spec import load_spec, scene_names
@@ -276,11 +277,22 @@ def _current_rows(
     altered = df.pop("altered") if options.reevaluate else pd.Series(False, index=df.index)
     if altered.any():
         log(f"{int(altered.sum())} altered row(s) of {runs_csv}; scoring them again")
-    # each row against its policy's hash; a policy not registered now (a module not given
-    # this time) keeps its rows as they are
+    # each row against its method's and task's hash (or one aliased to it); a method not
+    # registered now (a module not given this time) keeps its rows as they are
     known = set(METHODS)
-    expected = df["method"].map({p: prediction_hash(cfg.run, p) for p in set(df["method"]) & known})
-    stale = expected.notna() & (df["prediction_hash"] != expected)
+    hashes = {
+        (m, t): accepted(prediction_hash(cfg.run, m, t))
+        for m, t in set(zip(df["method"], df["task"]))
+        if m in known and t in RUNNERS
+    }
+    stale = pd.Series(
+        [
+            (m, t) in hashes and h not in hashes[(m, t)]
+            for m, t, h in zip(df["method"], df["task"], df["prediction_hash"])
+        ],
+        index=df.index,
+        dtype=bool,
+    )
     if stale.any():
         log(
             f"{int(stale.sum())} row(s) were computed by other code or settings; computing them again"
@@ -297,12 +309,14 @@ def _current_rows(
     for scene in set(df["scene"]) & set(cfg.scenes) - {Path(d).name for d in cfg.datasets}:
         rows = ~stale & (df["scene"] == scene)
         tasked = rows & df["task"].isin(RUNNERS)  # a row of each task against its own rig
-        key = {
-            (sd, t): entry_name(scene, int(sd), cfg.render(t), ws.renders)
+        names = {
+            (sd, t): entry_names(scene, int(sd), cfg.render(t), ws.renders)
             for sd, t in set(zip(df["seed"][tasked], df["task"][tasked]))
         }
-        expected = [key.get(k) for k in zip(df["seed"], df["task"])]
-        changed = tasked & (df["render_key"] != pd.Series(expected, index=df.index))
+        found = [
+            k in names.get(st, ()) for k, st in zip(df["render_key"], zip(df["seed"], df["task"]))
+        ]
+        changed = tasked & ~pd.Series(found, index=df.index, dtype=bool)
         if changed.any():
             log(
                 f"the scene {scene} (its generator, parameters or render settings) changed "
@@ -314,7 +328,7 @@ def _current_rows(
         log(f"{int(errored.sum())} row(s) could not be computed last time; computing them again")
     df = df[~(stale | errored)]
     rescore = altered[~(stale | errored)] | df["method"].isin(known) & (
-        options.reevaluate | (df["evaluation_hash"] != evaluation_hash())
+        options.reevaluate | ~df["evaluation_hash"].isin(accepted(evaluation_hash()))
     )
     return df, rescore
 

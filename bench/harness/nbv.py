@@ -53,7 +53,7 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-from bench import BenchError
+from bench import BenchError, MethodFailed
 from bench.acquisition.choosers import (
     CHOOSER,
     CandidatePose,
@@ -65,7 +65,6 @@ from bench.acquisition.choosers import (
 )
 from bench.evaluation.next_views import VIEW_ORACLE, best_candidate
 from bench.frontend.geometry import IMAGES, RIG
-from bench.frontend.policies import PolicyFailed
 from bench.frontend.signals import compute_signals
 from bench.frontend.views import Source
 from bench.harness import select_match
@@ -320,7 +319,7 @@ def store_trajectory(pick: Pick) -> Callable:
             ctx.seconds = dict.fromkeys(STAGES, 0.0)
             try:
                 initial, chosen = _trajectory(ctx, pick, job.protocol)
-            except PolicyFailed as e:  # the chooser's rows fail (`bench.harness.execute`)
+            except MethodFailed as e:  # the chooser's rows fail (`bench.harness.execute`)
                 e.tasks = (NEXT_VIEWS,)
                 raise
             captures = {}
@@ -390,6 +389,7 @@ register(
         kinds=(CHOOSER, VIEW_ORACLE),
         rig=lambda cfg: replace(cfg.render, views=cfg.nbv.path),
         default=False,
+        settings=("nbv",),
     )
 )
 implemented_by(

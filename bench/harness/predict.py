@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -38,21 +37,21 @@ from pathlib import Path
 
 import numpy as np
 
+from bench import MethodFailed
 from bench.backend.matching import PairMatches
 from bench.backend.peers import CAPS, COLMAP_SIFT, TRACKS, peer_extraction, run_peer
-from bench.codehash import code_hash
+from bench.codehash import accepted, code_hash
 from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.evaluation.truth import SceneTruth
 from bench.files import atomic_path, content_key, temp_dir_beside, write_text_atomic
 from bench.frontend import plugins
-from bench.frontend.policies import PolicyFailed
-from bench.frontend.stage import FrontEnd, front_end
+from bench.frontend.stage import FrontEnd, compute
 from bench.frontend.views import Source
 from bench.harness import select_match
 from bench.harness.config import RunConfig
 from bench.harness.tasks import RUNNERS, Matched
 from bench.results import LOOP, PREDICTION, Workspace
-from bench.vocabulary import CODE, METHODS, Job, Unit
+from bench.vocabulary import CODE, METHODS, Job, Unit, deciding
 
 
 @dataclass(frozen=True)
@@ -65,58 +64,76 @@ class LoadedScene:
     truth: SceneTruth
 
 
-SHARED_CODE = (sys.modules[__name__], front_end)
-"""Where the code every method's rows share starts: this module (selection, matching,
-the tasks' reconstructions, the export) and the front end. Each method's own code starts
-at its functions (`bench.vocabulary.CODE`); the scoring (`bench.evaluation`) is the
-evaluation hash's."""
-SCORING = "bench.evaluation"
+SHARED_CODE = (compute, select_match.select, select_match.match)
+"""Where the code every method's rows share starts: the front end's `compute` and the one
+select-and-match path. A task's rows add its own functions (`task_code`), a method's its
+own (`bench.vocabulary.CODE`); the scoring is the evaluation hash's
+(`bench.harness.evaluate`), the caching and I/O around them no hash's."""
 
 
-def _method_roots(but: str | None = None) -> list:
-    """Every method's functions (but those of `but`)."""
-    own = CODE.get(but, ())
-    return [f for code in CODE.values() for f in code if f not in own]
+def task_code(task: str) -> tuple:
+    """A task's functions that decide its predicted rows: its reconstruction and the model
+    it records without one."""
+    runner = RUNNERS[task]
+    return tuple(f for f in (runner.reconstruct, runner.record) if f is not None)
 
 
 @cache
 def shared_code_hash() -> str:
-    """Hash of the code every method's rows share (`SHARED_CODE`): the methods' own code
-    and the scoring are cut out."""
-    return code_hash(SHARED_CODE, cut=(SCORING, *_method_roots()))
-
-
-def method_code_hash(method: str) -> str:
-    """Hash of a method's own code: its functions and what they reach, other methods'
-    functions cut out ('' for a method that names no functions)."""
-    code = tuple(CODE.get(method, ()))
-    return _own_code_hash(method, code) if code else ""
+    """Hash of the code every method's rows share (`SHARED_CODE`)."""
+    return code_hash(SHARED_CODE)
 
 
 @cache
-def _own_code_hash(method: str, code: tuple) -> str:
+def task_code_hash(task: str) -> str:
+    """Hash of a task's own code (`task_code`; '' for a task without any)."""
+    code = task_code(task)
+    return code_hash(code) if code else ""
+
+
+def method_code_hash(method: str) -> str:
+    """Hash of a method's own code: its functions and what they reach ('' for a method
+    that names no functions)."""
+    code = tuple(CODE.get(method, ()))
+    return _own_code_hash(code) if code else ""
+
+
+@cache
+def _own_code_hash(code: tuple) -> str:
     """Kept per function objects, not per name: a policy module loaded again from another
     file registers the same name with other functions."""
-    return code_hash(code, cut=_method_roots(but=method))
+    return code_hash(code)
 
 
-def prediction_hash(cfg: RunConfig, method: str) -> str:
-    """The `prediction_hash` of a method's rows: the shared settings and code, the
-    method's own settings, matcher, code and input files (the learned weights), and for a
-    method from a module (`--policy-module`, an entry point) its module's content as well."""
+def prediction_hash(cfg: RunConfig, method: str, task: str) -> str:
+    """The `prediction_hash` of a method's rows of a task: the settings the prediction
+    reads (`RunConfig.prediction`), the fields of the method and task that decide a row
+    (`bench.vocabulary.deciding`), the shared, task's and method's code, the method's own
+    settings and input files (the learned weights), and for a method from a module
+    (`--policy-module`, an entry point) its module's content as well."""
     own = cfg.policy_config(method)
+    runner = RUNNERS[task]
     base = content_key(
         {
-            "settings": cfg.shared(),
+            "settings": cfg.prediction(runner.settings),
             "own": cfg.own(method),
-            "matcher": METHODS[method].matcher,
+            "method": deciding(METHODS[method]),
+            "task": {"grant": runner.spec.grant, "maps": runner.maps},
             "code": shared_code_hash(),
-            "method": method_code_hash(method),
+            "task_code": task_code_hash(task),
+            "method_code": method_code_hash(method),
             "inputs": plugins.files_hash(own.inputs()) if hasattr(own, "inputs") else "",
         }
     )
     origin = plugins.ORIGIN.get(method)
     return content_key([base, plugins.files_hash([origin])]) if origin else base
+
+
+def current(job: dict, cfg: RunConfig, method: str, task: str) -> bool:
+    """Whether a job's stored prediction (its record in `prediction.json`) is current: its
+    hash is this code's and settings', or one proven to give the same values
+    (`bench.codehash.accepted`)."""
+    return job.get("hash") in accepted(prediction_hash(cfg, method, task))
 
 
 Selection = tuple[list[np.ndarray], list[dict]]
@@ -187,11 +204,21 @@ def predict(
     (module docstring)."""
     folder = ws.unit_dir(unit)
     folder.mkdir(parents=True, exist_ok=True)
-    record = {"hash": prediction_hash(cfg, unit.method), "grants": {}, "jobs": {}}
+    record = {"grants": {}, "jobs": {}}
     earlier = read_record(folder)
-    if earlier.get("hash") == record["hash"]:
-        record |= {k: earlier[k] for k in ("grants", "jobs", "peer") if k in earlier}
+    kept = {  # the earlier jobs of other tasks or protocols that are still current
+        k: j
+        for k, j in job_records(earlier).items()
+        if k not in {j.key for j in jobs}
+        and k.partition("/")[0] in RUNNERS
+        and current(j, cfg, unit.method, k.partition("/")[0])
+    }
+    if kept:
+        record |= {k: earlier[k] for k in ("grants", "peer") if k in earlier}
+        record["jobs"] = kept
     store(scene, unit, jobs, cfg, ws, record)
+    for job in jobs:
+        record["jobs"][job.key]["hash"] = prediction_hash(cfg, unit.method, job.task)
     write_text_atomic(folder / f"{PREDICTION}.json", json.dumps(record, indent=1))
 
 
@@ -209,7 +236,7 @@ def _store_selection(scene, unit, jobs, cfg, ws, record, select) -> None:
             t = time.perf_counter()
             selections, rounds = select(fe, scene.truth, unit, cfg)
             select_s = time.perf_counter() - t
-        except PolicyFailed as e:
+        except MethodFailed as e:
             e.tasks = tuple(
                 dict.fromkeys(j.task for j in jobs if RUNNERS[j.task].spec.grant == grant)
             )
@@ -300,12 +327,17 @@ def read_record(folder: Path) -> dict:
         return {}
 
 
+def job_records(record: dict) -> dict[str, dict]:
+    """A record's jobs, each with its prediction hash (a record of the code before hashes
+    per job: the unit's)."""
+    unit = {"hash": record["hash"]} if "hash" in record else {}
+    return {k: unit | j for k, j in record.get("jobs", {}).items()}
+
+
 def has_prediction(ws: Workspace, unit: Unit, jobs: list[Job], cfg: RunConfig) -> bool:
     """Whether the unit's folder holds a current prediction of every job in `jobs`."""
-    record = read_record(ws.unit_dir(unit))
-    return record.get("hash") == prediction_hash(cfg, unit.method) and all(
-        j.key in record.get("jobs", {}) for j in jobs
-    )
+    done = job_records(read_record(ws.unit_dir(unit)))
+    return all(j.key in done and current(done[j.key], cfg, unit.method, j.task) for j in jobs)
 
 
 def pose_arrays(pairs: list[PairMatches]) -> dict[str, np.ndarray]:

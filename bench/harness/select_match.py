@@ -27,12 +27,13 @@ def select(
     pools: list[Candidates],
     signals: list[Signals],
     method: str,
-    budget: int,
+    budget: int | list[int],
     seed: int,
     cfg: RunConfig,
 ) -> tuple[list[np.ndarray], list[dict], float]:
-    """Each view's selection by `method` at `budget`, a multi-view policy's rounds, and the
-    seconds it took."""
+    """Each view's selection by `method` at `budget` (or a budget per view,
+    `bench.frontend.selection.by_view`), a multi-view policy's rounds, and the seconds it
+    took."""
     t = time.perf_counter()
     inputs = [PolicyInput(v, c, s) for v, c, s in zip(views, pools, signals)]
     match = matcher([v.camera for v in views], pools, cfg.backend, cfg.detector.detector)

@@ -90,6 +90,9 @@ class TaskRunner:
     run's); a grid runs such a task alone."""
     default: bool = True
     """Whether `bench run` runs it without `--tasks`."""
+    settings: tuple[str, ...] = ()
+    """The sections of the run's settings its predicted rows read beyond every task's
+    (`bench.harness.config.PREDICTION`): the nbv task's `nbv`."""
 
 
 RUNNERS: dict[str, TaskRunner] = {}

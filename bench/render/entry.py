@@ -23,7 +23,7 @@ import numpy as np
 
 from bench import BenchError, files
 from bench.camera import write_colmap_rig
-from bench.codehash import code_hash
+from bench.codehash import accepted, code_hash
 from bench.console import log
 from bench.render.config import RenderConfig
 from bench.render.mitsuba import AOVS, GT_LAYERS, MITSUBA_FROM_OPENCV, render_view
@@ -140,7 +140,21 @@ def _resolved(
     if why not in _announced:  # once per process (the calling one: `render_scenes`)
         _announced.add(why)
         log(why)
-    return spec, variant, f"{name}-s{seed}-{render_key(spec, seed, cfg, variant)}"
+    names = [f"{name}-s{seed}-{k}" for k in _keys(render_key(spec, seed, cfg, variant))]
+    found = [n for n in names if (Path(renders_dir) / n).is_dir()]
+    return spec, variant, (found or names)[0]
+
+
+def _keys(key: str) -> list[str]:
+    """A render key and the older keys aliased to it (`bench.codehash.accepted`)."""
+    return [key, *sorted(accepted(key) - {key})]
+
+
+def entry_names(name: str, seed: int, cfg: RenderConfig, renders_dir: Path) -> list[str]:
+    """The names a current cache entry of (scene, seed, settings) may have: its render key's
+    and those of the older keys proven to render the same rows."""
+    spec, variant, _ = _resolved(name, seed, cfg, renders_dir)
+    return [f"{name}-s{seed}-{k}" for k in _keys(render_key(spec, seed, cfg, variant))]
 
 
 def entry_meta(entry: Path) -> dict:
@@ -162,7 +176,8 @@ def truth_name(view: int) -> str:
 
 def entry_name(name: str, seed: int, cfg: RenderConfig, renders_dir: Path) -> str:
     """The name of the cache entry of (scene, seed, settings), without rendering it: what
-    a row of `runs.csv` records as its `render_key`, so a changed scene is noticed."""
+    a row of `runs.csv` records as its `render_key`, so a changed scene is noticed (an
+    entry under an older key aliased to this one where there is one, `entry_names`)."""
     return _resolved(name, seed, cfg, renders_dir)[2]
 
 
