@@ -536,13 +536,6 @@ def covered(roots, cut=(), packages: tuple[str, ...] = (PACKAGE,)) -> set[Target
     return out
 
 
-def definition_hashes(roots, cut=(), packages: tuple[str, ...] = (PACKAGE,)) -> dict:
-    """The Merkle hash of each definition reachable from `roots` (module docstring)."""
-    walk, _ = _walk(roots, cut, packages)
-    walk.hash_all()
-    return {t: walk.hashes[t] for t in covered(roots, cut, packages)}
-
-
 def code_hash(roots, cut=(), packages: tuple[str, ...] = (PACKAGE,)) -> str:
     """Hash of the code `covered` by `roots` (module docstring): their Merkle hashes."""
     walk, targets = _walk(roots, cut, packages)

@@ -14,6 +14,7 @@ after. Anything else: one line, exit 2, nothing written.
 import argparse
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -44,8 +45,8 @@ def main() -> None:
     lines = done.stdout.splitlines()
     if done.returncode or not lines:
         fail(f"compare_runs.py failed: {done.stderr.strip()[-500:]}")
-    sizes = lines[0].split()  # rows: A vs B, common C
-    if not (sizes[1] == sizes[3] == sizes[-1].rstrip(",") and int(sizes[1]) > 0):
+    sizes = re.findall(r"\d+", lines[0])  # rows: A vs B, common C
+    if not (len(set(sizes)) == 1 and int(sizes[0]) > 0):
         fail(f"the runs do not hold the same rows ({lines[0]})")
     differing = [line.strip() for line in lines if line.startswith("  ")]
     if differing:
@@ -61,7 +62,8 @@ def main() -> None:
                 pairs.add((old, new))
     known = {tuple(p) for p in json.loads(ALIASES.read_text())} if ALIASES.exists() else set()
     tmp = ALIASES.with_suffix(f".tmp{os.getpid()}")
-    tmp.write_text(json.dumps(sorted(known | pairs), indent=0) + "\n")
+    lines = ",\n".join(json.dumps(list(p)) for p in sorted(known | pairs))
+    tmp.write_text(f"[\n{lines}\n]\n")
     tmp.replace(ALIASES)
     print(f"{len(pairs - known)} alias(es) added to {ALIASES.relative_to(ROOT)}")
 

@@ -52,7 +52,7 @@ from bench.frontend.selection import select_views
 from bench.frontend.stage import front_end
 from bench.frontend.views import Source, load_views
 from bench.harness.config import RunConfig
-from bench.harness.tasks import RUNNERS, Matched
+from bench.harness.tasks import TASK_RUNNERS, Matched
 from bench.render.entry import render_scene
 from bench.vocabulary import METHODS, OWN_PIPELINE
 
@@ -164,7 +164,7 @@ def kept_table(entry: Path, cfg: RunConfig, renders: Path, budgets, methods) -> 
                 scale = [c.size[s] / 2 for c, s in zip(fe.pools, sel)]
                 resp = [p[s] for p, s in zip(pct, sel)]
                 m = Matched(image_dir, cams, names, xy, pairs)
-                model = RUNNERS["sfm"].reconstruct(m, backend, "multiview").model
+                model = TASK_RUNNERS["sfm"].reconstruct(m, backend, "multiview").model
             n = [len(x) for x in xy]
             verified = [np.zeros(k, bool) for k in n]
             correct = [np.zeros(k, bool) for k in n]

@@ -278,6 +278,7 @@ def test_the_shared_prediction_code_is_the_select_and_match_path_alone():
     assert ("bench.frontend.policies", "adaptive_policy") not in parts
     assert ("bench.frontend.policies", "select") in parts  # the contract every policy meets
     assert ("bench.frontend.feedback", "feedback_select") not in parts
+    assert ("bench.frontend.tracks", "track_first_select") not in parts  # registered
     own = covered([policies.POLICIES["adaptive"]])
     assert ("bench.frontend.policies", "capped_greedy") in own
     assert ("bench.frontend.policies", "random_policy") not in own

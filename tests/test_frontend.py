@@ -88,6 +88,21 @@ def test_front_end_cache_hit_gives_identical_arrays(table_front, tmp_path):
     assert np.array_equal(first.pools[2].descriptors, again.pools[2].descriptors)
 
 
+def test_a_front_end_of_large_views_shows_its_progress(table_front, tmp_path, monkeypatch, capsys):
+    """A step per view detected and per view's signals, shown where the views are large
+    (`PROGRESS_PIXELS`; a render's are not), with the same arrays as without."""
+    from bench.frontend import stage
+
+    quiet = front_end(table_front.entry, DetectorConfig(), SignalConfig(), tmp_path / "a")
+    assert "features:" not in capsys.readouterr().err
+    monkeypatch.setattr(stage, "PROGRESS_PIXELS", 1)
+    shown = front_end(table_front.entry, DetectorConfig(), SignalConfig(), tmp_path / "b")
+    views = len(shown.views)
+    assert f"features: {2 * views}/{2 * views} step (100 %)" in capsys.readouterr().err
+    for a, b in zip(quiet.signals, shown.signals):
+        assert all(np.array_equal(getattr(a, s), getattr(b, s)) for s in SIGNALS)
+
+
 @pytest.mark.parametrize("name", list(POLICIES))
 def test_exact_budget_distinct_indices(table_front, name):
     for inp in _inputs(table_front):

@@ -230,7 +230,7 @@ def test_sfm_selections_are_blind_to_the_poses_and_tri_selections_are_not(medium
     from bench.frontend.selection import select_views
     from bench.harness.config import RunConfig
     from bench.harness.grid import default_methods
-    from bench.harness.tasks import RUNNERS
+    from bench.harness.tasks import TASK_RUNNERS
 
     entry = medium_entry("table")
     true = _dataset(entry, tmp_path / "true")
@@ -238,7 +238,7 @@ def test_sfm_selections_are_blind_to_the_poses_and_tri_selections_are_not(medium
     cfg = RunConfig()
 
     def selections(dataset, task, policy):
-        grant = RUNNERS[task].spec.grant
+        grant = TASK_RUNNERS[task].spec.grant
         fe = front_end(dataset, cfg.detector, cfg.signals, tmp_path / "fe", grant)
         inputs = [PolicyInput(v, c, s) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
         match = matcher([v.camera for v in fe.views], fe.pools, cfg.backend, "sift")

@@ -102,7 +102,11 @@ def test_a_task_is_added_in_one_place(renders_dir, tmp_path):
         )
         runs = bench_run(grid, tmp_path, renders_dir)
     finally:  # the registry as it was, for the other tests
-        del tasks.RUNNERS["count"], vocabulary.TASKS["count"], vocabulary.METRICS["observed_points"]
+        del (
+            tasks.TASK_RUNNERS["count"],
+            vocabulary.TASKS["count"],
+            vocabulary.METRICS["observed_points"],
+        )
     counted = runs[runs["task"] == "count"].set_index("protocol")["observed_points"]
     tri = runs[runs["task"] == "tri"].set_index("protocol")["points"]
     assert (counted == tri).all() and counted.sum() > 0

@@ -314,7 +314,7 @@ def test_a_task_and_a_metric_declared_once_are_in_every_table_figure_and_the_pag
     (`Task.metrics`, `headline`): a new task with a metric of its own where lower is better
     is in Table 1, the paired tables, Table 2, the per-scene table, the figures, the page
     and the runs contract (its range), with no other change."""
-    from bench.harness.tasks import RUNNERS, TaskRunner, register
+    from bench.harness.tasks import TASK_RUNNERS, TaskRunner, register
     from bench.report import figures
     from bench.report.page import results_page
     from bench.report.write import write_tables
@@ -326,7 +326,7 @@ def test_a_task_and_a_metric_declared_once_are_in_every_table_figure_and_the_pag
     try:
         vocab = Vocabulary.current()
     finally:
-        RUNNERS.pop("toy"), TASKS.pop("toy"), METRICS.pop("score")
+        TASK_RUNNERS.pop("toy"), TASKS.pop("toy"), METRICS.pop("score")
     assert "toy" not in Vocabulary.current().tasks  # the other tests see the package's
     assert vocab.range_of("score") == (0.0, 1.0) and "toy_score" in vocab.lower_better()
     rows = []

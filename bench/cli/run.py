@@ -55,7 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from bench.frontend.policies import PolicyConfig, Weights, own_fields
     from bench.harness.config import RunConfig
     from bench.harness.grid import default_methods
-    from bench.harness.tasks import RUNNERS
+    from bench.harness.tasks import TASK_RUNNERS
     from bench.scenes.spec import scene_names
     from bench.vocabulary import PROTOCOLS, SETTINGS
 
@@ -84,10 +84,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "features per view (default: 128,256,512, or 256 with --quick; 256 is the headline; "
         "a whole-pool method such as `all` runs once per scene and seed, as budget 0)",
     )
-    tasks = "; ".join(f"{n} ({r.spec.doc})" for n, r in RUNNERS.items())
+    tasks = "; ".join(f"{n} ({r.spec.doc})" for n, r in TASK_RUNNERS.items())
     list_arg(
         "tasks",
-        ",".join(n for n, r in RUNNERS.items() if r.default),
+        ",".join(n for n, r in TASK_RUNNERS.items() if r.default),
         "T1,T2",
         f"tasks: {tasks}. The nbv task runs alone (--tasks nbv), on each scene's 21-view path "
         "(the nbv.* settings), with the view choosers: its cost (about 2.3 h cold for the "
@@ -390,12 +390,12 @@ def bags_arg(args: argparse.Namespace, datasets: bool, tasks: tuple[str, ...]) -
     whole dataset where the size is 0, and with a task that reads a path of its own: the
     next-views task chooses among every view of the set)."""
     from bench.harness.bags import DEFAULT_COUNT, DEFAULT_SIZE
-    from bench.harness.tasks import RUNNERS
+    from bench.harness.tasks import TASK_RUNNERS
 
     given = [n for n, v in (("--bag-size", args.bag_size), ("--bags", args.bags)) if v is not None]
     if given and not datasets:
         log(f"{' and '.join(given)} ignored without --dataset: rendered scenes have their rigs")
-    pathed = [t for t in tasks if t in RUNNERS and RUNNERS[t].rig is not None]
+    pathed = [t for t in tasks if t in TASK_RUNNERS and TASK_RUNNERS[t].rig is not None]
     if pathed and datasets:
         if given:
             log(f"{' and '.join(given)} ignored with --tasks {pathed[0]}: it reads the whole set")

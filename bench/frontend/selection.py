@@ -9,6 +9,7 @@ the declared ones, so an undeclared read would otherwise differ between them).""
 from __future__ import annotations
 
 import zlib
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -24,13 +25,11 @@ from bench.frontend.policies import (
     select,
 )
 from bench.frontend.signals import SIGNALS, Signals
-from bench.frontend.tracks import NAME as TRACK_FIRST
-from bench.frontend.tracks import track_first_select
 from bench.vocabulary import METHODS
 
-BY_VIEW = {TRACK_FIRST: track_first_select}
-"""The multi-view policies that take a budget per view: (inputs, budgets, settings, match)
--> each view's selection."""
+BY_VIEW: dict[str, Callable] = {}
+"""The multi-view policies that take a budget per view, registered where they are defined
+(`bench.frontend.tracks`): (inputs, budgets, settings, match) -> each view's selection."""
 
 
 def check_budgets(pools: list[int], budgets, where: str) -> None:

@@ -399,12 +399,14 @@ def compute_signals(
     det: DetectorConfig,
     cfg: SignalConfig,
     wanted: tuple[str, ...] = SIGNALS,
+    step=None,
 ) -> tuple[list[Signals], dict[str, float]]:
     """Signals of every view, and the seconds spent on each signal (summed over views) and
     on the views' geometry (`geometry`: from the poses when every view is posed, else from
     the images; `bench.frontend.geometry`). The two costly signals, repeatability_redetect
     and epipolar, are computed only when `wanted` (else 0 for every candidate): a caller
-    that selects with one policy asks for what it reads."""
+    that selects with one policy asks for what it reads. `step()`, if given, is called as
+    each view's own signals are done (progress)."""
     n, clock = len(views), _Clock()
     tau2 = DUPLICATE_DISTANCE[det.detector] ** 2
     values: list[dict[str, np.ndarray]] = [{} for _ in range(n)]
@@ -426,6 +428,8 @@ def compute_signals(
         clock.seconds["distinctiveness"] += time.perf_counter() - t - counting
         clock.seconds["ambiguity"] += counting
         near_dupes[i] += near
+        if step is not None:
+            step()
     geo = clock.time("geometry", view_geometry, views, pools, cfg)
     for i in range(n):
         values[i]["parallax"] = clock.time("parallax", geo.parallax, i, pools[i])

@@ -15,7 +15,9 @@ Cached (npz beside the render cache) by the render entry, the geometry granted, 
 detector and signal settings (and a learned detector's package versions) and the code
 that computes them (`compute` and what it reaches, `bench.codehash`; not this caching
 around it); the seconds measured when it was computed are stored with
-it, so reported front-end times do not depend on whether the cache was warm.
+it, so reported front-end times do not depend on whether the cache was warm. A front end
+of large views (photographs, `PROGRESS_PIXELS`) shows its own progress while computed, a
+step per view detected and per view's signals.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import numpy as np
 
 from bench import BenchError
 from bench.codehash import code_hash
-from bench.console import log
+from bench.console import log, progress
 from bench.files import atomic_path, content_key
 from bench.frontend import features, learned
 from bench.frontend.features import Candidates, DetectorConfig
@@ -43,6 +45,9 @@ VIEW_ALONE = ("repeatability_redetect",)
 """The costly signal that reads one view alone (four perturbed re-detections of it):
 `subset` takes the whole front end's (`compute_signals` computes the others cheaply, or,
 as ambiguity, parallax and epipolar, from the other views)."""
+PROGRESS_PIXELS = 2_000_000
+"""A front end whose largest view holds at least this many pixels shows its progress (a
+photograph's takes seconds a view, 8 views of 6 MP 238 s; a render's less than one)."""
 
 
 @dataclass
@@ -102,7 +107,10 @@ def front_end(
             return FrontEnd(views, pools, sigs, seconds, cached=True)
         except (OSError, ValueError, KeyError):
             log(f"damaged front-end cache {path.name}; computing it again")
-    _, pools, sigs, seconds = compute(views, det, sig)
+    large = max((v.camera.width * v.camera.height for v in views), default=0) >= PROGRESS_PIXELS
+    with progress("features", 2 * len(views), "step", shown=large) as bar:
+        bar.set_postfix_str(f"{entry.name}, {grant}")
+        _, pools, sigs, seconds = compute(views, det, sig, step=bar.update)
     arrays = {f"{f}_{v}": getattr(c, f) for v, c in enumerate(pools) for f in _CAND}
     arrays |= {f"{s}_{v}": getattr(g, s) for v, g in enumerate(sigs) for s in SIGNALS}
     arrays |= {f"seconds_{k}": np.float64(s) for k, s in seconds.items()}
@@ -142,20 +150,29 @@ def with_focal(view: View, factor: float) -> View:
 
 
 def compute(
-    views: list[View], det: DetectorConfig, sig: SignalConfig, wanted: tuple[str, ...] = SIGNALS
+    views: list[View],
+    det: DetectorConfig,
+    sig: SignalConfig,
+    wanted: tuple[str, ...] = SIGNALS,
+    step=None,
 ) -> tuple[list[View], list[Candidates], list[Signals], dict[str, float]]:
     """The stage on any views (module docstring): the views (with the focal length
     estimated where it was guessed), their candidates in full-resolution pixels, the
-    signals (`wanted`: those a caller's policy reads, `compute_signals`) and the seconds."""
+    signals (`wanted`: those a caller's policy reads, `compute_signals`) and the seconds;
+    `step()`, if given, is called as each view is detected and its signals computed."""
     t = time.perf_counter()
     work = [v.scale_to(det.max_image_size) for v in views]
-    pools = [features.detect(v, det) for v, _, _ in work]
+    pools = []
+    for v, _, _ in work:
+        pools.append(features.detect(v, det))
+        if step is not None:
+            step()
     seconds = {"detect": time.perf_counter() - t}
     t = time.perf_counter()
     if not all(v.focal_known for v in views):
         views, work = _estimate_focal(views, work, pools, sig)
     focal_s = time.perf_counter() - t
-    sigs, sig_seconds = compute_signals([v for v, _, _ in work], pools, det, sig, wanted)
+    sigs, sig_seconds = compute_signals([v for v, _, _ in work], pools, det, sig, wanted, step)
     seconds.update(sig_seconds)
     seconds["geometry"] += focal_s
     pools = [c.scaled(1 / sx, 1 / sy) for c, (_, sx, sy) in zip(pools, work)]

@@ -39,6 +39,7 @@ from bench.frontend.policies import (
     multiview_policy,
     settings_for,
 )
+from bench.frontend.selection import BY_VIEW
 
 NAME = "track-first"
 
@@ -99,6 +100,9 @@ def track_first_select(
         within = (s - s.min()) / (np.ptp(s) + 1e-12) if len(s) else s  # [0, 1]: below 1 view
         out.append(np.sort(capped_greedy(views * 2 + within, inp, b, cfg)))
     return out
+
+
+BY_VIEW[NAME] = track_first_select
 
 
 @multiview_policy(

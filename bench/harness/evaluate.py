@@ -35,7 +35,7 @@ from bench.harness.predict import (
     stored_pairs,
     stored_poses,
 )
-from bench.harness.tasks import RUNNERS
+from bench.harness.tasks import TASK_RUNNERS
 from bench.render.entry import entry_meta
 from bench.results import PREDICTION, Workspace
 from bench.vocabulary import METHODS, METRICS, TASKS, Job, Unit, deciding
@@ -44,7 +44,7 @@ from bench.vocabulary import METHODS, METRICS, TASKS, Job, Unit, deciding
 def scoring_code() -> tuple:
     """Where the scoring's code starts: the ground truth, each task's evaluation and what
     it keeps, the readers of a stored prediction and the making of a row."""
-    tasks = [f for r in RUNNERS.values() for f in (r.evaluate, r.keep) if f is not None]
+    tasks = [f for r in TASK_RUNNERS.values() for f in (r.evaluate, r.keep) if f is not None]
     return (scene_truth, selection_shared, own_pipeline_shared, make_row, *tasks)
 
 
@@ -83,7 +83,7 @@ def evaluate(
         out = ws.model_dir(unit, job)
         model = pycolmap.Reconstruction(str(out)) if done["model"] else None
         t = time.perf_counter()
-        runner = RUNNERS[job.task]
+        runner = TASK_RUNNERS[job.task]
         scores = runner.evaluate(scene.truth, model, names, job.protocol, poses)
         if runner.keep is not None:
             runner.keep(model, scene.truth, out)

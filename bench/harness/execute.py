@@ -51,7 +51,7 @@ from bench.harness.config import RunConfig
 from bench.harness.evaluate import identities
 from bench.harness.methods import runner
 from bench.harness.predict import LoadedScene, has_prediction, predict
-from bench.harness.tasks import RUNNERS
+from bench.harness.tasks import TASK_RUNNERS
 from bench.results import Workspace
 from bench.vocabulary import (
     GROUND_TRUTH,
@@ -91,7 +91,7 @@ class Plan:
     @property
     def grants(self) -> tuple[str, ...]:
         return tuple(
-            sorted({RUNNERS[j.task].spec.grant for w in self.work.values() for j in w.jobs})
+            sorted({TASK_RUNNERS[j.task].spec.grant for w in self.work.values() for j in w.jobs})
         )
 
 
@@ -168,7 +168,7 @@ def failed_rows(entry: Path, unit: Unit, jobs, cfg: RunConfig, why: str) -> list
     """Rows recording a unit that could not be computed (their failure: `ERROR` + why),
     with no value for any metric a task needs (so a report of such rows alone is drawn)."""
     failure = ERROR + " ".join(why.split())[:400]
-    empty = {k: math.nan for r in RUNNERS.values() for k in r.spec.needs}
+    empty = {k: math.nan for r in TASK_RUNNERS.values() for k in r.spec.needs}
     return [
         ident | empty | {"wall_ms": math.nan, "status": "failed", "failure": failure}
         for ident in identities(entry, unit, jobs, cfg)

@@ -42,7 +42,7 @@ from bench.harness.evaluate import evaluation_hash
 from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
 from bench.harness.manifest import git_commit, write_manifest
 from bench.harness.predict import prediction_hash
-from bench.harness.tasks import RUNNERS
+from bench.harness.tasks import TASK_RUNNERS
 from bench.render.config import RenderConfig
 from bench.render.entry import entry_name, entry_names, render_scene, render_scenes
 from bench.results import DAMAGED, Workspace, holding
@@ -75,7 +75,7 @@ def with_reference(methods: tuple[str, ...], tasks: tuple[str, ...]) -> tuple[st
     grid runs a task with the exclusion rule (sfm) on rendered scenes: its means leave out
     the cells it does not map, and the rule holds only when it ran in every cell. (Said by
     `bench run --help`; the run's closing line names the cells it left out.)"""
-    ruled = any(RUNNERS[t].spec.exclusion_reference for t in tasks if t in RUNNERS)
+    ruled = any(TASK_RUNNERS[t].spec.exclusion_reference for t in tasks if t in TASK_RUNNERS)
     if REFERENCE_PEER in methods or not ruled:
         return methods
     return (*methods, REFERENCE_PEER)
@@ -90,7 +90,7 @@ class BenchConfig:
     methods: tuple[str, ...] = field(default_factory=default_methods)
     budgets: tuple[int, ...] = (128, 256, 512)
     tasks: tuple[str, ...] = field(
-        default_factory=lambda: tuple(n for n, r in RUNNERS.items() if r.default)
+        default_factory=lambda: tuple(n for n, r in TASK_RUNNERS.items() if r.default)
     )
     """Default: every task but those run on request (`TaskRunner.default`: nbv)."""
     protocols: tuple[str, ...] = tuple(PROTOCOLS)
@@ -129,12 +129,12 @@ class BenchConfig:
         unknown = [p for p in self.protocols if p not in PROTOCOLS]
         if unknown:
             raise BenchError(f"unknown protocol {unknown[0]!r}; valid: {', '.join(PROTOCOLS)}")
-        unknown = [t for t in self.tasks if t not in RUNNERS]
+        unknown = [t for t in self.tasks if t not in TASK_RUNNERS]
         if unknown or not self.tasks:
             raise BenchError(
-                f"unknown task {unknown[0] if unknown else ''!r}; valid: {', '.join(RUNNERS)}"
+                f"unknown task {unknown[0] if unknown else ''!r}; valid: {', '.join(TASK_RUNNERS)}"
             )
-        rigged = [t for t in self.tasks if RUNNERS[t].rig is not None]
+        rigged = [t for t in self.tasks if TASK_RUNNERS[t].rig is not None]
         if rigged and len(self.tasks) > 1 and not self.datasets:
             raise BenchError(
                 f"the {rigged[0]} task renders its own rig (the scene's planned path): run it "
@@ -198,23 +198,23 @@ class BenchConfig:
         if METHODS[method].pool not in ("", self.run.detector.detector):
             return []
         peer, kind = METHODS[method].role == "peer", METHODS[method].kind
-        claimed = {k for r in RUNNERS.values() for k in r.kinds}
+        claimed = {k for r in TASK_RUNNERS.values() for k in r.kinds}
         tasks = [
             t
             for t in self.tasks
-            if (RUNNERS[t].spec.peers or not peer)
-            and (kind in RUNNERS[t].kinds if RUNNERS[t].kinds else kind not in claimed)
+            if (TASK_RUNNERS[t].spec.peers or not peer)
+            and (kind in TASK_RUNNERS[t].kinds if TASK_RUNNERS[t].kinds else kind not in claimed)
         ]
         return [Job(t, pr) for t in tasks for pr in self.protocols_of(t)]
 
     def protocols_of(self, task: str) -> tuple[str, ...]:
         """The protocols of a task's rows: the grid's, or `NO_PROTOCOL` without tracks."""
-        return self.protocols if RUNNERS[task].spec.tracks else (NO_PROTOCOL,)
+        return self.protocols if TASK_RUNNERS[task].spec.tracks else (NO_PROTOCOL,)
 
     def render(self, task: str | None = None) -> RenderConfig | None:
         """The render settings of the entries a task's units read (`TaskRunner.rig`; the
         grid's first task by default): the run's unless the task has its own rig."""
-        rig = RUNNERS[task or self.tasks[0]].rig
+        rig = TASK_RUNNERS[task or self.tasks[0]].rig
         return self.run.render if rig is None or self.run.render is None else rig(self.run)
 
 
@@ -283,7 +283,7 @@ def _current_rows(
     hashes = {
         (m, t): accepted(prediction_hash(cfg.run, m, t))
         for m, t in set(zip(df["method"], df["task"]))
-        if m in known and t in RUNNERS
+        if m in known and t in TASK_RUNNERS
     }
     stale = pd.Series(
         [
@@ -308,7 +308,7 @@ def _current_rows(
         stale |= changed
     for scene in set(df["scene"]) & set(cfg.scenes) - {Path(d).name for d in cfg.datasets}:
         rows = ~stale & (df["scene"] == scene)
-        tasked = rows & df["task"].isin(RUNNERS)  # a row of each task against its own rig
+        tasked = rows & df["task"].isin(TASK_RUNNERS)  # a row of each task against its own rig
         names = {
             (sd, t): entry_names(scene, int(sd), cfg.render(t), ws.renders)
             for sd, t in set(zip(df["seed"][tasked], df["task"][tasked]))
@@ -368,11 +368,13 @@ def _run_in(
     done = {(*k[:4], *k[5:]) for k in done - other}  # as `runs.csv` keys its rows
     n_rows = sum(len(w.jobs) for w in work.values())
     if not cfg.units():
-        only = [f"the {', '.join(r.kinds)} methods only {t}" for t, r in RUNNERS.items() if r.kinds]
+        only = [
+            f"the {', '.join(r.kinds)} methods only {t}" for t, r in TASK_RUNNERS.items() if r.kinds
+        ]
         raise BenchError(
             f"nothing to compute: no method of {', '.join(cfg.methods)} runs a task of "
             f"{', '.join(cfg.tasks)} (the COLMAP peers run only "
-            f"{', '.join(t for t, r in RUNNERS.items() if r.spec.peers)}"
+            f"{', '.join(t for t, r in TASK_RUNNERS.items() if r.spec.peers)}"
             + "".join(f"; {o}" for o in only)
             + ")"
         )

@@ -18,7 +18,7 @@ its views alone, at the unit's budget with the keypoint policy `nbv.policy`:
 * with the rig's poses: the front end of the captured views (each view's pool detected once
   per path, its signals computed over the captured views only: a candidate's image never
   enters), the policy's selection, matching and COLMAP verification, and the tri task's
-  known-pose triangulation (`RUNNERS["tri"]`) under the job's protocol. This is what a
+  known-pose triangulation (`TASK_RUNNERS["tri"]`) under the job's protocol. This is what a
   chooser sees (`ChooserInput`) and the capture's tri score;
 * without them (the sfm task's pose-free front end and selection): matching and the sfm
   task's mapping: the capture's sfm score.
@@ -71,7 +71,7 @@ from bench.harness import select_match
 from bench.harness.config import MAX_ADDED, RunConfig
 from bench.harness.evaluate import identities, make_row, render_seconds
 from bench.harness.predict import LoadedScene, clear_model, export_model, read_record
-from bench.harness.tasks import RUNNERS, Matched, TaskRunner, register
+from bench.harness.tasks import TASK_RUNNERS, Matched, TaskRunner, register
 from bench.results import Workspace
 from bench.vocabulary import (
     AT_LEAST_0,
@@ -218,7 +218,7 @@ def reconstruction(ctx: Context, views: tuple, grant: str, protocol: str):
 
     def compute():
         m = _matched(ctx, views, grant)
-        runner = RUNNERS[SCORED[grant]]
+        runner = TASK_RUNNERS[SCORED[grant]]
         t = time.perf_counter()
         rec = runner.reconstruct(m, ctx.cfg.backend, protocol)
         ctx.spent("task", t)
@@ -235,8 +235,8 @@ def capture_scores(scene: LoadedScene, names: list[str], models: dict, protocol:
     truth = scene.truth
     path = [v.name for v in scene.fronts[RIG].views]
     cams = [truth.cams[path.index(n)] for n in names]
-    tri = RUNNERS[SCORED[RIG]].evaluate(truth, models[RIG], names, protocol, {})
-    sfm = RUNNERS[SCORED[IMAGES]].evaluate(
+    tri = TASK_RUNNERS[SCORED[RIG]].evaluate(truth, models[RIG], names, protocol, {})
+    sfm = TASK_RUNNERS[SCORED[IMAGES]].evaluate(
         replace(truth, cams=cams), models[IMAGES], names, protocol, {}
     )
     return {"completeness": tri["acc_completeness_pct"], "maa": sfm["maa"]}

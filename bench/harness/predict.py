@@ -49,7 +49,7 @@ from bench.frontend.stage import FrontEnd, compute
 from bench.frontend.views import Source
 from bench.harness import select_match
 from bench.harness.config import RunConfig
-from bench.harness.tasks import RUNNERS, Matched
+from bench.harness.tasks import TASK_RUNNERS, Matched
 from bench.results import LOOP, PREDICTION, Workspace
 from bench.vocabulary import CODE, METHODS, Job, Unit, deciding
 
@@ -74,7 +74,7 @@ own (`bench.vocabulary.CODE`); the scoring is the evaluation hash's
 def task_code(task: str) -> tuple:
     """A task's functions that decide its predicted rows: its reconstruction and the model
     it records without one."""
-    runner = RUNNERS[task]
+    runner = TASK_RUNNERS[task]
     return tuple(f for f in (runner.reconstruct, runner.record) if f is not None)
 
 
@@ -112,7 +112,7 @@ def prediction_hash(cfg: RunConfig, method: str, task: str) -> str:
     settings and input files (the learned weights), and for a method from a module
     (`--policy-module`, an entry point) its module's content as well."""
     own = cfg.policy_config(method)
-    runner = RUNNERS[task]
+    runner = TASK_RUNNERS[task]
     base = content_key(
         {
             "settings": cfg.prediction(runner.settings),
@@ -210,7 +210,7 @@ def predict(
         k: j
         for k, j in job_records(earlier).items()
         if k not in {j.key for j in jobs}
-        and k.partition("/")[0] in RUNNERS
+        and k.partition("/")[0] in TASK_RUNNERS
         and current(j, cfg, unit.method, k.partition("/")[0])
     }
     if kept:
@@ -230,7 +230,7 @@ def store_selection(select: Callable[..., Selection]) -> Store:
 
 def _store_selection(scene, unit, jobs, cfg, ws, record, select) -> None:
     folder, matched = ws.unit_dir(unit), {}
-    for grant in dict.fromkeys(RUNNERS[j.task].spec.grant for j in jobs):
+    for grant in dict.fromkeys(TASK_RUNNERS[j.task].spec.grant for j in jobs):
         fe = scene.fronts[grant]
         try:
             t = time.perf_counter()
@@ -238,7 +238,7 @@ def _store_selection(scene, unit, jobs, cfg, ws, record, select) -> None:
             select_s = time.perf_counter() - t
         except MethodFailed as e:
             e.tasks = tuple(
-                dict.fromkeys(j.task for j in jobs if RUNNERS[j.task].spec.grant == grant)
+                dict.fromkeys(j.task for j in jobs if TASK_RUNNERS[j.task].spec.grant == grant)
             )
             raise
         key = repr(([s.tolist() for s in selections], rounds))
@@ -262,9 +262,9 @@ def _store_selection(scene, unit, jobs, cfg, ws, record, select) -> None:
         m = Matched(
             Source.of(scene.entry).images, [v.camera for v in fe.views], record["names"], xy, pairs
         )
-        grant_jobs = [j for j in jobs if RUNNERS[j.task].spec.grant == grant]
+        grant_jobs = [j for j in jobs if TASK_RUNNERS[j.task].spec.grant == grant]
         for job in grant_jobs:
-            runner = RUNNERS[job.task]
+            runner = TASK_RUNNERS[job.task]
             rec = runner.reconstruct(m, cfg.backend, job.protocol)
             model = rec.model
             if model is None and runner.record is not None:
@@ -288,7 +288,7 @@ def store_own_pipeline(scene, unit, jobs, cfg, ws, record) -> None:
     fe = next(iter(scene.fronts.values()))
     names, cams = [v.name for v in fe.views], [v.camera for v in fe.views]
     image_dir = Source.of(scene.entry).images
-    mapped = list(dict.fromkeys(j.protocol for j in jobs if RUNNERS[j.task].maps))
+    mapped = list(dict.fromkeys(j.protocol for j in jobs if TASK_RUNNERS[j.task].maps))
     sift = ws.renders / COLMAP_SIFT
     extracted = peer_extraction(image_dir, names, cams, unit.method, unit.budget, sift)
     keep_tracks = unit.budget if CAPS[unit.method] == TRACKS else 0
@@ -305,7 +305,7 @@ def store_own_pipeline(scene, unit, jobs, cfg, ws, record) -> None:
         np.savez(tmp, **arrays)
     matched = Matched(image_dir, cams, names, run.keypoints, run.pairs)
     for job in jobs:
-        runner = RUNNERS[job.task]
+        runner = TASK_RUNNERS[job.task]
         if runner.maps:
             rec, extra_s = run.recs[job.protocol], 0.0
         else:

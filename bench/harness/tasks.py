@@ -95,12 +95,13 @@ class TaskRunner:
     (`bench.harness.config.PREDICTION`): the nbv task's `nbv`."""
 
 
-RUNNERS: dict[str, TaskRunner] = {}
+TASK_RUNNERS: dict[str, TaskRunner] = {}
+"""Every task's runner, by name (as `bench.harness.methods.KIND_RUNNERS` holds every kind's)."""
 
 
 def register(runner: TaskRunner) -> None:
     declare_task(runner.spec)
-    RUNNERS[runner.spec.name] = runner
+    TASK_RUNNERS[runner.spec.name] = runner
 
 
 def view_of_name(names: list[str]) -> dict[str, int]:
