@@ -1,9 +1,10 @@
 """A results folder bound to its settings: what it records of them (`config.json`,
 `vocabulary.json`) and what a run, `bench plot` and `bench publish` check against them.
 
-A row is finished when its `prediction_hash` (the shared settings and code, and its
-method's own settings and code) and its `evaluation_hash` (the code of the scoring) are the
-current ones: a row whose prediction is stale is computed again; a row whose evaluation
+A row is finished when its `prediction_hash` (the settings its prediction reads, the
+shared code, its task's and its method's own code and settings) and its `evaluation_hash`
+(the code of the scoring) are the current ones, or older ones proven to give the same
+values (`bench.codehash.accepted`): a row whose prediction is stale is computed again; a row whose evaluation
 alone is stale is scored again from the unit's stored prediction. A results folder is bound to its shared settings
 (`config.json`); its grid may grow (new scenes, seeds, methods, budgets, tasks run only
 the new rows), a method's own settings may change (its rows alone run again), and only a

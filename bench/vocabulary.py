@@ -58,10 +58,9 @@ ROLES = ("baseline", "contender", "reference", "peer")
 """A baseline competes for "best baseline"; a contender is compared with the baselines; a
 reference (`all`, the oracle) and a peer (stock COLMAP) are shown, never ranked as either."""
 PER_VIEW, MULTI_VIEW, GROUND_TRUTH, OWN_PIPELINE = "per-view", "multi-view", "oracle", "peer"
-# The kind of `<policy>@<peer>`: a per-view policy at a peer's own keypoint count per view
-# (`bench.backend.equal_count` declares it); the report pairs it with its peer. (A comment,
-# not an attribute docstring: a bare string here would enter every row's code hash.)
 EQUAL_COUNT = "equal-count"
+"""The kind of `<policy>@<peer>`: a per-view policy at a peer's own keypoint count per view
+(`bench.backend.equal_count` declares it); the report pairs it with its peer."""
 
 
 def equal_parts(name: str) -> tuple[str, str]:

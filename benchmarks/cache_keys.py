@@ -3,7 +3,8 @@ each change, on a copy of the source tree (the package is never edited in place)
 
     .venv/bin/python benchmarks/cache_keys.py [--source DIR] [--out DIR]
 
-The changes, in order: a docstring and a comment edited; one policy edited (`texture`);
+The changes, in order: a docstring and a comment edited; a helper of three policies
+renamed in every module (`capped_greedy`); one policy edited (`texture`);
 a policy added (`texture-low`, in the grid from then on); `adaptive-loop`'s loop_rounds
 changed (`--set adaptive-loop.loop_rounds=1`; on a source tree without per-method
 settings `--set policy.loop_rounds=1 --overwrite`, which that code requires); a scene
@@ -19,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -47,7 +49,7 @@ NEW_POLICY = """
 
 @policy("texture-low", "Texture, lowest first", role="baseline", reads=("texture",))
 def texture_low_policy(inp, budget, rng, cfg):
-    return _order(-inp.signals.texture)[:budget]
+    return strongest_first(-inp.signals.texture)[:budget]
 """
 NEW_SCENE = """
 
@@ -62,6 +64,14 @@ def edit(path: Path, old: str, new: str) -> None:
     if old not in text:
         sys.exit(f"cannot edit {path}: {old!r} not found")
     path.write_text(text.replace(old, new, 1))
+
+
+def rename(root: Path, old: str, new: str) -> None:
+    """`old` renamed `new` (a whole word) in every module under `root`."""
+    for path in root.rglob("*.py"):
+        text = path.read_text()
+        if re.search(rf"\b{old}\b", text):
+            path.write_text(re.sub(rf"\b{old}\b", new, text))
 
 
 def run(src: Path, work: Path, extra: list[str], scenes: str, policies: str) -> float:
@@ -133,11 +143,18 @@ def main() -> None:
             [],
         ),
         (
+            "rename",
+            lambda: rename(src / "bench", "capped_greedy", "greedy_under_cap"),
+            "table,facade",
+            POLICIES,
+            [],
+        ),
+        (
             "edit texture",
             lambda: edit(
                 pol,
-                "return _order(inp.signals.texture)[:budget]",
-                "return _order(1.0 * inp.signals.texture)[:budget]",
+                "return strongest_first(inp.signals.texture)[:budget]",
+                "return strongest_first(1.0 * inp.signals.texture)[:budget]",
             ),
             "table,facade",
             POLICIES,

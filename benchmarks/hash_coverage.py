@@ -9,6 +9,8 @@ read with the cuts that code made. Printed: per key, the definitions (top-level 
 classes, constants; a module's statements that bind no name counted apart) and modules.
 """
 
+import argparse
+
 from bench.codehash import covered
 from bench.frontend import stage
 from bench.harness import evaluate, methods, predict  # noqa: F401  (declares every method)
@@ -44,6 +46,7 @@ def module_keys() -> dict:
 
 
 def main() -> None:
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     keys = content_keys() if hasattr(predict, "task_code") else module_keys()
     table = catalog.generator_of("table")
     others = [g for g in catalog.generator_functions() if g is not table]

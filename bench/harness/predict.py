@@ -10,8 +10,8 @@ learned peer (`aliked-b`) selects and matches like a policy, with LightGlue.
 
 What a unit predicted is stored in its folder (`Workspace.unit_dir`): the selections and
 verified matches (`prediction-<grant>.npz`, a peer's keypoints in `prediction-peer.npz`),
-the models exported per job, and `prediction.json` (written last: the prediction hash,
-the view names, each stage's seconds, each job's failure). `bench.harness.evaluate`
+the models exported per job, and `prediction.json` (written last: the view names, each
+stage's seconds, each job's prediction hash and failure). `bench.harness.evaluate`
 scores it; nothing here scores.
 
 The arrays, by key: `prediction-<grant>.npz` holds `selection_{v}` (the indices into view

@@ -5,11 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 VARIANTS = ("auto", "cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
-# The most views the command line renders on a path (`bench.cli.common.checked_views`):
-# twelve times the dense regime's 21, far beyond any grid (each view is a path-traced image
-# with its ground-truth layers, seconds and megabytes); 100000 started rendering. A comment,
-# not a docstring: a module's bare string is code to `bench.codehash`, and every row's hash.
 MAX_VIEWS = 256
+"""The most views the command line renders on a path (`bench.cli.common.checked_views`):
+twelve times the dense regime's 21, far beyond any grid (each view is a path-traced image
+with its ground-truth layers, seconds and megabytes); 100000 started rendering."""
 
 
 @dataclass(frozen=True)
