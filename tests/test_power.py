@@ -133,6 +133,7 @@ def test_the_verdict_says_whether_the_renders_predict_a_set_as_well_as_the_photo
     from bench.report.transfer import verdicts
 
     row = dict(dataset="d", rendered_views=6, matched=True, budget=256, tau_lo=0.1, tau_hi=0.8)
+    row |= dict(sees="image")
     row |= dict(rel_rendered=0.9, rel_dataset=0.8, ceiling=math.sqrt(0.72))
     summary = pd.DataFrame(
         [
@@ -143,6 +144,7 @@ def test_the_verdict_says_whether_the_renders_predict_a_set_as_well_as_the_photo
     )
     (line,) = verdicts(summary, 256)
     assert line.startswith("d, B = 256: the 6-view renders predict it as well as the other")
-    assert "sfm_maa (tau 0.50 [0.10, 0.80] against 0.30, within the interval;" in line
-    assert "less well than the other photographs in pairs_auc_10 (tau 0.50" in line
+    assert "sfm_maa among the selections that see `image` (tau 0.50 [0.10, 0.80] against" in line
+    assert "against 0.30, within the interval;" in line
+    assert "less well than the other photographs in pairs_auc_10 among the" in line
     assert "against 0.90; reliability 0.90 renders, 0.80 photographs, ceiling 0.85)" in line

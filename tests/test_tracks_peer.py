@@ -11,10 +11,11 @@ from bench.backend.matching import BackendConfig
 from bench.backend.peers import longest_tracks, run_peer
 from bench.cli import main
 from bench.evaluation.export import export_dataset
+from bench.frontend.tracks import TrackFirstConfig
 from bench.frontend.views import load_views
 from bench.harness.grid import BenchConfig, default_methods
 from bench.harness.methods import runner
-from bench.vocabulary import VIEWS, Job, Vocabulary
+from bench.vocabulary import TRACKS_FIRST_PASS, VIEWS, Job, Vocabulary
 from tests.test_policies import _dataset
 
 PEER = "colmap-tracks-b"
@@ -26,6 +27,10 @@ def _run(folder, budget=BUDGET, peer=PEER, protocols=()):
     names, cams = [v.name for v in views], [v.camera for v in views]
     images = folder / "images" if (folder / "images").is_dir() else folder
     return run_peer(images, names, cams, peer, budget, BackendConfig(), list(protocols))
+
+
+def test_its_first_pass_is_track_firsts():
+    assert TRACKS_FIRST_PASS == TrackFirstConfig().first_pass
 
 
 def test_the_longest_tracks_are_kept_ties_in_colmaps_order():

@@ -49,9 +49,10 @@ from bench.backend.reconstruction import Reconstruction, map_database, quiet_col
 from bench.camera import Camera
 from bench.frontend.features import strongest_first
 from bench.frontend.policies import register_policy, response_policy
-from bench.frontend.tracks import TrackFirstConfig, track_views
+from bench.frontend.tracks import track_views
 from bench.vocabulary import (
     OWN_PIPELINE,
+    TRACKS_FIRST_PASS,
     TRACKS_PEER,
     Method,
     declare_kind,
@@ -119,10 +120,10 @@ def longest_tracks(spans: np.ndarray, budget: int) -> np.ndarray:
 
 def track_cap(db_path: Path, names: list[str], budget: int, matching, verification) -> None:
     """`colmap-tracks-b`'s choice (module docstring): its first pass (the database's
-    keypoints, `track-first`'s multiple of B) matched and verified by COLMAP, then in each
+    keypoints held to `TRACKS_FIRST_PASS` x B, `track-first`'s) matched and verified by COLMAP, then in each
     view the `budget` keypoints of the longest verified tracks; the first pass's matches
     are cleared for the final matching."""
-    _cap_database(db_path, names, TrackFirstConfig().first_pass * budget)
+    _cap_database(db_path, names, TRACKS_FIRST_PASS * budget)
     pycolmap.match_exhaustive(
         db_path,
         matching_options=matching,
