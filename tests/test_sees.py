@@ -17,7 +17,7 @@ from bench.results import VOCABULARY
 from bench.vocabulary import IMAGE, TRUTH, VIEW_SIGNALS, VIEWS, Method, Vocabulary, sees
 
 OWN_IMAGE = (
-    *("random", "texture", "grid", "response", "ssc", "quadtree", "all"),
+    *("random", "texture", "grid", "response", "scale", "ssc", "quadtree", "all"),
     *("colmap", "colmap-b", "colmap-soft-b", "aliked-b", "disk-b", "response@colmap-soft-b"),
 )
 OTHER_VIEWS = (
