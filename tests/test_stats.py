@@ -362,7 +362,7 @@ def test_a_task_and_a_metric_declared_once_are_in_every_table_figure_and_the_pag
     figures.figure3(t1.reset_index(), vocab, tmp_path / "figure3")
     assert "Toy score" in [ax.get_title() for ax in drawn["fig"].axes]
     page = results_page(tmp_path, df)
-    assert "| adaptive | random | toy_score | 3 |" in page
+    assert "| adaptive (views) | random (image) | toy_score | 3 |" in page
 
 
 @pytest.mark.parametrize(

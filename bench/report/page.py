@@ -288,11 +288,11 @@ def _paired_section(
         rows = rows[rows["baseline"] == baseline]
     if rows.empty:
         return []
-    header = ["method", "baseline", "metric", "n", "mean difference [95%]", "w/t/l"]
+    header = ["method (sees)", "baseline (sees)", "metric", "n", "mean difference [95%]", "w/t/l"]
     body = [
         [
-            str(r["method"]),
-            str(r["baseline"]),
+            f"{r['method']} ({r.get('method_sees', 'n/a')})",
+            f"{r['baseline']} ({r.get('baseline_sees', 'n/a')})",
             str(r["metric"]),
             _num(r["n"]),
             _interval(r, "mean_diff", "lo", "hi", "note"),

@@ -269,7 +269,8 @@ def _paired(
     rows: pd.DataFrame, pairs: list[tuple[str, str]], metrics, vocab: Vocabulary
 ) -> pd.DataFrame:
     """Policy minus baseline for each (policy, baseline) of `pairs`, per scene and pooled,
-    per budget and metric, over the (scene, seed) units both ran."""
+    per budget and metric, over the (scene, seed) units both ran; each row names what
+    both see (`method_sees`, `baseline_sees`: a pair across categories says so)."""
     out = []
     lower = vocab.lower_better()
     for budget in sorted(b for b in pd.unique(rows["budget"]) if b > 0):
@@ -287,6 +288,8 @@ def _paired(
                             "budget": budget,
                             "method": policy,
                             "baseline": base,
+                            "method_sees": vocab.sees(policy),
+                            "baseline_sees": vocab.sees(base),
                             "metric": m,
                             **res,
                         }
@@ -457,4 +460,4 @@ def equal_keypoints(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
         kpv = rows.groupby(["method", "budget"])[count].mean()
         for side, col in (("method", "method_kpv"), ("baseline", "peer_kpv")):
             out[col] = [kpv.get((m, b), math.nan) for m, b in zip(out[side], out["budget"])]
-    return out.rename(columns={"baseline": "peer"})
+    return out.rename(columns={"baseline": "peer", "baseline_sees": "peer_sees"})
