@@ -59,6 +59,10 @@ TABLES = (
 TABLE1, TABLE1_TWOVIEW, TABLE2, PAIRED, PAIRED_SFM, TABLE_SCENES, FRONTEND_COST, TABLE3 = TABLES
 # The equal-keypoint comparison (`bench.report.tables.equal_keypoints`), where it ran.
 TABLE1_EQUAL = "table1_equal.csv"
+# The verdicts per category of `sees` (`bench.report.categories.category_verdicts`).
+VERDICTS = "verdicts.csv"
+# The cost per method and budget, and quality against it (`bench.report.cost`).
+TABLE_COST, FIGURE_COST = "table_cost.csv", "figure_cost"
 FIGURES = ("figure2", "figure3", "figure_budget", "figure_views")
 """The report's figures, without their suffix (`.png`; Figure 3 also `.pdf`)."""
 FIGURE2, FIGURE3, FIGURE_BUDGET, FIGURE_VIEWS = FIGURES

@@ -44,6 +44,10 @@ FIGURE_SCENE = "table"
 PAIRED_PEERS = ("colmap-b", "aliked-b", "disk-b")
 """The peers held to the same budget that `paired_sfm.csv` compares with, where they ran:
 stock COLMAP's, and a learned detector's own top-B with LightGlue (on its pool)."""
+# The peers held to the same budget that each category of `sees` is judged against, where
+# they ran (`bench.report.categories`, `paired_sfm.csv`): `PAIRED_PEERS`, which see their
+# own image, and stock COLMAP choosing from its own first pass, which sees other views.
+CATEGORY_PEERS = (*PAIRED_PEERS, "colmap-tracks-b")
 REFERENCE_PEER = "colmap"
 """Stock COLMAP with all its features: a (scene, seed) it does not map in the sfm task
 measures nothing, so it is marked (`REFERENCE_MAPS`) and left out of the sfm means."""
@@ -72,6 +76,9 @@ def equal_parts(name: str) -> tuple[str, str]:
 # The kind of `colmap-tracks-b`: stock COLMAP choosing each view's keypoints by the views
 # its own verified tracks span (`bench.backend.peers` declares it; see `KIND_SEES`).
 TRACKS_PEER = "peer-tracks"
+# Its first pass, keypoints per view as a multiple of B: `track-first`'s (its default
+# `first_pass`, tests/test_tracks_peer.py), so that the two have seen as much.
+TRACKS_FIRST_PASS = 4
 
 
 KINDS: dict[str, str] = {

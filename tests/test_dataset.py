@@ -34,7 +34,9 @@ from bench.report.transfer import transfer
 from bench.vocabulary import KEY
 from tests.conftest import MEDIUM, bench_run
 
-GRID = dict(seeds=(0,), methods=("texture", "adaptive", "oracle", "colmap-b"), budgets=(64,))
+GRID = dict(
+    seeds=(0,), methods=("texture", "grid", "adaptive", "oracle", "colmap-b"), budgets=(64,)
+)
 NOT_COMPARED = {"scene", "render_key", "render_s_per_view", "invocation", "ground_truth"}
 NOT_COMPARED |= {"row_checksum"}  # a hash of every value, those above included
 
@@ -68,19 +70,26 @@ def test_dataset_run_gives_the_metrics_and_the_ranking_of_the_rendered_path(
         renders_dir,
         workers=1,
     )
-    assert len(rendered) == len(data) == 3 * 5 + 3  # tri, sfm x 2 protocols, pairs once; colmap-b
+    assert len(rendered) == len(data) == 4 * 5 + 3  # tri, sfm x 2 protocols, pairs once; colmap-b
     timing = {c for c in rendered if c.endswith("_ms")}
     cols = [c for c in rendered.columns if c not in NOT_COMPARED | timing]
     a = rendered[cols].sort_values(list(KEY[2:]), ignore_index=True)
     b = data[cols].sort_values(list(KEY[2:]), ignore_index=True)
     pd.testing.assert_frame_equal(a, b, check_exact=False, rtol=1e-6, check_dtype=False)
     assert a["acc_completeness_pct"].notna().any() and a["maa"].notna().any()
-    # the export of a render ranks the methods as the render does
+    # the export of a render ranks the methods as the render does, each category of `sees`
+    # apart: texture, grid and colmap-b see their image (tri has no peer: 2, unranked);
+    # adaptive alone sees other views
     summary, ranks = transfer(data, read_vocabulary(tmp_path / "d"), tmp_path / "r")
-    assert set(summary["metric"]) == {"sfm_maa", "acc_completeness_pct", "pairs_auc_10"}
-    assert (ranks["rank_shift"] == 0).all() and len(ranks) == 3 + 4 + 4
-    assert summary["kendall_tau"].isna().all()  # 3 or 4 methods: too few for a tau
-    assert summary["tau_note"].str.match(r"no tau: [34] methods, too few").all()
+    assert set(summary["metric"]) == {"sfm_maa", "pairs_auc_10"}
+    assert set(summary["sees"]) == {"image"} and set(ranks["method"]) == {
+        "texture",
+        "grid",
+        "colmap-b",
+    }
+    assert (ranks["rank_shift"] == 0).all() and len(ranks) == 3 + 3
+    assert summary["kendall_tau"].isna().all()  # 3 methods: too few for a tau
+    assert summary["tau_note"].str.match(r"no tau: 3 methods, too few").all()
     assert (summary["winner_dataset"] == summary["winner_rendered"]).all()
 
 
@@ -490,7 +499,7 @@ def test_several_datasets_run_at_once_with_tables_per_dataset_and_a_transfer_tab
     sets = tmp_path / "sets"
     export_dataset(medium_entry("table"), sets / "table-ds")
     export_dataset(medium_entry("facade"), sets / "facade-ds")
-    grid = ["--methods", "random,texture,adaptive", "--budget", "64", "--tasks", "tri"]
+    grid = ["--methods", "random,texture,grid,adaptive", "--budget", "64", "--tasks", "tri"]
     grid += ["--protocols", "multiview", "--workers", "1", "--renders", str(renders_dir)]
     medium = ["--width", "320", "--height", "240", "--spp", "16", "--max-depth", "2"]
     assert (
@@ -522,6 +531,7 @@ def test_several_datasets_run_at_once_with_tables_per_dataset_and_a_transfer_tab
         assert set(pd.read_csv(out / f"table1-{name}.csv")["method"]) == {
             "random",
             "texture",
+            "grid",
             "adaptive",
         }
     summary, ranks = pd.read_csv(out / "transfer.csv"), pd.read_csv(out / "transfer_ranks.csv")

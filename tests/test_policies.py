@@ -59,6 +59,17 @@ def test_response_takes_the_strongest(fe):
     assert r[idx].min() >= np.sort(r)[-BUDGET]
 
 
+def test_scale_takes_the_largest_and_keeps_larger_scales_than_response(fe):
+    """COLMAP's cap order on the pool (issue 53): the B largest scales, at least as large
+    as response's B (which on the renders keep the finest extrema)."""
+    for inp in _inputs(fe):
+        idx = select("scale", inp, BUDGET, np.random.default_rng(0))
+        top = select("response", inp, BUDGET, np.random.default_rng(0))
+        size = inp.candidates.size
+        assert size[idx].min() >= np.sort(size)[-BUDGET]
+        assert np.median(size[idx]) >= np.median(size[top])
+
+
 def test_feedback_loop_meets_the_budget_logs_rounds_and_is_deterministic(fe):
     cams = [v.camera for v in fe.views]
 

@@ -165,6 +165,8 @@ def test_with_one_set_the_verdict_still_says_what_its_tau_means_and_its_ceiling(
     assert line.endswith("no other set to compare with (the baseline needs two sets).")
     (why,) = verdicts(pd.DataFrame([row | dict(kendall_tau=math.nan, tau_note="no tau: 5")]), 256)
     assert ": no tau: 5; the split-half reliabilities (0.95 renders, 0.94 this set)" in why
+    (own,) = verdicts(pd.DataFrame([row | dict(sees="image")]), 256)  # a category's ranking
+    assert own.startswith("d, sfm_maa among the selections that see `image`, B = 256, against")
 
 
 def test_the_tiers_claim_holds_how_many_units_tell_any_two_methods_apart():

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 
 import pandas as pd
+import pytest
 
 from bench.binding import read_vocabulary
 from bench.frontend.signals import GEOMETRIC
@@ -16,7 +17,7 @@ from bench.results import VOCABULARY
 from bench.vocabulary import IMAGE, TRUTH, VIEW_SIGNALS, VIEWS, Method, Vocabulary, sees
 
 OWN_IMAGE = (
-    *("random", "texture", "grid", "response", "ssc", "quadtree", "all"),
+    *("random", "texture", "grid", "response", "scale", "ssc", "quadtree", "all"),
     *("colmap", "colmap-b", "colmap-soft-b", "aliked-b", "disk-b", "response@colmap-soft-b"),
 )
 OTHER_VIEWS = (
@@ -61,3 +62,41 @@ def test_table1_says_what_each_method_sees():
     ]
     t1 = table1(headline_frame(pd.DataFrame(rows), vocab), vocab).set_index("method")
     assert t1["sees"].to_dict() == {"response": IMAGE, "track-first": VIEWS, "colmap-b": IMAGE}
+
+
+def _sfm_rows() -> pd.DataFrame:
+    """sfm mAA in 4 scenes x 3 seeds: track-first 0.8 ahead of colmap-tracks-b 0.7 and of
+    every own-image method; response 0.2 and grid 0.1 behind colmap-b 0.3."""
+    values = {"response": 0.2, "grid": 0.1, "colmap-b": 0.3}
+    values |= {"track-first": 0.8, "cross-view": 0.5, "colmap-tracks-b": 0.7}
+    return pd.DataFrame(
+        dict(scene=s, seed=k, method=m, budget=128, task="sfm", protocol="multiview", maa=v)
+        | dict(maa=v + 0.01 * k * (i + 1) + 0.003 * k * (m in ("track-first", "grid")))
+        for i, s in enumerate("abcd")
+        for k in range(3)
+        for m, v in values.items()
+    )
+
+
+def test_each_category_is_judged_against_its_own_peer_and_said_naming_it():
+    from bench.report.categories import category_verdicts, headline
+    from bench.report.tables import paired_sfm
+
+    vocab = Vocabulary.current()
+    frame = headline_frame(_sfm_rows(), vocab)
+    v = category_verdicts(frame, vocab).set_index("sees")
+    assert v.loc[IMAGE, ["policy", "peer", "verdict"]].tolist() == ["response", "colmap-b", "below"]
+    assert v.loc[VIEWS, ["policy", "peer", "verdict"]].tolist() == [
+        "track-first",
+        "colmap-tracks-b",
+        "above",
+    ]
+    assert v.loc[VIEWS, "mean_diff"] == pytest.approx(0.103) and v.loc[VIEWS, "n"] == 12
+    said = headline(category_verdicts(frame, vocab))
+    assert "see their own image (`image`)" in said and "see other views (`views`)" in said
+    pairs = paired_sfm(frame, vocab)
+    judged = set(zip(pairs["method"], pairs["baseline"]))
+    assert ("track-first", "colmap-tracks-b") in judged and ("response", "colmap-b") in judged
+    assert ("track-first", "colmap-b") not in judged and ("grid", "colmap-tracks-b") not in judged
+    t1 = table1(frame, vocab).set_index("method")["sfm_maa_tier"]
+    assert t1["track-first"] == 1 and t1["colmap-b"] == 1  # each the best of its category

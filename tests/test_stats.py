@@ -199,16 +199,20 @@ def test_the_sfm_rule_is_applied_in_all_cells_or_none_and_said(cells):
 
 
 def test_paired_sfm_compares_every_policy_with_each_budgeted_peer_that_ran():
-    """colmap-b and, on a learned pool, aliked-b: each policy minus each peer, by hand."""
+    """colmap-b, on a learned pool aliked-b, and colmap-tracks-b: each policy minus each
+    peer that sees what it sees (texture its image, adaptive other views), by hand."""
     rows = _sfm_rows((0, 1))
-    peer = rows[rows["method"] == "texture"].assign(method="aliked-b", maa=[0.1, 1.0])
-    frame = headline_frame(pd.concat([rows, peer]), Vocabulary.current())
+    texture = rows[rows["method"] == "texture"]
+    peers = [texture.assign(method=p, maa=[0.1, 1.0]) for p in ("aliked-b", "colmap-tracks-b")]
+    frame = headline_frame(pd.concat([rows, *peers]), Vocabulary.current())
     pairs = paired_sfm(frame, Vocabulary.current())
     assert "colmap-b" not in set(pairs["baseline"])
-    vs = pairs[(pairs["baseline"] == "aliked-b") & (pairs["metric"] == "sfm_maa")]
-    vs = vs[vs["scene"] == "s"].set_index("method")["mean_diff"]
+    sfm = pairs[(pairs["metric"] == "sfm_maa") & (pairs["scene"] == "s")]
+    vs = sfm.set_index(["method", "baseline"])["mean_diff"]
     # seed 1 is left out (stock COLMAP does not map it): adaptive 0.6 - 0.1, texture 0.3
-    assert vs["adaptive"] == pytest.approx(0.5) and vs["texture"] == pytest.approx(0.3)
+    assert vs["adaptive", "colmap-tracks-b"] == pytest.approx(0.5)
+    assert vs["texture", "aliked-b"] == pytest.approx(0.3)
+    assert ("adaptive", "aliked-b") not in vs and ("texture", "colmap-tracks-b") not in vs
 
 
 def test_the_oracle_share_of_a_grid_without_completeness_is_empty():
@@ -241,7 +245,7 @@ def test_a_dataset_run_with_colmap_keeps_its_sfm_means_and_its_transfer_table(
     ds = export_dataset(medium_entry("table"), tmp_path / "table-ds")
     rendered, out = tmp_path / "r", tmp_path / "d"
     grid = dict(seeds=(0,), budgets=(64,), tasks=("sfm",), protocols=("multiview",))
-    policies = ("random", "texture", "adaptive")
+    policies = ("random", "texture", "grid", "adaptive")  # three see their own image
     run = RunConfig(render=MEDIUM)
     bench_run(
         BenchConfig(scenes=("table",), methods=policies, run=run, **grid), rendered, renders_dir
@@ -358,7 +362,7 @@ def test_a_task_and_a_metric_declared_once_are_in_every_table_figure_and_the_pag
     figures.figure3(t1.reset_index(), vocab, tmp_path / "figure3")
     assert "Toy score" in [ax.get_title() for ax in drawn["fig"].axes]
     page = results_page(tmp_path, df)
-    assert "| adaptive | random | toy_score | 3 |" in page
+    assert "| adaptive (views) | random (image) | toy_score | 3 |" in page
 
 
 @pytest.mark.parametrize(

@@ -11,10 +11,11 @@ from bench.backend.matching import BackendConfig
 from bench.backend.peers import CAPS, TRACKS, longest_tracks, peer_extraction, run_peer
 from bench.cli import main
 from bench.evaluation.export import export_dataset
+from bench.frontend.tracks import TrackFirstConfig
 from bench.frontend.views import load_views
 from bench.harness.grid import BenchConfig, default_methods
 from bench.harness.methods import runner
-from bench.vocabulary import NO_PROTOCOL, VIEWS, Job, Vocabulary
+from bench.vocabulary import NO_PROTOCOL, TRACKS_FIRST_PASS, VIEWS, Job, Vocabulary
 from tests.test_policies import _dataset
 
 PEER = "colmap-tracks-b"
@@ -28,6 +29,10 @@ def _run(folder, budget=BUDGET, peer=PEER, protocols=()):
     extracted = peer_extraction(images, names, cams, peer, budget)
     keep = budget if CAPS[peer] == TRACKS else 0
     return run_peer(images, names, cams, extracted, BackendConfig(), list(protocols), keep)
+
+
+def test_its_first_pass_is_track_firsts():
+    assert TRACKS_FIRST_PASS == TrackFirstConfig().first_pass
 
 
 def test_the_longest_tracks_are_kept_ties_in_colmaps_order():

@@ -62,9 +62,10 @@ from bench.camera import Camera
 from bench.files import atomic_path, content_key
 from bench.frontend.features import strongest_first
 from bench.frontend.policies import register_policy, response_policy
-from bench.frontend.tracks import TrackFirstConfig, track_views
+from bench.frontend.tracks import track_views
 from bench.vocabulary import (
     OWN_PIPELINE,
+    TRACKS_FIRST_PASS,
     TRACKS_PEER,
     Method,
     declare_kind,
@@ -235,7 +236,7 @@ def peer_extraction(
     extracted = extract(image_dir, names, cams, budget if cap == SOFT else 0, cache_dir)
     if cap not in (HARD, TRACKS):
         return extracted
-    keep = budget if cap == HARD else TrackFirstConfig().first_pass * budget
+    keep = budget if cap == HARD else TRACKS_FIRST_PASS * budget
     kept = [hard_cap(e.keypoints, keep) for e in extracted]
     return [Extracted(e.keypoints[k], e.descriptors[k], e.seconds) for e, k in zip(extracted, kept)]
 
@@ -263,7 +264,7 @@ def longest_tracks(spans: np.ndarray, budget: int) -> np.ndarray:
 
 def track_cap(db_path: Path, names: list[str], budget: int, matching, verification) -> None:
     """`colmap-tracks-b`'s choice (module docstring): its first pass (the database's
-    keypoints, `track-first`'s multiple of B) matched and verified by COLMAP, then in each
+    keypoints, held to `TRACKS_FIRST_PASS` x B, track-first's) matched and verified by COLMAP, then in each
     view the `budget` keypoints of the longest verified tracks; the first pass's matches
     are cleared for the final matching."""
     pycolmap.match_exhaustive(

@@ -433,6 +433,16 @@ def response_policy(inp, budget, rng, cfg):
     return strongest_first(inp.candidates.response)[:budget]
 
 
+@policy("scale", "Largest scale (top-B)", role="baseline")
+def scale_policy(inp, budget, rng, cfg):
+    """The B largest-scale candidates, ties by response then index: COLMAP's own order
+    when it caps its SIFT (`colmap-b`), on the pool. An extremum found at a coarse scale
+    survives the changes of viewpoint, resolution and noise between two photographs of a
+    scene better than a fine one (issue 53; docs/protocol.md, "The own-image question")."""
+    c = inp.candidates
+    return np.lexsort((np.arange(len(c.size)), -c.response, -c.size))[:budget]
+
+
 @policy("ssc", "SSC (Bailo 2018)", role="baseline")
 def ssc_policy(inp, budget, rng, cfg):
     """Suppression via Square Covering (Bailo et al., "Efficient adaptive non-maximal

@@ -267,7 +267,8 @@ def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | 
 
 
 def figure_transfer(ranks: pd.DataFrame, summary: pd.DataFrame, budget: int, out: Path) -> None:
-    """Rendered rank against dataset rank at one budget, a panel per dataset and metric."""
+    """Rendered rank against dataset rank at one budget, a panel per dataset, category of
+    `sees` and metric."""
     panels = summary[summary["budget"] == budget]
     fig, axes = plt.subplots(
         1, len(panels), figsize=(4.2 * len(panels), 4.2), squeeze=False, constrained_layout=True
@@ -275,6 +276,7 @@ def figure_transfer(ranks: pd.DataFrame, summary: pd.DataFrame, budget: int, out
     for ax, (_, s) in zip(axes[0], panels.iterrows()):
         r = ranks[
             (ranks["dataset"] == s["dataset"])
+            & (ranks["sees"] == s["sees"])
             & (ranks["metric"] == s["metric"])
             & (ranks["budget"] == budget)
         ]
@@ -286,7 +288,7 @@ def figure_transfer(ranks: pd.DataFrame, summary: pd.DataFrame, budget: int, out
         ax.set(
             xlabel="rank on the rendered benchmark",
             ylabel=f"rank on {s['dataset']}",
-            title=f"{s['metric']}, B = {budget}\n"
+            title=f"{s['metric']}, sees {s['sees']}, B = {budget}\n"
             + (
                 f"tau {s['kendall_tau']:.2f} [{s['tau_lo']:.2f}, {s['tau_hi']:.2f}]"
                 if not s["tau_note"]

@@ -17,6 +17,7 @@ from pandas.api.types import is_numeric_dtype
 from bench.binding import read_vocabulary
 from bench.failures import outcomes
 from bench.report import nbv
+from bench.report.categories import headline, verdict_sentences
 from bench.report.power import min_units
 from bench.report.text import ci, column_format
 from bench.report.text import num as _num
@@ -27,6 +28,7 @@ from bench.results import (
     FIGURE2,
     FIGURE3,
     FIGURE_BUDGET,
+    FIGURE_COST,
     FIGURE_TRANSFER,
     FIGURE_VIEWS,
     MANIFEST,
@@ -36,15 +38,18 @@ from bench.results import (
     TABLE1,
     TABLE1_EQUAL,
     TABLE2,
+    TABLE_COST,
     TRANSFER,
+    VERDICTS,
     png,
 )
 from bench.vocabulary import (
+    CATEGORY_PEERS,
     HEADLINE,
     HEADLINE_BUDGET,
     HEADLINE_POLICY,
     ORACLE,
-    PAIRED_PEERS,
+    SEES,
     Vocabulary,
 )
 
@@ -72,6 +77,7 @@ FIGURES = {
     png(FIGURE_BUDGET): "Each headline metric against the budget",
     png(FIGURE2): f"Figure 2: the {HEADLINE_POLICY} selection and its points coloured by error",
     png(FIGURE_TRANSFER): "The rendered ranking against each dataset's",
+    png(FIGURE_COST): "Quality against cost: each method above colmap-b's line is worth its cost",
     png(FIGURE_VIEWS): "Next views: each score against the views added, per chooser",
 }
 
@@ -241,20 +247,22 @@ def _tiers_section(t1: pd.DataFrame, vocab: Vocabulary) -> list[str]:
         "Tier 1 is the best method by mean and every method not significantly different "
         "from it (two-sided Wilcoxon signed-rank tests over the units every method has, "
         "Holm-corrected at 0.05); the next tier starts at the best method left. Each tier "
-        "best first.",
+        "best first. Tiers are per category of what a selection sees (`sees`): no method "
+        "is tiered against one of the other category.",
         "",
     ]
     for col in cols:
         metric = col.removesuffix("_tier")
         best = [True, metric in vocab.lower_better()]
         ranked = at.dropna(subset=[col]).sort_values([col, metric], ascending=best, kind="stable")
-        groups = ranked.groupby(col, sort=True)["method"].agg(", ".join)
-        tiers = "; ".join(f"{int(k)}: {v}" for k, v in groups.items())
-        k = len(ranked)
-        out.append(
-            f"- `{metric}`: {tiers} ({k} methods: with fewer than {min_units(k)} units no "
-            "two of them can be told apart, one tier)"
-        )
+        for sees, part in ranked.groupby(ranked["method"].map(vocab.sees), sort=False):
+            groups = part.groupby(col, sort=True)["method"].agg(", ".join)
+            tiers = "; ".join(f"{int(k)}: {v}" for k, v in groups.items())
+            n = len(part)
+            out.append(
+                f"- `{metric}`, sees `{sees}`: {tiers} ({n} methods: with fewer than "
+                f"{min_units(n)} units no two of them can be told apart, one tier)"
+            )
     return out + [""]
 
 
@@ -313,12 +321,12 @@ def _paired_section(
         rows = rows[rows["baseline"] == baseline]
     if rows.empty:
         return []
-    header = ["method", "baseline", "metric", "n", "mean difference [95%]", "w/t/l"]
+    header = ["method (sees)", "baseline (sees)", "metric", "n", "mean difference [95%]", "w/t/l"]
     fmt = _format(rows, ["mean_diff"], ["lo", "hi"])
     body = [
         [
-            str(r["method"]),
-            str(r["baseline"]),
+            f"{r['method']} ({r.get('method_sees', 'n/a')})",
+            f"{r['baseline']} ({r.get('baseline_sees', 'n/a')})",
             str(r["metric"]),
             _num(r["n"]),
             _interval(r, "mean_diff", "lo", "hi", "note", fmt),
@@ -366,6 +374,40 @@ def _equal_section(equal: pd.DataFrame) -> list[str]:
         for _, r in rows.iterrows()
     ]
     return out + _table(header, body) + [""]
+
+
+def _verdicts_section(verdicts: pd.DataFrame) -> list[str]:
+    """Each category of `sees` against its peer, every budget (`verdicts.csv`)."""
+    said = verdict_sentences(verdicts)
+    if not said:
+        return []
+    out = ["## Verdicts per category: each against a peer that sees what it sees", ""]
+    out += [f"- `{k}`: {v}" for k, v in SEES.items()] + [""]
+    return out + [f"- {line}" for line in said] + [""]
+
+
+def _cost_section(cost: pd.DataFrame) -> list[str]:
+    """Table 1c: what each method matched and the time it took, at the headline budget
+    (`table_cost.csv` has every budget)."""
+    if cost.empty:
+        return []
+    budgets = sorted(cost["budget"].unique())
+    budget = HEADLINE_BUDGET if HEADLINE_BUDGET in budgets else budgets[len(budgets) // 2]
+    at = cost[cost["budget"] == budget]
+    metrics = [c for c in at.columns[at.columns.get_loc("ms_per_view") + 1 :]]
+    header = ["method", "sees", "first pass kpv", "final kpv", "ms per view", *metrics]
+    body = [
+        [f"`{r['method']}`", str(r["sees"]), _num(r["first_pass_kpv"]), _num(r["final_kpv"])]
+        + [_num(r["ms_per_view"]), *(_num(r[m]) for m in metrics)]
+        for _, r in at.iterrows()
+    ]
+    said = (
+        f"At B = {_num(budget)}, per method: the keypoints per view matched before choosing "
+        "(a first pass; 0 for a selection that sees its own image) and kept, and the front "
+        "end plus matching milliseconds per view of a pose-free run (detection, the signals "
+        "read, the selection with its first pass, matching and verification)."
+    )
+    return ["## Table 1c: the cost", "", said, ""] + _table(header, body) + [""]
 
 
 def _transfer_section(transfer: pd.DataFrame) -> list[str]:
@@ -447,10 +489,15 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
         "Do not edit: the next `bench plot` rewrites it.",
         "",
     ]
+    verdicts = _read(results, VERDICTS)
+    said = headline(verdicts)
+    out += [said, ""] if said else []
     out += _run_section(_json(results, MANIFEST), runs) + [""]
     out += _grid_section(runs, _json(results, CONFIG)) + [""]
     out += _table1_section(t1, vocab, "Table 1: means over runs, 95% intervals")
     out += _tiers_section(t1, vocab)
+    out += _verdicts_section(verdicts)
+    out += _cost_section(_read(results, TABLE_COST))
     out += _equal_section(_read(results, TABLE1_EQUAL))
     ran = set(t1["method"]) if "method" in t1 else set()  # a method not run has no section
     if HEADLINE_POLICY in ran:
@@ -461,12 +508,12 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
             f"Paired: {HEADLINE_POLICY} against every method, all scenes",
             None,
         )
-    for peer in (p for p in PAIRED_PEERS if p in ran):
+    for peer in (p for p in CATEGORY_PEERS if p in ran):
         out += _paired_section(
             _read(results, PAIRED_SFM),
             vocab,
-            f"Paired: every method against `{peer}` (held to the budget), all scenes, "
-            "in the tasks it runs",
+            f"Paired: every method that sees what `{peer}` sees (`{vocab.sees(peer)}`) "
+            "against it (held to the budget), all scenes, in the tasks it runs",
             peer,
         )
     out += nbv.page_section(results, vocab)

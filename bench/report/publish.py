@@ -16,6 +16,7 @@ from bench.results import (
     FIGURE2,
     FIGURE3,
     FIGURE_BUDGET,
+    FIGURE_COST,
     FIGURE_VIEWS,
     GALLERY,
     MANIFEST,
@@ -23,14 +24,18 @@ from bench.results import (
     RUNS,
     TABLE1,
     TABLE1_EQUAL,
+    TABLE_COST,
     TABLES,
+    VERDICTS,
     VOCABULARY,
     png,
 )
 from bench.runs import read_runs
 
-PUBLISHED_FILES = (RUNS, CONFIG, VOCABULARY, MANIFEST, GALLERY, *TABLES, TABLE1_EQUAL)
+PUBLISHED_FILES = (RUNS, CONFIG, VOCABULARY, MANIFEST, GALLERY, *TABLES, TABLE1_EQUAL, VERDICTS)
+PUBLISHED_FILES += (TABLE_COST,)
 FIGURE_FILES = (*map(png, (FIGURE2, FIGURE3, FIGURE_BUDGET, FIGURE_VIEWS)), f"{FIGURE3}.pdf")
+FIGURE_FILES += (png(FIGURE_COST),)
 
 
 def check_publishable(results: Path, regime: dict | None = None) -> None:

@@ -20,9 +20,12 @@
   and `<adaptive>_<m>_n`, `best_baseline_<m>_n` and `diff_<m>_n` count them.
   `paired.csv`: adaptive against every other policy that is not a reference, per scene
   and pooled, for every headline metric. `paired_sfm.csv`: in the sfm task's mAA and
-  registered views, per scene and pooled, every budgeted policy (and the oracle) against
-  stock COLMAP held to B keypoints (`colmap-b`), and every contender (and the oracle)
-  against every baseline.
+  registered views, per scene and pooled, every budgeted policy against each peer held to
+  B keypoints that sees what it sees (`sees`: `colmap-b`, `aliked-b` and `disk-b` for
+  `image`, `colmap-tracks-b` for `views`; the oracle against each), and every contender
+  (and the oracle) against every baseline. Table 1's tiers are per category of `sees`
+  (`with_tiers`); `verdicts.csv` judges each category against its peer
+  (`bench.report.categories`).
 * A (scene, seed) cell that stock COLMAP with all its features (`colmap`) does not map
   (it registers fewer than all views, or with pose mAA below 0.5; `reference_maps` is 0
   in `runs.csv`) measures
@@ -59,12 +62,12 @@ from bench.failures import ERROR, exclusion_rule
 from bench.report.power import tiers
 from bench.report.stats import paired_difference, stratified_interval
 from bench.vocabulary import (
+    CATEGORY_PEERS,
     EQUAL_COUNT,
     GROUND_TRUTH,
     HEADLINE,
     HEADLINE_POLICY,
     NO_PROTOCOL,
-    PAIRED_PEERS,
     REFERENCE_MAPS,
     UNIT_KEY,
     Vocabulary,
@@ -234,17 +237,19 @@ def tier_column(metric: str) -> str:
 
 def with_tiers(t: pd.DataFrame, rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     """Table 1 with the tiers of each task's first headline metric (`tier_column`): per
-    budget, among the budgeted methods that are no reference, over the (scene, seed) units
-    every one of them has (`bench.report.power.tiers`: Holm-corrected Wilcoxon tests; 1 is
-    the best's tier); empty for the others."""
+    budget and per category of what a method sees (`sees`: no method is tiered against
+    one of the other category), among the budgeted methods that are no reference, over
+    the (scene, seed) units every one of them has (`bench.report.power.tiers`:
+    Holm-corrected Wilcoxon tests; 1 is the best's tier); empty for the others."""
     if t.empty:
         return t
     references = set(vocab.with_role("reference"))
     for m in (m for m in vocab.first_headline() if m in rows):
         counted = solvable(rows, m, vocab)
         counted = counted[(counted["budget"] > 0) & ~counted["method"].isin(references)]
+        counted = counted.assign(sees=counted["method"].map(vocab.sees))
         tier = {}
-        for budget, at in counted.groupby("budget"):
+        for (budget, _), at in counted[counted["sees"] != ""].groupby(["budget", "sees"]):
             wide = at.pivot_table(index=["scene", "seed"], columns="method", values=m)
             wide = wide.dropna(axis=1, how="all").dropna()
             if wide.shape[1] >= 2 and len(wide):
@@ -267,7 +272,8 @@ def _paired(
     rows: pd.DataFrame, pairs: list[tuple[str, str]], metrics, vocab: Vocabulary
 ) -> pd.DataFrame:
     """Policy minus baseline for each (policy, baseline) of `pairs`, per scene and pooled,
-    per budget and metric, over the (scene, seed) units both ran."""
+    per budget and metric, over the (scene, seed) units both ran; each row names what
+    both see (`method_sees`, `baseline_sees`: a pair across categories says so)."""
     out = []
     lower = vocab.lower_better()
     for budget in sorted(b for b in pd.unique(rows["budget"]) if b > 0):
@@ -285,6 +291,8 @@ def _paired(
                             "budget": budget,
                             "method": policy,
                             "baseline": base,
+                            "method_sees": vocab.sees(policy),
+                            "baseline_sees": vocab.sees(base),
                             "metric": m,
                             **res,
                         }
@@ -303,13 +311,21 @@ def paired(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
 def paired_sfm(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     """In the summary metrics (`Task.summary`) of the tasks the peers run (sfm: mAA and
     registered views), per scene and pooled, per budget (`rows`: `headline_frame`): every
-    budgeted policy (and the oracle) minus each peer held to the budget (`PAIRED_PEERS`), and
+    budgeted policy minus each peer held to the budget that sees what it sees
+    (`CATEGORY_PEERS`; the oracle minus each), and
     every contender (and the oracle) minus every baseline. Cells stock COLMAP does not
     map are left out (`solvable`)."""
     present = list(pd.unique(rows["method"]))
     ranked = {*vocab.with_role("baseline", "contender"), *vocab.with_kind(GROUND_TRUTH)}
     policies = [p for p in present if p in ranked]
-    pairs = [(p, peer) for peer in PAIRED_PEERS if peer in present for p in policies]
+    truth = set(vocab.with_kind(GROUND_TRUTH))
+    pairs = [
+        (p, peer)
+        for peer in CATEGORY_PEERS
+        if peer in present
+        for p in policies
+        if p in truth or vocab.sees(p) == vocab.sees(peer)
+    ]
     bases = [p for p in present if p in vocab.with_role("baseline")]
     pairs += [(p, b) for p in policies if p not in bases for b in bases]
     metrics = [m for n, t in vocab.tasks.items() if t.peers for m in vocab.summary_metrics(n)]
@@ -447,4 +463,4 @@ def equal_keypoints(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
         kpv = rows.groupby(["method", "budget"])[count].mean()
         for side, col in (("method", "method_kpv"), ("baseline", "peer_kpv")):
             out[col] = [kpv.get((m, b), math.nan) for m, b in zip(out[side], out["budget"])]
-    return out.rename(columns={"baseline": "peer"})
+    return out.rename(columns={"baseline": "peer", "baseline_sees": "peer_sees"})

@@ -1,10 +1,12 @@
 """Whether the rendered ranking holds on photographs: `transfer.csv`,
 `transfer_ranks.csv` and `figure_transfer.png` of a results folder of datasets.
 
-For each dataset, budget and ranking metric (each task's first headline metric,
+For each dataset, budget, ranking metric (each task's first headline metric,
 `bench.vocabulary.Task.headline`, named as in `paired.csv`: the `tri` task's
-`acc_completeness_pct` where the dataset has per-pixel truth, the `sfm` task's `sfm_maa`),
-the budgeted methods that both results folders hold are ranked by their mean, best first
+`acc_completeness_pct` where the dataset has per-pixel truth, the `sfm` task's `sfm_maa`)
+and category of what a selection sees (`sees`: `image` or `views`; no ranking mixes the
+two), the budgeted methods of the category that both results folders hold (at least 3)
+are ranked by their mean, best first
 (by the metric's direction, `Task.lower_better`), on the dataset and on the rendered
 benchmark (all its scenes and seeds pooled, at the same budget, under the headline
 protocol; for a task with the exclusion rule, without the cells stock COLMAP does not map
@@ -21,8 +23,8 @@ Beside each tau, its power (`bench.report.power`, docs/protocol.md "Verdicts and
 power"): the split-half reliability of each side's ranking (`rel_rendered` over the rendered
 (scene, seed) cells, `rel_dataset` over the dataset's bags), their `ceiling`, the
 real-to-real baseline `tau_photos` (the other datasets' mean rank against this one; NaN
-with one dataset), and the signs of each method minus `SIGN_REFERENCE` where both sides
-ran it: `signs_agree` of `signs_decided` between the renders and the dataset, beside
+with one dataset), and the signs of each method minus its category's peer
+(`SIGN_REFERENCES`) where both sides ran it: `signs_agree` of `signs_decided` between the renders and the dataset, beside
 `signs_agree_photos` of `signs_decided_photos` between the other datasets' mean difference
 and this one's.
 
@@ -45,10 +47,11 @@ from bench.report.power import ceiling, real_to_real, sign_agreement, split_half
 from bench.report.tables import headline_frame, solvable
 from bench.results import RUNS
 from bench.runs import read_runs
-from bench.vocabulary import Vocabulary
+from bench.vocabulary import IMAGE, VIEWS, Vocabulary
 
-SIGN_REFERENCE = "colmap-b"
-"""Stock COLMAP held to the budget: the signs of `transfer.csv` are each method's minus it."""
+SIGN_REFERENCES = {IMAGE: "colmap-b", VIEWS: "colmap-tracks-b"}
+"""Per category of `sees`, stock COLMAP's peer held to the budget: the signs of
+`transfer.csv` are each method's minus it."""
 DRAWS = 2000
 MOVERS = 2
 MIN_METHODS = 6
@@ -105,10 +108,11 @@ def power(
     dataset: str,
     methods: list[str],
     lower_better: bool,
+    reference: str = SIGN_REFERENCES[IMAGE],
 ) -> dict:
     """The power fields of one comparison (module docstring): `real` and `ref` the cells x
     methods of the dataset and of the renders, `sets` every dataset's means (sets x
-    methods) at the same budget and metric."""
+    methods) at the same budget and metric, the signs against `reference`."""
     rel_r = split_half(ref.reindex(columns=methods))[1]
     rel_d = split_half(real.reindex(columns=methods))[1]
     sets = sets.reindex(columns=methods).dropna(axis=1)
@@ -119,19 +123,19 @@ def power(
         "ceiling": ceiling(rel_r, rel_d),
         "tau_photos": base,
     }
-    if SIGN_REFERENCE in methods:
-        mine = _minus_reference(real.reindex(columns=methods).mean())
-        rendered = _minus_reference(ref.reindex(columns=methods).mean())
+    if reference in methods:
+        mine = _minus(real.reindex(columns=methods).mean(), reference)
+        rendered = _minus(ref.reindex(columns=methods).mean(), reference)
         out["signs_agree"], out["signs_decided"] = sign_agreement(mine, rendered)
-        if SIGN_REFERENCE in sets and len(sets) > 1:
-            others = sets.drop(index=dataset).apply(_minus_reference, axis=1).mean()
+        if reference in sets and len(sets) > 1:
+            others = sets.drop(index=dataset).apply(_minus, axis=1, reference=reference).mean()
             out["signs_agree_photos"], out["signs_decided_photos"] = sign_agreement(mine, others)
     return out
 
 
-def _minus_reference(means: pd.Series) -> pd.Series:
-    """Each method's mean minus `SIGN_REFERENCE`'s."""
-    return means.drop(SIGN_REFERENCE) - means[SIGN_REFERENCE]
+def _minus(means: pd.Series, reference: str) -> pd.Series:
+    """Each method's mean minus `reference`'s."""
+    return means.drop(reference) - means[reference]
 
 
 def compare(dataset: pd.Series, rendered: pd.Series, lower_better: bool) -> tuple[dict, list]:
@@ -199,20 +203,24 @@ def transfer(
             every = {d: _means(r, metric, vocab) for d, r in mine.groupby("scene", sort=False)}
             for budget in real.index.intersection(ref.index):
                 a, b = real.loc[budget].dropna(), ref.loc[budget].dropna()
-                methods = [m for m in a.index if m in b.index]
-                if len(methods) < MIN_RANKED:
-                    continue
                 lower = metric in vocab.lower_better()
-                row, rows_ranked = compare(a[methods], b[methods], lower)
-                sets = pd.DataFrame(
-                    {d: m.loc[budget] for d, m in every.items() if budget in m.index}
-                ).T
-                cells = _cells(rows, metric, vocab, budget), _cells(theirs, metric, vocab, budget)
-                row |= power(*cells, sets, dataset, methods, lower)
-                key = {"dataset": dataset, "rendered_views": views, "metric": metric}
-                key["budget"] = int(budget)
-                summary.append(key | row)
-                ranks += [key | r for r in rows_ranked]
+                for sees, reference in SIGN_REFERENCES.items():
+                    methods = [m for m in a.index if m in b.index and vocab.sees(m) == sees]
+                    if len(methods) < MIN_RANKED:
+                        continue
+                    row, rows_ranked = compare(a[methods], b[methods], lower)
+                    sets = pd.DataFrame(
+                        {d: m.loc[budget] for d, m in every.items() if budget in m.index}
+                    ).T
+                    cells = (
+                        _cells(rows, metric, vocab, budget),
+                        _cells(theirs, metric, vocab, budget),
+                    )
+                    row |= power(*cells, sets, dataset, methods, lower, reference)
+                    key = {"dataset": dataset, "rendered_views": views, "sees": sees}
+                    key |= {"metric": metric, "budget": int(budget)}
+                    summary.append(key | row)
+                    ranks += [key | r for r in rows_ranked]
     return pd.DataFrame(summary), pd.DataFrame(ranks)
 
 
@@ -264,7 +272,8 @@ def said(summary: pd.DataFrame, budget: int) -> list[str]:
     for dataset, group in rows.groupby("dataset", sort=False):
         notes = set(group["tau_note"])
         taus = [
-            f"{r.metric} " + (r.tau_note or f"{r.kendall_tau:.2f} [{r.tau_lo:.2f}, {r.tau_hi:.2f}]")
+            f"{r.metric} (sees {r.sees}) "
+            + (r.tau_note or f"{r.kendall_tau:.2f} [{r.tau_lo:.2f}, {r.tau_hi:.2f}]")
             for r in group.itertuples()
         ]
         views = group["rendered_views"].iloc[0]
@@ -287,7 +296,12 @@ def verdicts(summary: pd.DataFrame, budget: int) -> list[str]:
 
 def _verdict(r, budget: int) -> str:
     """One row's sentence (`verdicts`)."""
-    head = f"{r.dataset}, {r.metric}, B = {budget}, against the {r.rendered_views}-view renders: "
+    sees = getattr(r, "sees", "")
+    among = f" among the selections that see `{sees}`" if isinstance(sees, str) and sees else ""
+    head = (
+        f"{r.dataset}, {r.metric}{among}, B = {budget}, against the {r.rendered_views}-view "
+        "renders: "
+    )
     cap = (
         f"the split-half reliabilities ({r.rel_rendered:.2f} renders, {r.rel_dataset:.2f} this "
         f"set) cap any tau at the ceiling {r.ceiling:.2f}"

@@ -5,7 +5,9 @@ reconstructs, and nothing here imports the stages that do.
 Written files: `table1.csv` (headline task and protocol), `table1_twoview.csv` (where
 rows ran under that protocol),
 `table2.csv`, `paired.csv`, `paired_sfm.csv`, `table_scenes.csv`, `frontend_cost.csv`,
-`table1_equal.csv` where equal-count methods ran with their peer (`bench.report.tables`), `figure3.png/.pdf`, `figure_budget.png` (with several budgets)
+`table1_equal.csv` where equal-count methods ran with their peer (`bench.report.tables`),
+`verdicts.csv`, each category of `sees` against its peer (`bench.report.categories`),
+`table_cost.csv` and `figure_cost.png`, quality against cost (`bench.report.cost`), `figure3.png/.pdf`, `figure_budget.png` (with several budgets)
 and `figure2.png` (`bench.report.figures`), `table3.csv` and `figure_views.png` with rows
 of the next-views task (`bench.report.nbv`), and last the folder's page, `README.md`
 (`bench.report.page`). A results folder of datasets also gets
@@ -26,6 +28,8 @@ from bench.binding import read_settings, read_vocabulary
 from bench.console import log
 from bench.failures import exclusions, failures
 from bench.files import write_text_atomic
+from bench.report.categories import category_verdicts
+from bench.report.cost import figure_cost, table_cost
 from bench.report.figures import (
     figure2,
     figure2_expected,
@@ -54,6 +58,7 @@ from bench.results import (
     FIGURE2,
     FIGURE3,
     FIGURE_BUDGET,
+    FIGURE_COST,
     FIGURE_TRANSFER,
     FIGURE_VIEWS,
     FRONTEND_COST,
@@ -66,9 +71,11 @@ from bench.results import (
     TABLE1_TWOVIEW,
     TABLE2,
     TABLE3,
+    TABLE_COST,
     TABLE_SCENES,
     TRANSFER,
     TRANSFER_RANKS,
+    VERDICTS,
     png,
     table1_of,
 )
@@ -78,6 +85,14 @@ from bench.vocabulary import HEADLINE, PROTOCOLS, Vocabulary
 def _drop(*paths: Path) -> None:
     for p in paths:
         p.unlink(missing_ok=True)
+
+
+def _settings(results: Path) -> dict:
+    """The settings of `results` (`config.json`), or none (a folder of tables alone)."""
+    try:
+        return read_settings(results)
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
 
 
 def is_dataset_run(results: Path) -> bool:
@@ -138,6 +153,8 @@ def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> list[pd.
         FRONTEND_COST: frontend_cost(df, vocab),
         TABLE3: table3(df, vocab),
         TABLE1_EQUAL: equal_keypoints(frame, vocab),
+        VERDICTS: category_verdicts(frame, vocab) if len(frame) else pd.DataFrame(),
+        TABLE_COST: table_cost(df, frame, vocab, _settings(results)),
     }
     _write_tables(results, tables)
     return [tables[TABLE1], tables[TABLE1_TWOVIEW]]
@@ -151,6 +168,9 @@ def _write_figures(df: pd.DataFrame, t1: pd.DataFrame, results: Path, renders: P
         figure_budget(t1, vocab, results / FIGURE_BUDGET)
     else:
         _drop(results / png(FIGURE_BUDGET))
+    cost = results / TABLE_COST
+    if not cost.is_file() or not figure_cost(pd.read_csv(cost), vocab, results / FIGURE_COST):
+        _drop(results / png(FIGURE_COST))
     why = figure2(df, results, renders, results / FIGURE2)
     if why and (figure2_expected(df) or (results / png(FIGURE2)).exists()):
         log(f"{png(FIGURE2)} not drawn (and any older one removed): {why}")

@@ -1,0 +1,134 @@
+"""The cost of a selection, on the page (issue 53): what each method matched and the time it
+took, beside what it scored.
+
+`table_cost.csv`, per method and budget (the pose-free task's rows, `Vocabulary.posefree_task`,
+under the headline protocol):
+
+* `sees` (`bench.vocabulary.sees`);
+* `first_pass_kpv`: the keypoints per view matched before choosing (`first_pass`): none
+  for a selection that sees its own image; for one that reads a signal of other views,
+  the geometry's first pass (`signals.first_pass` of `config.json`, the strongest
+  candidates of every view matched in every pair); for a method with a first pass of its
+  own (`first_pass` among its settings, `track-first`: that multiple of B; the peer
+  `colmap-tracks-b`: `TRACKS_FIRST_PASS` x B; `adaptive-loop`: its own B each round) the
+  larger of the two;
+* `final_kpv`: the keypoints per view it kept (`keypoints_per_view` where the rows hold
+  it, the peers' and the equal-count methods'; else the budget);
+* `ms_per_view`: the front end and matching milliseconds per view of a run: detection,
+  the signals it reads, its selection (with any first pass and its own matching) and the
+  matching and verification of what it kept (`detect_ms + signals_ms + select_ms +
+  match_ms + verify_ms`, those the rows hold), over the run's views, mean over runs;
+* each ranking metric of the tasks the peers run (`sfm_maa`, `pairs_auc_10`), its mean.
+
+`figure_cost.png`: those metrics against `ms_per_view` (log x axis), a point per method
+and budget, each category of `sees` in its own marker, and `colmap-b` at every budget it
+ran (128 to 2048, doubling, in the published measurement) drawn as a line: the peer's
+frontier. A method is worth its cost where it lies above that line.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from bench.report.categories import peer_metrics
+from bench.report.figures import plt, save
+from bench.report.tables import solvable
+from bench.vocabulary import (
+    HEADLINE,
+    MULTI_VIEW,
+    TRACKS_FIRST_PASS,
+    TRACKS_PEER,
+    VIEW_SIGNALS,
+    VIEWS,
+    Vocabulary,
+    equal_parts,
+)
+
+TIMED = ("detect_ms", "signals_ms", "select_ms", "match_ms", "verify_ms")
+"""The front end and matching stages of a row (module docstring)."""
+FRONTIER = "colmap-b"
+"""The peer whose curve over the budgets is the frontier of `figure_cost.png`."""
+
+
+def first_pass(method: str, budget: int, vocab: Vocabulary, settings: dict) -> float:
+    """Keypoints per view `method` matched before choosing at `budget` (module docstring)."""
+    if vocab.sees(method) != VIEWS or budget <= 0:
+        return 0.0
+    m = vocab.methods[method]
+    own = (settings.get("methods") or {}).get(method, {}).get("first_pass")
+    n = float(own * budget) if own else 0.0
+    if m.kind == TRACKS_PEER:
+        n = max(n, TRACKS_FIRST_PASS * budget)
+    policy = equal_parts(method)[0] if "@" in method else method
+    if vocab.methods.get(policy, m).kind == MULTI_VIEW:
+        n = max(n, budget)
+    if any(s in VIEW_SIGNALS for s in m.reads):
+        n = max(n, float((settings.get("signals") or {}).get("first_pass", 0)))
+    return n
+
+
+def table_cost(df: pd.DataFrame, frame: pd.DataFrame, vocab: Vocabulary, settings: dict):
+    """`table_cost.csv` (module docstring; `df`: the rows, `frame`: `headline_frame`)."""
+    task = vocab.posefree_task
+    if task is None or "views" not in df:
+        return pd.DataFrame()
+    rows = df[(df["task"] == task) & (df["protocol"] == HEADLINE[1]) & (df["budget"] > 0)]
+    if rows.empty:
+        return pd.DataFrame()
+    timed = [c for c in TIMED if c in rows]
+    ms = rows[timed].fillna(0).sum(axis=1) / rows["views"]
+    kpv = rows["keypoints_per_view"] if "keypoints_per_view" in rows else rows["budget"] * math.nan
+    rows = rows.assign(ms_per_view=ms, final_kpv=kpv.fillna(rows["budget"]))
+    out = rows.groupby(["method", "budget"], sort=False)[["final_kpv", "ms_per_view"]].mean()
+    out = out.reset_index()
+    out.insert(1, "sees", out["method"].map(vocab.sees))
+    first = [first_pass(m, b, vocab, settings) for m, b in zip(out["method"], out["budget"])]
+    out.insert(3, "first_pass_kpv", first)
+    for metric in (m for m in peer_metrics(vocab) if m in frame):
+        means = solvable(frame, metric, vocab).groupby(["method", "budget"])[metric].mean()
+        out[metric] = [means.get(k, math.nan) for k in zip(out["method"], out["budget"])]
+    order = out.apply(lambda r: (r["budget"], vocab.order(r["method"])), axis=1)
+    return out.loc[order.sort_values().index].reset_index(drop=True)
+
+
+def figure_cost(cost: pd.DataFrame, vocab: Vocabulary, out: Path) -> bool:
+    """`figure_cost.png` (module docstring); False (nothing drawn) without a ranking metric
+    or a timed row."""
+    metrics = [m for m in peer_metrics(vocab) if m in cost and cost[m].notna().any()]
+    if not metrics or not (cost["ms_per_view"] > 0).any():
+        return False
+    fig, axes = plt.subplots(1, len(metrics), figsize=(7 * len(metrics), 5.5), squeeze=False)
+    markers = {"image": "o", "views": "s"}
+    colours = {m: plt.cm.tab20(k % 20) for k, m in enumerate(dict.fromkeys(cost["method"]))}
+    for ax, metric in zip(axes[0], metrics):
+        for method, g in cost[cost[metric].notna()].groupby("method", sort=False):
+            g = g.sort_values("budget")
+            if method == FRONTIER:
+                ax.plot(g["ms_per_view"], g[metric], "k-", lw=2, label=f"{method} (frontier)")
+                for _, r in g.iterrows():
+                    ax.annotate(f"{int(r['budget'])}", (r["ms_per_view"], r[metric]), fontsize=7)
+                continue
+            marker = markers.get(vocab.sees(method), "^")
+            ax.plot(
+                g["ms_per_view"],
+                g[metric],
+                marker=marker,
+                linestyle=":",
+                color=colours[method],
+                label=f"{method} ({vocab.sees(method)})",
+            )
+        ax.set_xscale("log")
+        ax.set_xlabel("front end + matching ms per view (log)")
+        ax.set_ylabel(metric)
+        ax.set_title(f"{metric} against its cost, each budget a point")
+        if np.isfinite(cost[metric]).any():
+            ax.set_ylim(bottom=0)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.18, 1, 1))
+    save(fig, out, ("png",))
+    return True
