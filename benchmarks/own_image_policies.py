@@ -30,3 +30,13 @@ def coarse_response_policy(inp, budget, rng, cfg):
     coarse = c.size >= np.median(c.size)
     order = np.lexsort((np.arange(len(c.size)), -c.response, ~coarse))
     return order[:budget]
+
+
+if __name__ == "__main__":
+    import argparse
+
+    argparse.ArgumentParser(
+        description="A policy module, not a script: measure its policies with `bench run "
+        "--policy-module benchmarks/own_image_policies.py --methods coarse-response,scale,"
+        "response --budget 128,256,512` (docs/protocol.md, the own-image question)."
+    ).parse_args()

@@ -22,17 +22,17 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench.backend.peers import keypoint_scales
+from bench.backend.peers import keypoint_scales, peer_extraction
 from bench.files import atomic_path
 from bench.frontend.features import DetectorConfig, detect, strongest_first
 from bench.frontend.views import Source, load_views
-from benchmarks.small_budget import peer_shapes
 
 
 def measure(source: Path, budgets: list[int]) -> list[dict]:
     views = load_views(source)
     names, cams = [v.name for v in views], [v.camera for v in views]
-    colmap = peer_shapes(Source.of(source).images, names, cams, "colmap", 0)
+    extracted = peer_extraction(Source.of(source).images, names, cams, "colmap", 0)
+    colmap = [e.keypoints for e in extracted]
     out = []
     for v, kps in zip(views, colmap):
         pool = detect(v, DetectorConfig())

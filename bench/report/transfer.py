@@ -204,8 +204,10 @@ def transfer(
             for budget in real.index.intersection(ref.index):
                 a, b = real.loc[budget].dropna(), ref.loc[budget].dropna()
                 lower = metric in vocab.lower_better()
-                for sees, reference in SIGN_REFERENCES.items():
-                    methods = [m for m in a.index if m in b.index and vocab.sees(m) == sees]
+                common = [m for m in a.index if m in b.index]
+                for sees in dict.fromkeys(vocab.sees(m) for m in common):  # a chooser: ''
+                    methods = [m for m in common if vocab.sees(m) == sees]
+                    reference = SIGN_REFERENCES.get(sees, "")
                     if len(methods) < MIN_RANKED:
                         continue
                     row, rows_ranked = compare(a[methods], b[methods], lower)
