@@ -100,3 +100,16 @@ def test_each_category_is_judged_against_its_own_peer_and_said_naming_it():
     assert ("track-first", "colmap-b") not in judged and ("grid", "colmap-tracks-b") not in judged
     t1 = table1(frame, vocab).set_index("method")["sfm_maa_tier"]
     assert t1["track-first"] == 1 and t1["colmap-b"] == 1  # each the best of its category
+
+
+def test_a_verdict_sentence_writes_its_numbers_in_one_format():
+    """Means with three decimals, the difference and its bounds signed (it read
+    `-0.0717 [-0.219, 0.0761]` beside means of three significant figures)."""
+    from bench.report.categories import verdict_sentence
+
+    row = dict(sees=IMAGE, budget=256, metric="sfm_maa", policy="scale", policy_mean=0.392333)
+    row |= dict(peer="colmap-b", peer_mean=0.464, mean_diff=-0.0716667, lo=-0.219451)
+    row |= dict(hi=0.076118, note="", wins=5, ties=10, losses=5, n=20, verdict="tied")
+    said = verdict_sentence(pd.Series(row))
+    assert "`scale` (0.392), against" in said and "`colmap-b` (0.464)" in said
+    assert ": -0.072 [-0.219, +0.076], 5/10/5 over 20 runs, tied." in said

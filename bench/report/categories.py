@@ -108,14 +108,24 @@ def _verdict(res: dict, lower: bool) -> str:
     return "below" if (lo > 0) == lower else "above"
 
 
+def _three(x) -> str:
+    """A mean in a sentence: three decimals, as the README's summary writes them."""
+    return "n/a" if pd.isna(x) else f"{float(x):.3f}"
+
+
+def _signed(x) -> str:
+    """A paired difference or its bound: three decimals with its sign."""
+    return "n/a" if pd.isna(x) else f"{float(x):+.3f}"
+
+
 def verdict_sentence(r: pd.Series) -> str:
     """One verdict row as a sentence that names its category."""
     who, peer_is = CATEGORIES[r["sees"]]
-    diff = ci(r["mean_diff"], r["lo"], r["hi"], r.get("note"))
+    diff = ci(r["mean_diff"], r["lo"], r["hi"], r.get("note"), fmt=_signed)
     sentence = (
         f"Of the {who} (`{r['sees']}`), the best at B = {_num(r['budget'])} in "
-        f"`{r['metric']}`, `{r['policy']}` ({_num(r['policy_mean'])}), against "
-        f"{peer_is}, `{r['peer']}` ({_num(r['peer_mean'])}): {diff}, "
+        f"`{r['metric']}`, `{r['policy']}` ({_three(r['policy_mean'])}), against "
+        f"{peer_is}, `{r['peer']}` ({_three(r['peer_mean'])}): {diff}, "
         f"{_num(r['wins'])}/{_num(r['ties'])}/{_num(r['losses'])} over {_num(r['n'])} "
         f"runs, {r['verdict']}"
     )
