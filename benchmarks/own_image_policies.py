@@ -15,6 +15,20 @@ sees its own view's candidates alone (no signal of other views).
   finest scales of any camera image contrast is set by noise, aliasing and
   demosaicing, which do not repeat between views; above the median it ranks real
   structure. The cut is the view's own median, no constant fitted to a scene.
+* `repeatable-scale` (second round): the candidates re-detected under the most of the four
+  fixed perturbations of their own image (`repeatability_redetect`: a rotation, a tilt,
+  blur with noise, an exposure change), the largest scales first among equals. Reason:
+  `colmap-b`'s keypoints fall in tracks of three or more views more often than
+  `scale`'s; a keypoint that survives its own image's perturbations is the one a second
+  photograph, which perturbs it too, detects again, and scale orders those that survive
+  alike. It reads one image (the signal's perturbations are of the view alone).
+* `distinct-scale` (second round): the largest scales among the candidates whose nearest
+  other descriptor in their own image lies at least the view's median distance away
+  (`distinctiveness`), then the rest by scale. Reason: a descriptor with a near twin in
+  its own image (repeated structure: windows, tiles, leaves) fails the ratio test of
+  matching in every other view; leaving out the less distinct half is the own image's
+  view of the ambiguity the `views` policies measure across views. The cut is the view's
+  own median, as above.
 """
 
 from __future__ import annotations
@@ -32,11 +46,31 @@ def coarse_response_policy(inp, budget, rng, cfg):
     return order[:budget]
 
 
+@policy(
+    "repeatable-scale",
+    "Re-detected, then largest scale",
+    role="baseline",
+    reads=("repeatability_redetect",),
+)
+def repeatable_scale_policy(inp, budget, rng, cfg):
+    c, r = inp.candidates, inp.signals.repeatability_redetect
+    return np.lexsort((np.arange(len(c.size)), -c.response, -c.size, -r))[:budget]
+
+
+@policy(
+    "distinct-scale", "Distinct, then largest scale", role="baseline", reads=("distinctiveness",)
+)
+def distinct_scale_policy(inp, budget, rng, cfg):
+    c, q = inp.candidates, inp.signals.distinctiveness
+    distinct = q >= np.median(q)
+    return np.lexsort((np.arange(len(c.size)), -c.response, -c.size, ~distinct))[:budget]
+
+
 if __name__ == "__main__":
     import argparse
 
     argparse.ArgumentParser(
         description="A policy module, not a script: measure its policies with `bench run "
-        "--policy-module benchmarks/own_image_policies.py --methods coarse-response,scale,"
-        "response --budget 128,256,512` (docs/protocol.md, the own-image question)."
+        "--policy-module benchmarks/own_image_policies.py --methods coarse-response,"
+        "repeatable-scale,distinct-scale,scale,response --budget 128,256,512` (docs/protocol.md, the own-image question)."
     ).parse_args()

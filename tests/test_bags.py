@@ -89,6 +89,30 @@ def test_a_bags_signals_are_those_of_its_views_alone(dataset, tmp_path):
     )
 
 
+def test_a_bagged_whole_set_front_end_gives_every_bag_the_same_front_end(dataset, tmp_path):
+    from bench.frontend.geometry import IMAGES
+    from bench.frontend.signals import SIGNALS
+    from bench.frontend.stage import front_end, subset
+    from bench.harness.config import RunConfig
+
+    cfg, bag = RunConfig(), (1, 2, 4, 5)
+    full = front_end(dataset, cfg.detector, cfg.signals, tmp_path, IMAGES)
+    alone = front_end(dataset, cfg.detector, cfg.signals, tmp_path, IMAGES, bagged=True)
+    assert len(list(tmp_path.glob("*.npz"))) == 2  # cached apart: neither is the other
+    assert not alone.seconds["geometry"] and alone.seconds["detect"] > 0
+    assert not any(g.parallax.any() or g.ambiguity.any() for g in alone.signals)
+    want, got = (
+        subset(full, bag, cfg.detector, cfg.signals),
+        subset(alone, bag, cfg.detector, cfg.signals),
+    )
+    for a, b in zip(want.pools, got.pools):
+        np.testing.assert_array_equal(a.xy, b.xy)
+        np.testing.assert_array_equal(a.descriptors, b.descriptors)
+    for a, b in zip(want.signals, got.signals):
+        for s in SIGNALS:
+            np.testing.assert_array_equal(getattr(a, s), getattr(b, s), err_msg=s)
+
+
 def test_bag_options_default_apply_to_datasets_alone_and_not_to_the_next_views_task(capsys):
     from argparse import Namespace
 

@@ -37,7 +37,13 @@ from bench.files import atomic_path, content_key
 from bench.frontend import features, learned
 from bench.frontend.features import Candidates, DetectorConfig
 from bench.frontend.geometry import IMAGES, RIG, SignalConfig, estimate_focal, focal_camera
-from bench.frontend.signals import SIGNALS, TIMED, Signals, compute_signals
+from bench.frontend.signals import (
+    SIGNALS,
+    TIMED,
+    Signals,
+    compute_signals,
+    repeatability_redetect,
+)
 from bench.frontend.views import View, load_views, source_key
 
 _CAND = [f.name for f in fields(Candidates)]
@@ -75,11 +81,13 @@ def front_end(
     cache_dir: Path,
     grant: str = RIG,
     views: list[View] | None = None,
+    bagged: bool = False,
 ) -> FrontEnd:
     """Candidates and signals of every view of `entry` (a render entry or a dataset) under
     the geometry granted (RIG or IMAGES), computed or read from the cache; `views`: the
     entry's (`load_views`), shared between geometries so that each image is decoded once,
-    and only when the cache misses."""
+    and only when the cache misses. `bagged` (every unit reads a bag of its views, whose
+    other signals are the bag's own): only what `subset` takes of it (`view_alone`)."""
     entry = Path(entry)
     if grant not in (RIG, IMAGES):
         raise BenchError(f"unknown geometry {grant!r}; valid: {RIG}, {IMAGES}")
@@ -95,9 +103,11 @@ def front_end(
             "opencv": cv2.__version__,
             "code": frontend_code_hash(),
         }
+        | ({"view_alone": code_hash([view_alone])} if bagged else {})
         | learned.versions(det.detector)
     )
-    path = Path(cache_dir) / f"{entry.name}-{det.detector}-{grant}-{key}.npz"
+    part = "-alone" if bagged else ""
+    path = Path(cache_dir) / f"{entry.name}-{det.detector}-{grant}{part}-{key}.npz"
     if path.is_file():
         try:
             with np.load(path) as z:
@@ -110,7 +120,9 @@ def front_end(
     large = max((v.camera.width * v.camera.height for v in views), default=0) >= PROGRESS_PIXELS
     with progress("features", 2 * len(views), "step", shown=large) as bar:
         bar.set_postfix_str(f"{entry.name}, {grant}")
-        _, pools, sigs, seconds = compute(views, det, sig, step=bar.update)
+        _, pools, sigs, seconds = (view_alone if bagged else compute)(
+            views, det, sig, step=bar.update
+        )
     arrays = {f"{f}_{v}": getattr(c, f) for v, c in enumerate(pools) for f in _CAND}
     arrays |= {f"{s}_{v}": getattr(g, s) for v, g in enumerate(sigs) for s in SIGNALS}
     arrays |= {f"seconds_{k}": np.float64(s) for k, s in seconds.items()}
@@ -175,6 +187,33 @@ def compute(
     sigs, sig_seconds = compute_signals([v for v, _, _ in work], pools, det, sig, wanted, step)
     seconds.update(sig_seconds)
     seconds["geometry"] += focal_s
+    pools = [c.scaled(1 / sx, 1 / sy) for c, (_, sx, sy) in zip(pools, work)]
+    return views, pools, sigs, seconds
+
+
+def view_alone(views: list[View], det: DetectorConfig, sig: SignalConfig, step=None):
+    """`compute` without what `subset` computes again on a bag's views: the candidates and
+    the view-alone signals (`VIEW_ALONE`), the others 0, the views' geometry not estimated
+    (on kitti-seq2, 51 frames in bags of 6, the whole set's geometry took 1,323 of a bag
+    run's 2,033 s and no bag read it). Its values are `compute`'s wherever `subset` reads
+    them (tests/test_bags.py)."""
+    t = time.perf_counter()
+    work = [v.scale_to(det.max_image_size) for v in views]
+    pools = [features.detect(v, det) for v, _, _ in work]
+    seconds = dict.fromkeys(TIMED, 0.0) | {"detect": time.perf_counter() - t}
+    if not all(v.focal_known for v in views):
+        t = time.perf_counter()
+        views, work = _estimate_focal(views, work, pools, sig)
+        seconds["geometry"] = time.perf_counter() - t
+    sigs = []
+    for (v, _, _), cand in zip(work, pools):
+        t = time.perf_counter()
+        redetect = repeatability_redetect(v.gray, cand, det)
+        seconds["repeatability_redetect"] += time.perf_counter() - t
+        zero = {s: np.zeros(len(cand)) for s in SIGNALS}
+        sigs.append(Signals(**zero | {"repeatability_redetect": redetect}))
+        if step is not None:
+            step(2)
     pools = [c.scaled(1 / sx, 1 / sy) for c, (_, sx, sy) in zip(pools, work)]
     return views, pools, sigs, seconds
 

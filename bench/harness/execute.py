@@ -103,11 +103,15 @@ class Cluster:
     scheduler: str | None = None
 
 
-def _front_ends(entry: Path, cfg: RunConfig, renders: Path, grants) -> dict[str, FrontEnd]:
-    """The front end of an entry under each geometry granted, computed or read from its cache."""
+def _front_ends(
+    entry: Path, cfg: RunConfig, renders: Path, grants, bag: str = ""
+) -> dict[str, FrontEnd]:
+    """The front end of an entry under each geometry granted, computed or read from its
+    cache; of a bag of some of its views, only what the bag's front end takes of it."""
     views = load_views(entry)  # decoded once, when a front end is computed
+    bagged = 0 < len(bag.split()) < len(views)
     return {
-        g: front_end(entry, cfg.detector, cfg.signals, renders / "frontend", g, views)
+        g: front_end(entry, cfg.detector, cfg.signals, renders / "frontend", g, views, bagged)
         for g in grants
     }
 
@@ -116,7 +120,7 @@ def _scene(entry: Path, cfg: RunConfig, renders: Path, grants, bag: str = "") ->
     key = (str(entry), repr(cfg), tuple(grants), bag)
     if _HELD.get("key") != key:
         _HELD.clear()  # let the previous scene go before loading the next
-        fronts = _front_ends(entry, cfg, renders, grants)
+        fronts = _front_ends(entry, cfg, renders, grants, bag)
         if len(bag.split()) not in (0, len(next(iter(fronts.values())).views)):
             # a bag's views alone (`bench.harness.bags`); a bag of every view is the entry
             fronts = bags.bag_fronts(fronts, bag, cfg.detector, cfg.signals)
@@ -134,7 +138,8 @@ def scene_task(group: tuple, entry: Path, cfg: RunConfig, renders: Path, plan: P
     granted, computed or read from their cache, checked against the budgets; returns their
     seconds and the largest pool."""
     t = time.perf_counter()
-    fronts = _front_ends(entry, cfg, renders, plan.grants)
+    bag = next((u.bag for u in plan.work if u.group == group), "")
+    fronts = _front_ends(entry, cfg, renders, plan.grants, bag)
     sizes = [len(p) for p in next(iter(fronts.values())).pools]
     check_budgets(sizes, plan.budgets, f"{group[0]} seed {group[1]}")
     largest = max(sizes)
