@@ -29,6 +29,14 @@ sees its own view's candidates alone (no signal of other views).
   matching in every other view; leaving out the less distinct half is the own image's
   view of the ambiguity the `views` policies measure across views. The cut is the view's
   own median, as above.
+* `peak-scale` (third round, after the two above fell below `scale`): the largest scales
+  among the candidates whose response reaches COLMAP's SIFT peak threshold (0.02 per
+  octave of 3 levels, on intensities in [0, 1]: the DoG contrast below which Lowe and
+  COLMAP discard an extremum as moved by noise), then the rest by scale. Reason: the pool
+  is detected at a contrast threshold four times lower (`DetectorConfig.sift_contrast`,
+  so that it holds several times the budget), and 5-33 % of `scale`'s 256 coarsest on the
+  seed-0 renders lie below COLMAP's threshold: coarse, faint blobs that no second
+  photograph places alike. The threshold is the peer's default, not fitted.
 """
 
 from __future__ import annotations
@@ -66,11 +74,23 @@ def distinct_scale_policy(inp, budget, rng, cfg):
     return np.lexsort((np.arange(len(c.size)), -c.response, -c.size, ~distinct))[:budget]
 
 
+PEAK_THRESHOLD = 0.02 / 3
+"""COLMAP's SIFT peak threshold (`peak_threshold` 0.02 over `octave_resolution` 3), in the
+units of OpenCV's SIFT response (DoG contrast on intensities in [0, 1])."""
+
+
+@policy("peak-scale", "Largest scale above COLMAP's peak threshold", role="baseline")
+def peak_scale_policy(inp, budget, rng, cfg):
+    c = inp.candidates
+    faint = c.response < PEAK_THRESHOLD
+    return np.lexsort((np.arange(len(c.size)), -c.response, -c.size, faint))[:budget]
+
+
 if __name__ == "__main__":
     import argparse
 
     argparse.ArgumentParser(
         description="A policy module, not a script: measure its policies with `bench run "
         "--policy-module benchmarks/own_image_policies.py --methods coarse-response,"
-        "repeatable-scale,distinct-scale,scale,response --budget 128,256,512` (docs/protocol.md, the own-image question)."
+        "repeatable-scale,distinct-scale,peak-scale,scale,response --budget 128,256,512` (docs/protocol.md, the own-image question)."
     ).parse_args()

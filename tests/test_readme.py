@@ -32,6 +32,10 @@ def test_the_photographs_verdicts_come_from_a_published_photo_folder(tmp_path):
     said = results_section({"sparse": sparse}, tmp_path)
     assert "- middlebury-temple-sparse, sfm_maa, B = 256, against the 6-view renders: tau" in said
     assert "No snapshot of the photo sets" in results_section({"sparse": sparse}, None)
+    for name in ("table1.csv", "paired_sfm.csv", "vocabulary.json"):  # a photo run's tables
+        (tmp_path / name).write_bytes((sparse / name).read_bytes())
+    said = results_section({"sparse": sparse}, tmp_path)
+    assert "| photographs | sfm (sfm_maa) | image | `scale` " in said
 
 
 def test_the_section_is_replaced_between_its_markers_alone():

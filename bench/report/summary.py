@@ -6,9 +6,10 @@ Per regime snapshot, task (its first headline metric on `Table 1`, `PRIMARY`) an
 the policy (a baseline or a contender) with the highest mean leads; beside it the
 category's peer (`PEER`: the stock-COLMAP method that sees what it sees, else `colmap-b`,
 named), the paired difference of the leader minus that peer pooled over the snapshot's
-cells with its 95 % interval, and the cells won, tied and lost (`paired_sfm.csv`). Then,
-from a published folder of photo sets where there is one (its `transfer.csv`), one
-sentence per set (`bench.report.transfer.verdicts`).
+cells with its 95 % interval, and the cells won, tied and lost (`paired_sfm.csv`). The
+published photo sets' folder, where there is one, gives rows of its own (`PHOTOS`, a bag
+is a cell) and, from its `transfer.csv`, one sentence per set
+(`bench.report.transfer.verdicts`).
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ PRIMARY = {"sfm": "sfm_maa", "pairs": "pairs_auc_10"}
 PEER = {IMAGE: "colmap-b", VIEWS: "colmap-tracks-b"}
 """The stock-COLMAP peer of each category (DESIGN, seventh wave)."""
 FALLBACK = "colmap-b"
+PHOTOS = "photographs"
+"""The regime column of the photo sets' rows (their bags pooled: a bag is a cell)."""
 POOLED = "all scenes"
 
 
@@ -105,6 +108,8 @@ def results_section(snapshots: dict[str, Path], photos: Path | None) -> str:
     ]
     for regime, folder in found.items():
         lines += _rows(folder, regime)
+    if photos is not None and (Path(photos) / TABLE1).is_file():
+        lines += _rows(Path(photos), PHOTOS)
     lines.append("")
     if photos is not None and (Path(photos) / TRANSFER).is_file():
         summary = pd.read_csv(Path(photos) / TRANSFER)
