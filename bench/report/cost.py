@@ -22,8 +22,9 @@ under the headline protocol):
 
 `figure_cost.png`: those metrics against `ms_per_view` (log x axis), a point per method
 and budget, each category of `sees` in its own marker, and `colmap-b` at every budget it
-ran (128 to 2048, doubling, in the published measurement) drawn as a line: the peer's
-frontier. A method is worth its cost where it lies above that line.
+ran (the grid's; the slice of docs/protocol.md, "The own-image question", ran 1024 and
+2048 too) drawn as a line: the peer's frontier. A method is worth its cost where it lies
+above that line.
 """
 
 from __future__ import annotations
