@@ -29,7 +29,8 @@ sees its own view's candidates alone (no signal of other views).
   matching in every other view; leaving out the less distinct half is the own image's
   view of the ambiguity the `views` policies measure across views. The cut is the view's
   own median, as above.
-* `peak-scale` (third round, after the two above fell below `scale`): the largest scales
+* `peak-scale` (third round, after the two above fell below `scale`; now the package's:
+  `bench.frontend.policies.peak_scale_policy`): the largest scales
   among the candidates whose response reaches COLMAP's SIFT peak threshold (0.02 per
   octave of 3 levels, on intensities in [0, 1]: the DoG contrast below which Lowe and
   COLMAP discard an extremum as moved by noise), then the rest by scale. Reason: the pool
@@ -72,18 +73,6 @@ def distinct_scale_policy(inp, budget, rng, cfg):
     c, q = inp.candidates, inp.signals.distinctiveness
     distinct = q >= np.median(q)
     return np.lexsort((np.arange(len(c.size)), -c.response, -c.size, ~distinct))[:budget]
-
-
-PEAK_THRESHOLD = 0.02 / 3
-"""COLMAP's SIFT peak threshold (`peak_threshold` 0.02 over `octave_resolution` 3), in the
-units of OpenCV's SIFT response (DoG contrast on intensities in [0, 1])."""
-
-
-@policy("peak-scale", "Largest scale above COLMAP's peak threshold", role="baseline")
-def peak_scale_policy(inp, budget, rng, cfg):
-    c = inp.candidates
-    faint = c.response < PEAK_THRESHOLD
-    return np.lexsort((np.arange(len(c.size)), -c.response, -c.size, faint))[:budget]
 
 
 if __name__ == "__main__":

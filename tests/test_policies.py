@@ -70,6 +70,21 @@ def test_scale_takes_the_largest_and_keeps_larger_scales_than_response(fe):
         assert np.median(size[idx]) >= np.median(size[top])
 
 
+def test_peak_scale_takes_the_largest_scales_above_colmaps_peak_threshold_first(fe):
+    from bench.frontend.policies import PEAK_THRESHOLD
+
+    for inp in _inputs(fe):
+        idx = select("peak-scale", inp, BUDGET, np.random.default_rng(0))
+        c = inp.candidates
+        strong = c.response >= PEAK_THRESHOLD
+        assert len(idx) == len(set(idx)) == BUDGET and strong.sum() > BUDGET
+        assert strong[idx].all()  # none faint while the strong ones last
+        assert c.size[idx].min() >= np.sort(c.size[strong])[-BUDGET]
+        assert (
+            c.response[select("scale", inp, BUDGET, np.random.default_rng(0))] < PEAK_THRESHOLD
+        ).any()
+
+
 def test_feedback_loop_meets_the_budget_logs_rounds_and_is_deterministic(fe):
     cams = [v.camera for v in fe.views]
 

@@ -443,6 +443,23 @@ def scale_policy(inp, budget, rng, cfg):
     return np.lexsort((np.arange(len(c.size)), -c.response, -c.size))[:budget]
 
 
+PEAK_THRESHOLD = 0.02 / 3
+"""COLMAP's SIFT peak threshold (its `peak_threshold` 0.02 over `octave_resolution` 3), in
+the units of OpenCV's SIFT response: DoG contrast on intensities in [0, 1]."""
+
+
+@policy("peak-scale", "Largest scale above COLMAP's peak threshold", role="baseline", pool="sift")
+def peak_scale_policy(inp, budget, rng, cfg):
+    """The B largest-scale candidates among those whose response reaches COLMAP's SIFT peak
+    threshold (`PEAK_THRESHOLD`), then the fainter by scale: COLMAP's own order and cut
+    when it caps its SIFT (`colmap-b`), on a pool detected at a contrast four times lower
+    (`DetectorConfig.sift_contrast`), whose faint coarse blobs, moved by noise, no second
+    photograph places alike (Lowe 2004; docs/protocol.md, "The own-image question")."""
+    c = inp.candidates
+    faint = c.response < PEAK_THRESHOLD
+    return np.lexsort((np.arange(len(c.size)), -c.response, -c.size, faint))[:budget]
+
+
 @policy("ssc", "SSC (Bailo 2018)", role="baseline")
 def ssc_policy(inp, budget, rng, cfg):
     """Suppression via Square Covering (Bailo et al., "Efficient adaptive non-maximal
