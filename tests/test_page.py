@@ -218,3 +218,12 @@ def test_a_columns_numbers_share_one_format_that_tells_them_apart():
     fmt = column_format([0.25, 0.5], [0.1, 0.75])
     assert ci(0.5, 0.1, 0.75, fmt=fmt) == "0.50 [0.10, 0.75]" and fmt(math.nan) == "n/a"
     assert column_format([3, 12, 20])(12) == "12"  # whole numbers stay whole
+
+
+def test_a_difference_reads_with_its_sign_in_the_columns_format():
+    """The page's difference columns printed 0.0761 beside -0.0717: a gain read as a level."""
+    from bench.report.text import ci, column_format, signed
+
+    fmt = signed(column_format([-0.0717, 0.0761], [-0.219, 0.0761]))
+    assert ci(-0.0717, -0.219, 0.0761, fmt=fmt) == "-0.07 [-0.22, +0.08]"
+    assert fmt(0.0) == "0.00" and fmt(math.nan) == "n/a"

@@ -19,7 +19,7 @@ from bench.failures import outcomes
 from bench.report import nbv
 from bench.report.categories import headline, verdict_sentences
 from bench.report.power import min_units
-from bench.report.text import ci, column_format
+from bench.report.text import ci, column_format, signed
 from bench.report.text import num as _num
 from bench.report.text import table as _table
 from bench.report.transfer import TRANSFER_TEXT, verdicts
@@ -105,13 +105,14 @@ def _interval(
     return ci(row.get(col), row.get(lo or f"{col}_lo"), row.get(hi or f"{col}_hi"), why, fmt)
 
 
-def _format(frame: pd.DataFrame, cols, bounds=()):
+def _format(frame: pd.DataFrame, cols, bounds=(), difference: bool = False):
     """One format for the numbers of the columns `cols` of `frame`, and of its intervals'
-    `bounds` columns (`bench.report.text.column_format`)."""
+    `bounds` columns (`bench.report.text.column_format`); signed for a `difference`."""
     values = [frame[c].to_numpy(object) for c in cols if c in frame]
-    return column_format(
+    fmt = column_format(
         np.concatenate(values) if values else [], *(frame[c] for c in bounds if c in frame)
     )
+    return signed(fmt) if difference else fmt
 
 
 def _run_section(manifest: dict, runs: pd.DataFrame) -> list[str]:
@@ -279,7 +280,7 @@ def _table2_section(t2: pd.DataFrame) -> list[str]:
     mine = _format(at, [f"{HEADLINE_POLICY}_{m}" for m in metrics])
     best = _format(at, [f"best_baseline_{m}" for m in metrics])
     bounds = [f"diff_{m}{s}" for m in metrics for s in ("_lo", "_hi")]
-    diff = _format(at, [f"diff_{m}" for m in metrics], bounds)
+    diff = _format(at, [f"diff_{m}" for m in metrics], bounds, difference=True)
     body = []
     for _, r in at.iterrows():
         for m in metrics:
@@ -322,7 +323,7 @@ def _paired_section(
     if rows.empty:
         return []
     header = ["method (sees)", "baseline (sees)", "metric", "n", "mean difference [95%]", "w/t/l"]
-    fmt = _format(rows, ["mean_diff"], ["lo", "hi"])
+    fmt = _format(rows, ["mean_diff"], ["lo", "hi"], difference=True)
     body = [
         [
             f"{r['method']} ({r.get('method_sees', 'n/a')})",
@@ -346,7 +347,7 @@ def _equal_section(equal: pd.DataFrame) -> list[str]:
         return []
     first = rows["metric"].iloc[0]
     head = rows[(rows["budget"] == HEADLINE_BUDGET) & (rows["metric"] == first)]
-    fmt = _format(rows, ["mean_diff"], ["lo", "hi"])
+    fmt = _format(rows, ["mean_diff"], ["lo", "hi"], difference=True)
     said = "; ".join(
         f"`{r['method']}` {_interval(r, 'mean_diff', 'lo', 'hi', 'note', fmt)} against "
         f"`{r['peer']}` ({_num(r['method_kpv'])} and {_num(r['peer_kpv'])} keypoints per view)"

@@ -50,6 +50,16 @@ def column_format(values, *bounds) -> Callable[[object], str]:
     return lambda v: _fixed(v, d)
 
 
+def signed(fmt: Callable[[object], str]) -> Callable[[object], str]:
+    """`fmt` for a difference: a `+` before a positive number, as a `-` before a negative."""
+
+    def out(v) -> str:
+        text = fmt(v)
+        return f"+{text}" if text[:1].isdigit() and float(v) > 0 else text
+
+    return out
+
+
 def _fixed(x, d: int) -> str:
     if x is None or x is pd.NA or (isinstance(x, float) and math.isnan(x)):
         return "n/a"
