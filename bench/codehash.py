@@ -14,7 +14,8 @@ as one group), so a rename or a move changes no hash. Left out of the tree:
 * every string-only statement (the docstring of a module, class, function or field);
 * annotations (type hints decide no value);
 * decorators of the package (`@policy(...)`, `@generator(...)`: registrations, whose
-  fields that decide a row a key states as data, `bench.vocabulary.Method.deciding`);
+  fields that decide a row a key states as data, `bench.vocabulary.Method.deciding`;
+  `@last_call(...)`, a memo that decides no value, `bench.memo`);
 * a module's statements that bind no name (registrations such as `register(...)`): they
   enter no hash of the module's other definitions; what they register that decides a row
   is a root where it is used (a task's functions) or data (its declared fields).

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -231,6 +232,17 @@ def test_matchable_tracks_need_ground_truth_and_matching_descriptors():
     truth = SceneTruth.build([a, b], [_plane_truth(a), _plane_truth(b)], [pa, pb])
     ta, tb = matchable_tracks(truth, [pa, pb], 0.8)
     assert ta[0] == tb[0] and ta[1] == tb[1] and ta[2] != tb[2]
+
+    # computed once per scene: equal pools (another geometry's copy) give the same result
+    # object; other descriptors or another truth compute again, as the function would
+    copies = [replace(pa, descriptors=pa.descriptors.copy()), replace(pb)]
+    assert matchable_tracks(truth, copies, 0.8) is matchable_tracks(truth, [pa, pb], 0.8)
+    pb.descriptors[:] = desc[[0, 3, 2]]
+    again = matchable_tracks(truth, [pa, pb], 0.8)
+    fresh = matchable_tracks.__wrapped__(truth, [pa, pb], 0.8)
+    assert [t.tolist() for t in again] == [t.tolist() for t in fresh] != [ta.tolist(), tb.tolist()]
+    other = SceneTruth.build([a, b], [_plane_truth(a), _plane_truth(b)], [pa, pb])
+    assert matchable_tracks(other, [pa, pb], 0.8) is not again
 
 
 # --- pose accuracy of the sfm task -------------------------------------------------------
