@@ -35,7 +35,7 @@ def test_the_photographs_verdicts_come_from_a_published_photo_folder(tmp_path):
     for name in ("table1.csv", "paired_sfm.csv", "vocabulary.json"):  # a photo run's tables
         (tmp_path / name).write_bytes((sparse / name).read_bytes())
     said = results_section({"sparse": sparse}, tmp_path)
-    assert "| photographs | sfm (sfm_maa) | image | `scale` " in said
+    assert "| photographs | sfm (sfm_maa) | image | `peak-scale` " in said
 
 
 def test_the_section_is_replaced_between_its_markers_alone():
