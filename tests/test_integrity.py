@@ -493,6 +493,20 @@ def test_publish_copies_a_checked_folder_and_removes_stale_files(quick_results, 
     assert not (snap / "figure_budget.png").exists()
 
 
+def test_publish_carries_a_photo_runs_transfer_and_per_set_tables(quick_results, tmp_path):
+    """Published photo sets lacked `transfer.csv`, which the README's photo sentences read."""
+    results, snap = tmp_path / "photos", tmp_path / "published-datasets"
+    shutil.copytree(quick_results, results)
+    for name in ("transfer.csv", "transfer_ranks.csv", "figure_transfer.png", "table1-a.csv"):
+        (results / name).write_text(name)
+    snap.mkdir()
+    (snap / "table1-gone.csv").write_text("stale")
+    publish(results, snap)
+    for name in ("transfer.csv", "transfer_ranks.csv", "figure_transfer.png", "table1-a.csv"):
+        assert (snap / name).read_text() == name
+    assert not (snap / "table1-gone.csv").exists()
+
+
 def test_bad_input_leaves_no_lock_or_temporary_file(tmp_path, capsys):
     renders = tmp_path / "renders"
     assert main(["render", "table", "--seed", "-1", "--renders", str(renders)]) == 2

@@ -17,6 +17,7 @@ from bench.results import (
     FIGURE3,
     FIGURE_BUDGET,
     FIGURE_COST,
+    FIGURE_TRANSFER,
     FIGURE_VIEWS,
     GALLERY,
     MANIFEST,
@@ -26,16 +27,21 @@ from bench.results import (
     TABLE1_EQUAL,
     TABLE_COST,
     TABLES,
+    TRANSFER,
+    TRANSFER_RANKS,
     VERDICTS,
     VOCABULARY,
     png,
+    table1_of,
 )
 from bench.runs import read_runs
 
 PUBLISHED_FILES = (RUNS, CONFIG, VOCABULARY, MANIFEST, GALLERY, *TABLES, TABLE1_EQUAL, VERDICTS)
-PUBLISHED_FILES += (TABLE_COST,)
+PUBLISHED_FILES += (TABLE_COST, TRANSFER, TRANSFER_RANKS)
 FIGURE_FILES = (*map(png, (FIGURE2, FIGURE3, FIGURE_BUDGET, FIGURE_VIEWS)), f"{FIGURE3}.pdf")
-FIGURE_FILES += (png(FIGURE_COST),)
+FIGURE_FILES += (png(FIGURE_COST), png(FIGURE_TRANSFER))
+PER_DATASET = table1_of("*")
+"""A photo run's Table 1 of each of its datasets: published with it, as its transfer."""
 
 
 def check_publishable(results: Path, regime: dict | None = None) -> None:
@@ -92,7 +98,8 @@ def publish(results: Path, to: Path, regime: dict | None = None) -> int:
     check_publishable(results, regime)
     to.mkdir(parents=True, exist_ok=True)
     copied = 0
-    for name in (*PUBLISHED_FILES, *FIGURE_FILES):
+    per_dataset = {p.name for d in (results, to) for p in Path(d).glob(PER_DATASET)}
+    for name in (*PUBLISHED_FILES, *FIGURE_FILES, *sorted(per_dataset)):
         src, dst = Path(results) / name, to / name
         if src.is_file():
             with atomic_path(dst) as tmp:
