@@ -125,4 +125,4 @@ def test_the_equal_table_pairs_each_method_with_its_peer_by_hand():
     assert r["mean_diff"] == pytest.approx(0.4) and (r["wins"], r["losses"]) == (2, 0)
     assert r["method_kpv"] == r["peer_kpv"] == 110
     page = "\n".join(_equal_section(t))
-    assert "sfm_maa at 256" in page and "`cross-view@colmap-soft-b` 0.40 [" in page
+    assert "sfm_maa at 256" in page and "`cross-view@colmap-soft-b` +0.40 [" in page
