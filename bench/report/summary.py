@@ -7,7 +7,7 @@ the policy (a baseline or a contender) with the highest mean leads; beside it th
 category's peer (`PEER`: the stock-COLMAP method that sees what it sees, else `colmap-b`,
 named), the paired difference of the leader minus that peer pooled over the snapshot's
 cells with its 95 % interval, and the cells won, tied and lost (`paired_sfm.csv`). The
-published photo sets' folder, where there is one, gives rows of its own (`PHOTOS`, a bag
+published photo sets' folder, where there is one, gives rows of its own (`PHOTO_ROWS`, a bag
 is a cell) and, from its `transfer.csv`, one sentence per set
 (`bench.report.transfer.verdicts`).
 """
@@ -32,7 +32,7 @@ PRIMARY = {"sfm": "sfm_maa", "pairs": "pairs_auc_10"}
 PEER = {IMAGE: "colmap-b", VIEWS: "colmap-tracks-b"}
 """The stock-COLMAP peer of each category (DESIGN, seventh wave)."""
 FALLBACK = "colmap-b"
-PHOTOS = "photographs"
+PHOTO_ROWS = "photographs"
 """The regime column of the photo sets' rows (their bags pooled: a bag is a cell)."""
 POOLED = "all scenes"
 
@@ -102,7 +102,7 @@ def results_section(snapshots: dict[str, Path], photos: Path | None) -> str:
         "its selection sees (`image`: its own view's; `views`: other views, through a first",
         "pass of matches), and the category's stock-COLMAP peer at the same budget; the",
         "difference is paired over the snapshot's cells (95 % interval; cells won/tied/lost;",
-        f"the `{PHOTOS}` rows pool the published photo sets' bags, a bag a cell):",
+        f"the `{PHOTO_ROWS}` rows pool the published photo sets' bags, a bag a cell):",
         "",
         "| regime | task (metric) | sees | leads | peer | leader - peer | won/tied/lost |",
         "|---|---|---|---|---|---|---|",
@@ -110,7 +110,7 @@ def results_section(snapshots: dict[str, Path], photos: Path | None) -> str:
     for regime, folder in found.items():
         lines += _rows(folder, regime)
     if photos is not None and (Path(photos) / TABLE1).is_file():
-        lines += _rows(Path(photos), PHOTOS)
+        lines += _rows(Path(photos), PHOTO_ROWS)
     lines.append("")
     if photos is not None and (Path(photos) / TRANSFER).is_file():
         summary = pd.read_csv(Path(photos) / TRANSFER)
