@@ -146,10 +146,25 @@ def test_the_verdict_says_whether_the_renders_predict_a_set_as_well_as_the_photo
     assert "(1: the renders order its methods as the set does, 0: no relation" in sfm
     assert "reliabilities (0.90 renders, 0.80 this set) cap any tau at the ceiling 0.85" in sfm
     assert sfm.endswith(
-        "the other sets predict it at 0.30, within the interval: the renders predict it as "
-        "well as the other photographs."
+        "the other sets predict it at 0.30: the renders predict it as well as the other "
+        "photographs (theirs lies within the interval)."
     )
     assert "at 0.90: the renders predict it less well than the other photographs." in pairs
+
+
+def test_the_renders_predict_a_set_less_well_or_better_only_outside_the_interval():
+    """It said "less well" wherever the other sets' tau was above the renders' point
+    estimate, even inside its interval (templeSparseRing: 0.73 [0.33, 1.00] against 0.78)."""
+    from types import SimpleNamespace
+
+    from bench.report.transfer import prediction
+
+    def said(photos, tau=0.73, lo=0.33, hi=1.0):
+        return prediction(SimpleNamespace(kendall_tau=tau, tau_lo=lo, tau_hi=hi, tau_photos=photos))
+
+    assert said(0.78) == said(0.40) == said(0.33) == "as well as"
+    assert said(0.20) == "better than" and said(0.9, hi=0.85) == "less well than"
+    assert said(math.nan) == said(0.5, tau=math.nan) == "n/a"
 
 
 def test_with_one_set_the_verdict_still_says_what_its_tau_means_and_its_ceiling():

@@ -25,12 +25,14 @@ def test_the_readmes_results_section_is_what_the_published_snapshots_give(monkey
 
 def test_the_photographs_verdicts_come_from_a_published_photo_folder(tmp_path):
     row = dict(dataset="middlebury-temple-sparse", rendered_views=6, matched=True, budget=256)
+    row |= dict(sees="image")
     row |= dict(metric="sfm_maa", kendall_tau=0.5, tau_lo=0.1, tau_hi=0.8, tau_photos=0.3)
     row |= dict(rel_rendered=0.9, rel_dataset=0.8, ceiling=math.sqrt(0.72), tau_note="")
     pd.DataFrame([row]).to_csv(tmp_path / "transfer.csv", index=False)
     sparse = ROOT / "results" / "published"
     said = results_section({"sparse": sparse}, tmp_path)
-    assert "- middlebury-temple-sparse, sfm_maa, B = 256, against the 6-view renders: tau" in said
+    row = "| middlebury-temple-sparse | sfm (sfm_maa) | image | 0.50 [0.10, 0.80] | 0.90 / 0.80 |"
+    assert row + " 0.85 | 0.30 | as well as the others |" in said
     assert "No snapshot of the photo sets" in results_section({"sparse": sparse}, None)
     for name in ("table1.csv", "paired_sfm.csv", "vocabulary.json"):  # a photo run's tables
         (tmp_path / name).write_bytes((sparse / name).read_bytes())
@@ -43,3 +45,25 @@ def test_the_section_is_replaced_between_its_markers_alone():
     assert with_section(readme, "new\n") == f"# t\n\nbefore\n{BEGIN}\nnew\n{END}\nafter\n"
     with pytest.raises(BenchError, match="lacks its results markers"):
         with_section("# t\n", "new\n")
+
+
+def test_the_next_views_gains_come_from_the_published_next_views_table(tmp_path):
+    """The README's next-views paragraph carried numbers typed by hand; they are written
+    from the snapshot's Table 3 now: the chooser minus each baseline, per score and k."""
+    sparse = ROOT / "results" / "published"
+    row = dict(scene="all scenes", budget=256, method="weak-triangulation", n=20, wins=12)
+    row |= dict(ties=3, losses=5, diff_lo=0.01, diff_hi=0.12)
+    table3 = pd.DataFrame(
+        [
+            row | dict(score="maa", k=1, baseline="random-view", diff=0.064),
+            row | dict(score="maa", k=1, baseline="farthest-view", diff=-0.02),
+            row | dict(scene="table", score="maa", k=1, baseline="random-view", diff=0.9),
+            row | dict(method="random-view", score="maa", k=1, baseline="gap-view", diff=0.9),
+        ]
+    )
+    table3.to_csv(tmp_path / "table3.csv", index=False)
+    said = results_section({"sparse": sparse}, None, tmp_path)
+    assert "| score | k | - `farthest-view` | - `random-view` |" in said
+    assert "| maa | 1 | -0.020 [+0.010, +0.120] 12/3/5 | +0.064 [+0.010, +0.120] 12/3/5 |" in said
+    assert "paired over the 20 rendered paths at 256" in said
+    assert "Next views" not in results_section({"sparse": sparse}, None, tmp_path / "none")

@@ -22,6 +22,9 @@ published snapshot; only `bench publish` does."""
 PHOTOS = "datasets"
 """The published photo sets' folder is `regime_folder(PUBLISHED, PHOTOS)`,
 results/published-datasets (`bench publish --to` it; the README states its verdicts)."""
+NBV = "nbv"
+"""The published next-views snapshot's folder is `regime_folder(PUBLISHED, NBV)`,
+results/published-nbv (the README states its chooser's gains)."""
 
 REGIMES = {"sparse": (6, "0-4"), "dense": (21, "0,1")}
 """Rig regimes: (views on each scene's path, default seeds). The sparse regime's views are

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from bench.cli.common import (
     LATEST,
+    NBV,
     PHOTOS,
     PUBLISHED,
     REGIMES,
@@ -105,11 +106,11 @@ def write_readme(readme: Path = README, required: bool = True) -> None:
 
 def readme_section(base: Path = PUBLISHED) -> str:
     """The README's results section from the regimes' snapshots (`base` the sparse one's
-    folder) and the photo sets' (`bench.report.summary`)."""
+    folder), the photo sets' and the next views' (`bench.report.summary`)."""
     from bench.report.summary import results_section
 
     snapshots = {r: regime_folder(base, r) for r in REGIMES}
-    return results_section(snapshots, regime_folder(base, PHOTOS))
+    return results_section(snapshots, regime_folder(base, PHOTOS), regime_folder(base, NBV))
 
 
 def run(args: argparse.Namespace) -> None:

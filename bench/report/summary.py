@@ -8,8 +8,10 @@ category's peer (`PEER`: the stock-COLMAP method that sees what it sees, else `c
 named), the paired difference of the leader minus that peer pooled over the snapshot's
 cells with its 95 % interval, and the cells won, tied and lost (`paired_sfm.csv`). The
 published photo sets' folder, where there is one, gives rows of its own (`PHOTO_ROWS`, a bag
-is a cell) and, from its `transfer.csv`, one sentence per set
-(`bench.report.transfer.verdicts`).
+is a cell) and, from its `transfer.csv`, a table row per set, task and category: whether
+the renders predict its ranking as well as the other sets do
+(`bench.report.transfer.prediction`). The next-views snapshot, where there is one, gives
+its chooser's pooled paired gains (`_nbv_rows`).
 """
 
 from __future__ import annotations
@@ -21,8 +23,8 @@ import pandas as pd
 
 from bench import BenchError
 from bench.binding import read_vocabulary
-from bench.report.transfer import verdicts
-from bench.results import PAIRED_SFM, TABLE1, TRANSFER
+from bench.report.transfer import prediction
+from bench.results import PAIRED_SFM, TABLE1, TABLE3, TRANSFER
 from bench.vocabulary import HEADLINE_BUDGET, IMAGE, VIEWS, Vocabulary
 
 BEGIN = "<!-- results: written by `bench publish --readme` from the published snapshots -->"
@@ -37,8 +39,10 @@ PHOTO_ROWS = "photographs"
 POOLED = "all scenes"
 
 
-def _num(x: float, signed: bool = False) -> str:
-    return "n/a" if x is None or math.isnan(x) else (f"{x:+.3f}" if signed else f"{x:.3f}")
+def _num(x: float, signed: bool = False, digits: int = 3) -> str:
+    if x is None or math.isnan(x):
+        return "n/a"
+    return f"{x:+.{digits}f}" if signed else f"{x:.{digits}f}"
 
 
 def _leader(t1: pd.DataFrame, vocab: Vocabulary, sees: str, metric: str) -> pd.Series | None:
@@ -91,9 +95,12 @@ def _rows(snapshot: Path, regime: str) -> list[str]:
     return out
 
 
-def results_section(snapshots: dict[str, Path], photos: Path | None) -> str:
+def results_section(
+    snapshots: dict[str, Path], photos: Path | None, nbv: Path | None = None
+) -> str:
     """The README's results section (module docstring) from the regime snapshots
-    (`{regime name: folder}`, those that exist) and the published photo sets' folder."""
+    (`{regime name: folder}`, those that exist), the published photo sets' folder and the
+    next-views snapshot's."""
     found = {r: Path(f) for r, f in snapshots.items() if (Path(f) / TABLE1).is_file()}
     if not found:
         raise BenchError("no published snapshot with a table1.csv: nothing to summarise")
@@ -113,20 +120,87 @@ def results_section(snapshots: dict[str, Path], photos: Path | None) -> str:
         lines += _rows(Path(photos), PHOTO_ROWS)
     lines.append("")
     if photos is not None and (Path(photos) / TRANSFER).is_file():
-        summary = pd.read_csv(Path(photos) / TRANSFER)
-        said = verdicts(summary, HEADLINE_BUDGET)
-        lines.append(
-            f"On the photographs ({Path(photos).as_posix()}/README.md), whether the renders "
-            "rank each set's methods as well as the other sets do:"
-        )
-        lines += [""] + [f"- {s}" for s in said] if said else ["", "- no set has a baseline."]
+        lines += _transfer_rows(pd.read_csv(Path(photos) / TRANSFER), Path(photos))
     else:
         where = "none" if photos is None else Path(photos).as_posix()
         lines += [
             f"No snapshot of the photo sets is published ({where}): whether the ranking",
             "holds on photographs is not stated here (docs/datasets.md says how to measure it).",
         ]
+    if nbv is not None and (Path(nbv) / TABLE3).is_file():
+        lines += _nbv_rows(pd.read_csv(Path(nbv) / TABLE3), Path(nbv))
     return "\n".join(lines) + "\n"
+
+
+def _transfer_rows(summary: pd.DataFrame, photos: Path) -> list[str]:
+    """Per set, metric and category at `HEADLINE_BUDGET`: the renders' Kendall tau against
+    the set's ranking, the ceiling the two rankings' reliabilities allow, the other sets'
+    tau, and whether the renders predict the set as well as they do
+    (`bench.report.transfer.prediction`)."""
+    rows = summary[summary["matched"] & (summary["budget"] == HEADLINE_BUDGET)]
+    if rows.empty or "rel_rendered" not in rows:
+        return ["", "- no set has a baseline."]
+    out = [
+        f"On the photographs ({photos.as_posix()}/README.md): Kendall's tau between the",
+        f"renders' ranking of the methods at {HEADLINE_BUDGET} and each set's (1: the same order, "
+        "0: no relation),",
+        "with its 95 % interval over methods; the ceiling the two rankings' split-half",
+        "reliabilities allow; the other sets' tau for this set (the real-to-real baseline); and",
+        "whether the renders predict the set as well as the other sets do (their tau within",
+        "the interval), less well or better:",
+        "",
+        "| set | task (metric) | sees | tau [95 %] | reliability renders / set | ceiling "
+        "| other sets' tau | the renders predict it |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    task = {m: t for t, m in PRIMARY.items()}
+    for r in rows.sort_values(
+        ["dataset", "metric", "sees"], ascending=[True, False, False]
+    ).itertuples():
+        tau = (
+            r.tau_note
+            if math.isnan(r.kendall_tau)
+            else f"{r.kendall_tau:.2f} [{r.tau_lo:.2f}, {r.tau_hi:.2f}]"
+        )
+        out.append(
+            f"| {r.dataset} | {task.get(r.metric, r.metric)} ({r.metric}) | {r.sees} | {tau} | "
+            f"{r.rel_rendered:.2f} / {r.rel_dataset:.2f} | {_num(r.ceiling, digits=2)} | "
+            f"{_num(r.tau_photos, digits=2)} | {prediction(r)} the others |"
+        )
+    return out + [""]
+
+
+NBV_CHOOSER = "weak-triangulation"
+"""The paper's next-view chooser, whose gains the README states (`_nbv_rows`)."""
+
+
+def _nbv_rows(table3: pd.DataFrame, nbv: Path) -> list[str]:
+    """The next-views snapshot's pooled paired differences: `NBV_CHOOSER` minus each
+    baseline chooser, per score and number of added views k (Table 3's `all scenes`)."""
+    pooled = table3[(table3["scene"] == POOLED) & (table3["method"] == NBV_CHOOSER)]
+    if pooled.empty:
+        return []
+    paths = int(pooled["n"].max())
+    out = [
+        f"Next views ({nbv.as_posix()}/README.md, Table 3): `{NBV_CHOOSER}` minus each",
+        f"baseline chooser after k added views, paired over the {paths} rendered paths at "
+        f"{int(pooled['budget'].iloc[0])}",
+        "keypoints per view (95 % interval; paths won/tied/lost); `completeness`: the tri",
+        "task's completeness, in percentage points; `maa`: the sfm task's pose mAA:",
+        "",
+        "| score | k | "
+        + " | ".join(f"- `{b}`" for b in sorted(pooled["baseline"].unique()))
+        + " |",
+        "|---|---|" + "---|" * pooled["baseline"].nunique(),
+    ]
+    for (score, k), g in pooled.groupby(["score", "k"], sort=True):
+        cells = [
+            f"{_num(r.diff, True)} [{_num(r.diff_lo, True)}, {_num(r.diff_hi, True)}] "
+            f"{r.wins}/{r.ties}/{r.losses}"
+            for r in g.sort_values("baseline").itertuples()
+        ]
+        out.append(f"| {score} | {k} | " + " | ".join(cells) + " |")
+    return out + [""]
 
 
 def with_section(readme: str, section: str) -> str:

@@ -320,16 +320,27 @@ def _verdict(r, budget: int) -> str:
     photos = getattr(r, "tau_photos", math.nan)
     if math.isnan(photos):
         return head + said + "; no other set to compare with (the baseline needs two sets)."
-    how = "as well as" if r.kendall_tau >= photos else "less well than"
-    inside = ", within the interval" if r.tau_lo <= photos <= r.tau_hi else ""
+    how = prediction(r)
+    inside = " (theirs lies within the interval)" if how == AS_WELL else ""
     return (
-        head
-        + said
-        + (
-            f"; the other sets predict it at {photos:.2f}{inside}: the renders predict it {how} "
-            "the other photographs."
-        )
+        head + said + f"; the other sets predict it at {photos:.2f}: the renders predict it "
+        f"{how} the other photographs{inside}."
     )
+
+
+AS_WELL = "as well as"
+
+
+def prediction(r) -> str:
+    """Whether the renders predict a set's ranking (a `transfer.csv` row) as well as the
+    other sets do: `AS_WELL`, "less well than" or "better than", told apart only where the
+    other sets' tau lies outside the interval of the renders' tau; "n/a" without both."""
+    photos = getattr(r, "tau_photos", math.nan)
+    if math.isnan(r.kendall_tau) or math.isnan(photos):
+        return "n/a"
+    if photos > r.tau_hi:
+        return "less well than"
+    return "better than" if photos < r.tau_lo else AS_WELL
 
 
 def _winner(rank: pd.Series) -> str:
