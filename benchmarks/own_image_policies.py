@@ -38,6 +38,20 @@ sees its own view's candidates alone (no signal of other views).
   so that it holds several times the budget), and 5-33 % of `scale`'s 256 coarsest on the
   seed-0 renders lie below COLMAP's threshold: coarse, faint blobs that no second
   photograph places alike. The threshold is the peer's default, not fitted.
+* `octave-scale` (fourth round, after `benchmarks/pool_apart.py` found COLMAP's keypoints
+  through the policies' back end level with `colmap-b` where `peak-scale`'s are not; now
+  the package's: `bench.frontend.policies.octave_scale_policy`): `peak-scale` within
+  COLMAP's scale range, the candidates coarser than the coarsest scale COLMAP's SIFT
+  extracts put last (`COLMAP_MAX_SIGMA`). Reason, for photographs in
+  general: COLMAP's default extraction spans 4 octaves from the upsampled image
+  (`first_octave` -1, `num_octaves` 4), so it never keeps an extremum coarser than sigma
+  = 1.6 x 2^(1/3) x 2^3 = 16 px, at any image size; OpenCV's pool holds every octave down
+  to a few samples of image (sigma up to 26 px on the sparse facade, 53 px on the dense
+  corridor), and `peak-scale` kept 4-11 such blobs per view at 128 there. Their extremum
+  is located to a sample of an octave whose pixels are 8-32 image pixels, against the back
+  end's 4 px verification threshold. The cut is the peer's default octave range, not
+  fitted. Looked at before the grid ran: the seven cells of the 128 gap (sparse facade,
+  dense corridor), one back-end seed: 3 up, 2 down, 2 level.
 """
 
 from __future__ import annotations

@@ -85,6 +85,27 @@ def test_peak_scale_takes_the_largest_scales_above_colmaps_peak_threshold_first(
         ).any()
 
 
+def test_octave_scale_keeps_none_coarser_than_colmaps_octaves_while_others_last(fe):
+    """`peak-scale` kept 4-11 extrema per view coarser than any COLMAP's SIFT extracts;
+    `octave-scale` keeps the largest strong ones within COLMAP's octaves first."""
+    from bench.frontend.policies import COLMAP_MAX_SIGMA, PEAK_THRESHOLD
+
+    assert 16.1 < COLMAP_MAX_SIGMA < 16.2
+    coarse = [(i.candidates.size / 2 > COLMAP_MAX_SIGMA).sum() for i in _inputs(fe)]
+    assert sum(coarse) > 0  # the pool holds what the policy puts last
+    for inp in _inputs(fe):
+        c = inp.candidates
+        first = (c.response >= PEAK_THRESHOLD) & (c.size / 2 <= COLMAP_MAX_SIGMA)
+        for budget in (BUDGET, int(first.sum()) + 3):
+            idx = select("octave-scale", inp, budget, np.random.default_rng(0))
+            assert len(idx) == len(set(idx)) == min(budget, len(c))
+            if budget <= first.sum():
+                assert first[idx].all() and c.size[idx].min() >= np.sort(c.size[first])[-budget]
+            else:
+                assert first[idx].sum() == first.sum()  # all of them, then the others
+        assert np.array_equal(idx, select("octave-scale", inp, budget, np.random.default_rng(1)))
+
+
 def test_feedback_loop_meets_the_budget_logs_rounds_and_is_deterministic(fe):
     cams = [v.camera for v in fe.views]
 

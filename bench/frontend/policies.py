@@ -460,6 +460,30 @@ def peak_scale_policy(inp, budget, rng, cfg):
     return np.lexsort((np.arange(len(c.size)), -c.response, -c.size, faint))[:budget]
 
 
+COLMAP_MAX_SIGMA = 1.6 * 2 ** (1 / 3) * 2**3
+"""The coarsest scale sigma (px) of COLMAP's default SIFT extraction: VLFeat's base scale
+1.6 x 2^(1/3), times 2^3 at the start of the fifth octave counted from the upsampled -1,
+which COLMAP does not compute (`first_octave` -1, `num_octaves` 4)."""
+
+
+@policy(
+    "octave-scale",
+    "Largest scale above COLMAP's peak threshold, within its octaves",
+    role="baseline",
+    pool="sift",
+)
+def octave_scale_policy(inp, budget, rng, cfg):
+    """`peak-scale` within COLMAP's scale range: the candidates coarser than any COLMAP's
+    SIFT extracts (`COLMAP_MAX_SIGMA`) last. COLMAP never keeps such an extremum, at any
+    image size; the pool holds them down to a few samples of image (sigma up to 26 px on
+    the sparse facade, 53 on the dense corridor), located to a sample of an octave whose
+    pixels are 8-32 image pixels, against the back end's 4 px verification threshold
+    (docs/protocol.md, "The own-image question")."""
+    c = inp.candidates
+    faint, coarse = c.response < PEAK_THRESHOLD, c.size / 2 > COLMAP_MAX_SIGMA
+    return np.lexsort((np.arange(len(c.size)), -c.response, -c.size, faint, coarse))[:budget]
+
+
 @policy("ssc", "SSC (Bailo 2018)", role="baseline")
 def ssc_policy(inp, budget, rng, cfg):
     """Suppression via Square Covering (Bailo et al., "Efficient adaptive non-maximal
