@@ -30,7 +30,7 @@ REGIMES = {"sparse": (6, "0-4"), "dense": (21, "0,1")}
 """Rig regimes: (views on each scene's path, default seeds). The sparse regime's views are
 every fourth of the dense one's (`bench.scenes.catalog.path_positions`), rendered once.
 Dense has two seeds: its 21-view units cost three times a sparse unit (2,681 s for the dense
-grid on 2 cores, renders cached, against 755 s for the sparse one: docs/speed.md)."""
+grid on 2 cores, renders cached, against 617 s for the sparse one: docs/speed.md)."""
 
 
 def regime_folder(base: Path, regime: str) -> Path:
