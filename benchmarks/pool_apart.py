@@ -22,7 +22,7 @@ paired means; `--out` gets the per-cell CSV (temporary name, then renamed).
     PYTHONPATH=. .venv/bin/python benchmarks/pool_apart.py --scenes facade --seeds 0-4 \
         --budgets 128 --out /tmp/pool_apart.csv
     PYTHONPATH=. .venv/bin/python benchmarks/pool_apart.py --views 21 --seeds 0,1 \
-        --renders /work/runs/dense-renders --budgets 128 --out /tmp/pool_apart_dense.csv
+        --renders DENSE_RENDERS --budgets 128 --out /tmp/pool_apart_dense.csv
 """
 
 from __future__ import annotations
