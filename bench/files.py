@@ -22,6 +22,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
+import numpy as np
+
 from bench import BenchError
 
 META = "meta.json"
@@ -198,3 +200,16 @@ def atomic_dir(entry: Path) -> Iterator[Path]:
     finally:
         for left in entry.parent.glob(temporary):
             shutil.rmtree(left, ignore_errors=True)
+
+
+def image_pixels_key(image: np.ndarray) -> str:
+    """SHA-256 of an image's decoded 8-bit values and shape (not of a file's bytes, which
+    depend on the encoder)."""
+    digest = hashlib.sha256(str(image.shape).encode())
+    digest.update(np.ascontiguousarray(image).tobytes())
+    return digest.hexdigest()
+
+
+def images_pixels_key(keys: list[str]) -> str:
+    """The `pixels` of a set of views: their `image_pixels_key`s, in view order."""
+    return "px-" + hashlib.sha256("\n".join(keys).encode()).hexdigest()[:12]

@@ -49,7 +49,7 @@ from bench.vocabulary import (
 HASHES = ("prediction_hash", "evaluation_hash")
 ROW_CHECKSUM = "row_checksum"
 """The last column: a hash of the row's other values as written (`row_checksum`)."""
-TEXT_COLUMNS = ("scene", "method", "task", "protocol", "render_key", *HASHES, "status")
+TEXT_COLUMNS = ("scene", "method", "task", "protocol", "render_key", "pixels", *HASHES, "status")
 TEXT_COLUMNS += ("failure", "invocation", "ground_truth", "pairs_rule", "bag", ROW_CHECKSUM)
 REQUIRED = (*KEY, "render_key", *HASHES, "status", "failure", "invocation", "wall_ms")
 OLD_METHOD = "policy"
@@ -233,8 +233,44 @@ def read_runs(
     df = _frame(header, good + altered)
     if keep_altered:
         df["altered"] = [False] * len(good) + [True] * len(altered)
+    check_pixels(df, path)
     df = mark_reference(df, vocab or read_vocabulary(path.parent))
     return df.sort_values(list(KEY), kind="stable", ignore_index=True)
+
+
+NO_PIXELS = "unrecorded"
+"""What `pixels_of` says of a row written before rows named their pixels (before 0.5.0)."""
+
+
+def pixels_of(rows: pd.DataFrame) -> pd.Series:
+    """Each row's `pixels` (the hash of the images its unit read), `NO_PIXELS` for a row
+    that names none."""
+    if "pixels" not in rows:
+        return pd.Series(NO_PIXELS, index=rows.index, dtype=object)
+    return rows["pixels"].fillna(NO_PIXELS)
+
+
+def group_of(rows: pd.DataFrame) -> list[tuple]:
+    """Each row's set of views: (scene, seed, bag) (a rendered scene's bag is empty)."""
+    bag = rows["bag"].fillna("") if "bag" in rows else pd.Series("", index=rows.index)
+    return list(zip(rows["scene"], rows["seed"], bag))
+
+
+def check_pixels(rows: pd.DataFrame, source: Path | str) -> None:
+    """Refuse, in one line naming both hashes and the remedy, rows of one set of views
+    (`group_of`) that read different pixels: no pairing, table, tier, transfer or snapshot
+    combines them (renders differ in their last bits between machines)."""
+    seen: dict[tuple, str] = {}
+    for group, px in zip(group_of(rows), pixels_of(rows)):
+        if seen.setdefault(group, px) != px:
+            scene, seed, bag = group
+            where = f"{scene} seed {seed}" + (f" bag {bag}" if bag else "")
+            raise BenchError(
+                f"{source} mixes rows of {where} read from different pixels ({seen[group]} "
+                f"and {px}: other renders, or rows made before rows named their pixels); "
+                "recompute them into one folder: `bench run` with the reference renders "
+                "(the default) into a new --results folder"
+            )
 
 
 def _frame(header: list[str], good: list[tuple[int, str]]) -> pd.DataFrame:

@@ -24,7 +24,8 @@ def upgrade(results: Path, current: Vocabulary) -> list[str]:
     upgrade`): the `policy` column of its rows is renamed `method` (`_rename_method`),
     and a recorded vocabulary that lacks this one's fields (`older_fields`) gets the
     package's declarations of its methods and tasks, by name, and of every metric; the rows
-    of a task without tracks are written once (`_rows_once`). What it changed, one item
+    of a task without tracks are written once (`_rows_once`); a dataset's rows name their
+    pixels (`_dataset_pixels`). What it changed, one item
     each (empty: the folder was up to date)."""
     results = Path(results)
     path = results / VOCABULARY
@@ -47,7 +48,36 @@ def upgrade(results: Path, current: Vocabulary) -> list[str]:
         changed.append(f"{VOCABULARY}: declared as this bench does ({', '.join(older)})")
     untracked = {n for n, t in current.tasks.items() if not t.tracks}
     changed += [c for name in (RUNS, DAMAGED) for c in _rows_once(results / name, untracked)]
+    changed += [c for name in (RUNS, DAMAGED) for c in _dataset_pixels(results / name)]
     return changed
+
+
+def _dataset_pixels(path: Path) -> list[str]:
+    """Name the pixels of a dataset's rows written before rows named them: a dataset's
+    `render_key` is already the hash of its files' contents (`source_key`), which is its
+    `pixels`. A rendered row's pixels cannot be told from its render key (renders differ
+    between machines): it stays unnamed, and a run computes it again."""
+    if not path.is_file():
+        return []
+    with path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or "render_key" not in rows[0]:
+        return []
+    header = rows[0] if "pixels" in rows[0] else [*rows[0][:-1], "pixels", rows[0][-1]]
+    out, named = [header], 0
+    for fields in rows[1:]:
+        row = dict(zip(rows[0], fields))
+        held = ROW_CHECKSUM in row and row[ROW_CHECKSUM] == row_checksum(row)
+        if not row.get("pixels") and row["render_key"].startswith("dataset-"):
+            row["pixels"] = row["render_key"]
+            named += 1
+            if held:
+                row[ROW_CHECKSUM] = row_checksum(row)
+        out.append([row.get(c, "") for c in header])
+    if not named:
+        return []
+    write_text_atomic(path, csv_lines(out))
+    return [f"{path.name}: {named} dataset row(s) name their pixels (their contents' hash)"]
 
 
 def _rename_method(path: Path) -> list[str]:

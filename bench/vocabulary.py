@@ -3,8 +3,7 @@ headline, the units of work, and the registries of methods and tasks.
 
 A method (a selection policy, a reference or a stock-COLMAP peer) is declared where it is
 implemented (`bench.frontend.policies.policy`, the feedback loop, the oracle, the peers),
-with its display label, its role, the functions that implement it (`CODE`: its rows'
-code hash starts there, `bench.harness.predict`) and its own settings (`SETTINGS`: a
+with its display label, its role and its own settings (`SETTINGS`: a
 dataclass, set as `--set <method>.<field>=value`); the display names, the baselines, the default grid
 and the budget-0 rule are derived from these declarations. A task is declared where its
 reconstruction and evaluation are (`bench.harness.tasks`). A results folder records the
@@ -65,6 +64,10 @@ PER_VIEW, MULTI_VIEW, GROUND_TRUTH, OWN_PIPELINE = "per-view", "multi-view", "or
 EQUAL_COUNT = "equal-count"
 """The kind of `<policy>@<peer>`: a per-view policy at a peer's own keypoint count per view
 (`bench.backend.equal_count` declares it); the report pairs it with its peer."""
+RECOMPUTED_TRUTH = "rendered, recomputed"
+"""The `ground_truth` of the rows of a reference entry (`bench.render.reference`): its
+layers recomputed on the machine that ran by the AOV pass, which can differ from the
+reference machine's in a few pixels' last bits; only the oracle selects with them."""
 
 
 def equal_parts(name: str) -> tuple[str, str]:
@@ -259,15 +262,13 @@ class Job(NamedTuple):
 METHODS: dict[str, Method] = {}
 TASKS: dict[str, Task] = {}
 METRICS: dict[str, Metric] = {}
-CODE: dict[str, tuple] = {}
-"""The functions that implement each method: the roots of its rows' code hash."""
 SETTINGS: dict[str, type] = {}
 """The dataclass of each method's own settings (a method without one has none)."""
 
 
-def declare_method(method: Method, code: tuple = (), settings: type | None = None) -> Method:
-    """Register a method under a name no other method has, with the functions that
-    implement it and the dataclass of its own settings (if it has any)."""
+def declare_method(method: Method, settings: type | None = None) -> Method:
+    """Register a method under a name no other method has, with the dataclass of its own
+    settings (if it has any)."""
     if method.role not in ROLES:
         raise BenchError(
             f"policy {method.name}: unknown role {method.role!r}; valid: {', '.join(ROLES)}"
@@ -279,18 +280,10 @@ def declare_method(method: Method, code: tuple = (), settings: type | None = Non
     if method.name in METHODS:
         raise BenchError(f"policy name {method.name!r} is taken; give the policy another name")
     METHODS[method.name] = method
-    CODE[method.name] = tuple(code)  # a name declared anew starts from its own code only
     SETTINGS.pop(method.name, None)
     if settings is not None:
         SETTINGS[method.name] = settings
     return method
-
-
-def implemented_by(names, *functions) -> None:
-    """Record the functions that implement the declared methods `names` (module
-    docstring); a method declared before its functions are defined names them here."""
-    for name in names:
-        CODE[name] = CODE.get(name, ()) + functions
 
 
 def declare_kind(name: str, doc: str) -> str:

@@ -1,305 +1,277 @@
-"""Cache keys as narrow as what they protect, by content: a rename, a move, a docstring
-or string, an annotation, a display label or an unused function changes no hash; an edit
-in one policy changes that policy's rows alone, an edit in the shared back end every row;
-a method's rows depend on its own code and settings, a scene's render key on its own
-generator."""
+"""Cache keys that name everything that decides a row: the import closure of the code a
+row's stages run (`bench.codehash`: every module whole, so no edit that changes a value is
+missed; docstrings, comments and layout are free), the settings, the declared fields, the
+libraries' versions; a method's own settings decide its rows alone."""
 
 from __future__ import annotations
 
 import dataclasses
 import importlib
 import json
+import os
 import sys
 import textwrap
+import time
 
 import pytest
 
-from bench import BenchError
-from bench.codehash import accepted, code_hash, covered, object_digest
+from bench import BenchError, codehash
+from bench.codehash import check_unchanged, closure, code_hash
 
-REGISTRY = """
+MODULES = {
+    "__init__": "",
+    "registry": """
 POLICIES = {}
 
 
-def policy(name, label):
+def policy(name, memo=1):
     def register(fn):
-        POLICIES[name] = fn
+        POLICIES[name] = (fn, memo)
         return fn
 
     return register
-"""
-
-BACKEND = '''
+""",
+    "backend": '''
 """The synthetic back end."""
 
-SCALE = 2  # the scale
+from functools import partial
+
+try:
+    import fast_matcher as matcher  # noqa: F401
+except ImportError:
+    SCALE = 2  # the scale
+
+if SCALE > 1:
+
+    def helper(x):
+        """Doubles."""
+        return SCALE * x
 
 
-def helper(x):
-    """Doubles."""
-    return SCALE * x
+def match(x, offset=1):
+    return helper(x) + offset
 
 
-def match(x):
-    return helper(x) + 1
-
-
-def colmap_io(path):
-    """Not reached by any row."""
-    return open(path).read()
-
-
-def lazy(x):
-    return x * 3
-'''
-
-POLICIES = '''
-"""Two synthetic policies."""
-
+MATCH = partial(match, offset=1)
+''',
+    "settings": """
 from dataclasses import dataclass
-
-from ckpkg.registry import policy
 
 
 @dataclass(frozen=True)
 class Settings:
-    """A policy's settings."""
-
     shift: int = 1
-    """How far it shifts."""
+""",
+    "policies": '''
+"""Two synthetic policies."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from ckpkg.registry import policy
+
+if TYPE_CHECKING:
+    from ckpkg.settings import Settings
 
 
-@policy("a", "Policy A")
-def policy_a(x: int) -> int:
-    return _order(x) + Settings().shift
-
-
-@policy("b", "Policy B")
-def policy_b(x):
-    return _order(x) - 1
-
-
-def _order(x):
-    return x * 2
-'''
-
-STAGE = '''
-"""The synthetic shared path."""
-
-from ckpkg import backend
+@policy("a", memo=1)
+def policy_a(x: int, cfg: Settings) -> int:
+    return x * 2 + cfg.shift
+''',
+    "glue": '''
+from ckpkg import backend, policies  # noqa: F401 (importing it registers the policies)
 from ckpkg.registry import POLICIES
 
 
-def run(name, x):
+def selection(name, x, budget):
+    return POLICIES[name][0](x, budget)
+
+
+def run(name, x, budget):
     """Runs."""
-    return backend.match(POLICIES[name](x)) + late(x)
+    return backend.MATCH(selection(name, x, budget)) + late(x)
 
 
 def late(x):
-    from ckpkg.backend import lazy
+    from ckpkg.cycle_a import ping
 
-    return lazy(x)
-'''
+    return ping(x)
+''',
+    "cycle_a": """
+def ping(x):
+    from ckpkg.cycle_b import pong
 
-MODULES = {"registry": REGISTRY, "backend": BACKEND, "policies": POLICIES, "stage": STAGE}
+    return pong(x) if x > 0 else 0
+""",
+    "cycle_b": """
+def pong(x):
+    from ckpkg.cycle_a import ping
+
+    return ping(x - 2)
+""",
+    "report": """
+from ckpkg import glue
+
+
+def table(rows):
+    return [glue.run("a", r, 4) for r in rows]
+""",
+}
+"""A toy package: `glue.run` is a row's root (`report` only reads rows)."""
 
 
 @pytest.fixture
 def pkg(tmp_path, monkeypatch):
-    """The synthetic package written to tmp_path and imported; `edit(module, old, new)`
-    rewrites one of its files (the imported modules are hashed from their files), `rows()`
-    each policy's row key: the shared path's hash and the policy's own."""
+    """The toy package in tmp_path; `edit(module, old, new)` rewrites a file and returns
+    the root's hash as a new process would take it."""
     root = tmp_path / "ckpkg"
     root.mkdir()
-    (root / "__init__.py").write_text("")
     for name, text in MODULES.items():
         (root / f"{name}.py").write_text(text)
     monkeypatch.syspath_prepend(str(tmp_path))
-    names = ["ckpkg", *(f"ckpkg.{m}" for m in MODULES)]
-    for name in names:
-        sys.modules.pop(name, None)
-    importlib.import_module("ckpkg.policies")
-    stage = importlib.import_module("ckpkg.stage")
-    importlib.import_module("ckpkg.registry")
+    monkeypatch.setattr(codehash, "HASHED", set())  # the toy's files are no run's code
+    importlib.invalidate_caches()
 
-    def edit(module: str, old: str, new: str) -> None:
+    def edit(module: str, old: str, new: str) -> str:
         path = root / f"{module}.py"
-        text = path.read_text()
-        assert old in text
-        path.write_text(text.replace(old, new))
+        assert old in path.read_text()
+        path.write_text(path.read_text().replace(old, new))
+        return rows()
 
-    def rows() -> dict[str, tuple[str, str]]:
-        """Each policy's row key, the package imported anew (a process of the code now)."""
-        for name in names:
-            sys.modules.pop(name, None)
-        importlib.import_module("ckpkg.policies")
-        stage = importlib.import_module("ckpkg.stage")
-        registry = importlib.import_module("ckpkg.registry")
-        shared = code_hash([stage.run], packages=("ckpkg",))
-        own = {p: code_hash([fn], packages=("ckpkg",)) for p, fn in registry.POLICIES.items()}
-        return {p: (shared, h) for p, h in own.items()}
+    def rows() -> str:
+        code_hash.cache_clear()
+        return code_hash(("ckpkg.glue",), package="ckpkg")
 
-    yield stage, edit, rows
-    for name in names:
-        sys.modules.pop(name, None)
-
-
-MOVE_ORDER = [
-    ("policies", "\n\ndef _order(x):\n    return x * 2\n", "\n"),
-    (
-        "policies",
-        "from ckpkg.registry import policy",
-        "from ckpkg.backend import _order\nfrom ckpkg.registry import policy",
-    ),
-    ("backend", "\ndef lazy(x):", "\ndef _order(x):\n    return x * 2\n\n\ndef lazy(x):"),
-]
-
-
-@pytest.mark.parametrize(
-    "edits",
-    [
-        [("backend", "helper", "twice")],  # a rename: its definition and its uses
-        [("policies", "_order", "_sorted")],
-        [("policies", "policy_a", "select_a")],  # a policy's function renamed
-        [("backend", "SCALE", "FACTOR")],  # a constant renamed
-        MOVE_ORDER,  # a helper moved to another module
-        [("backend", '"""Doubles."""', '"""Twice its argument, a corrected docstring."""')],
-        [("policies", '"""How far it shifts."""', '"""How far, a field docstring."""')],
-        [("stage", "    return lazy(x)", '    "a string statement"\n    return lazy(x)')],
-        [("backend", "# the scale", "# the scale factor, a longer comment")],
-        [("stage", "def run(name, x):", "\n\ndef run(name, x):  # blank lines")],
-        [("policies", "def policy_a(x: int) -> int:", "def policy_a(x: float) -> float:")],
-        [("policies", '"Policy A"', '"Policy A, its display label"')],  # registration
-        [("backend", "def colmap_io(path):", "def colmap_io(path, mode='r'):")],  # unreached
-        [("backend", "\ndef lazy", "\ndef unused(x):\n    return 0\n\n\ndef lazy")],  # new
-    ],
-)
-def test_renames_moves_strings_and_unused_code_change_no_hash(pkg, edits):
-    stage, edit, rows = pkg
-    before = rows()
-    for module, old, new in edits:
-        edit(module, old, new)
-    assert rows() == before
+    yield root, edit, rows
+    code_hash.cache_clear()
+    for name in [m for m in sys.modules if m.split(".")[0] == "ckpkg"]:
+        sys.modules.pop(name)
 
 
 @pytest.mark.parametrize(
     "module, old, new",
     [
-        ("backend", "return SCALE * x", "return SCALE * x + 1"),  # a function the path calls
-        ("backend", "SCALE = 2", "SCALE = 3"),  # a constant it reads, through the module
-        ("backend", "return x * 3", "return x * 4"),  # imported inside a function
-        ("stage", "+ late(x)", "- late(x)"),
+        ("glue", "POLICIES[name][0](x, budget)", "POLICIES[name][0](x, budget // 2)"),  # glue
+        ("policies", '@policy("a", memo=1)', '@policy("a", memo=2)'),  # a decorator's argument
+        ("backend", "    SCALE = 2", "    SCALE = 3"),  # under a top-level try
+        ("backend", "        return SCALE * x", "        return SCALE * x + 1"),  # under an if
+        ("settings", "shift: int = 1", "shift: int = 2"),  # reached by an annotation alone
+        ("backend", "partial(match, offset=1)", "partial(match, offset=2)"),  # partial's binding
+        ("cycle_b", "ping(x - 2)", "ping(x - 1)"),  # a member of an import cycle
+        ("cycle_a", "if x > 0 else 0", "if x > 1 else 0"),  # its partner
+        ("backend", "def match(x, offset=1):", "def match(x, offset=1, unused=0):"),
     ],
 )
-def test_an_edit_in_the_back_end_changes_every_rows_key(pkg, module, old, new):
-    stage, edit, rows = pkg
+def test_every_edit_that_can_change_a_value_changes_the_hash(pkg, module, old, new):
+    """The blind spots of the function-level hash this replaced (0.4.0): the harness glue
+    between stages, a decorator's arguments, definitions under a top-level `if` or `try`,
+    a class reached through an annotation, a `partial`'s bound arguments, a cycle."""
+    _, edit, rows = pkg
     before = rows()
-    edit(module, old, new)
-    after = rows()
-    assert all(after[p] != before[p] for p in before)
+    assert edit(module, old, new) != before
 
 
 @pytest.mark.parametrize(
-    "old, new",
+    "module, old, new",
     [
-        ("return _order(x) + Settings().shift", "return _order(x) + Settings().shift + 1"),
-        ("shift: int = 1", "shift: int = 2"),  # its settings class
+        ("backend", '"""Doubles."""', '"""Twice its argument, a corrected docstring."""'),
+        ("backend", "# the scale", "# the scale factor, a longer comment"),
+        ("glue", "def run(name, x, budget):", "\n\ndef run(name, x, budget):  # blank lines"),
+        ("glue", '"""Runs."""', '"""Runs the stage."""\n    "a string statement"'),
+        ("report", "r, 4)", "r, 8)"),  # a module no root imports
     ],
 )
-def test_an_edit_in_one_policy_changes_its_rows_alone(pkg, old, new):
-    stage, edit, rows = pkg
+def test_docstrings_comments_layout_and_modules_outside_the_closure_change_no_hash(
+    pkg, module, old, new
+):
+    _, edit, rows = pkg
     before = rows()
-    edit("policies", old, new)
-    after = rows()
-    assert after["a"] != before["a"] and after["b"] == before["b"]
-    edit("policies", "return x * 2", "return x * 3")  # a helper both policies call
-    assert all(rows()[p] != after[p] for p in after)
+    assert edit(module, old, new) == before
 
 
-def test_a_cut_function_belongs_to_its_own_hash(pkg):
-    """A function cut out of a hash: editing it changes its own hash and not the other."""
-    stage, edit, rows = pkg
-    from ckpkg import backend
-
-    cut = code_hash([stage.run], cut=[backend.helper], packages=("ckpkg",))
-    own = code_hash([backend.helper], packages=("ckpkg",))
-    edit("backend", "return SCALE * x", "return SCALE * x + 1")
-    assert code_hash([stage.run], cut=[backend.helper], packages=("ckpkg",)) == cut
-    assert code_hash([backend.helper], packages=("ckpkg",)) != own
+def test_the_closure_follows_imports_anywhere_and_stops_at_readers(pkg):
+    _, edit, rows = pkg
+    found = set(closure(("ckpkg.glue",), package="ckpkg"))
+    assert found == {"ckpkg", *(f"ckpkg.{m}" for m in MODULES if m not in ("__init__", "report"))}
+    with pytest.raises(BenchError, match="not a module of ckpkg"):
+        closure(("ckpkg.missing",), package="ckpkg")
 
 
-def test_a_lambda_is_a_root_of_its_own(pkg, tmp_path):
-    """A function registered as a lambda (a task's `reconstruct`) is hashed by its code,
-    not by the statement that registers it."""
-    stage, edit, rows = pkg
-    edit(
-        "registry",
-        "POLICIES = {}",
-        "POLICIES = {}\nTASKS = {\n    't': lambda x: x + 1,\n    'u': lambda x: x - 1,\n}",
-    )
-    registry = importlib.reload(sys.modules["ckpkg.registry"])
-    before = code_hash([registry.TASKS["t"]], packages=("ckpkg",))
-    edit("registry", "lambda x: x - 1", "lambda x: x - 2")
-    assert code_hash([registry.TASKS["t"]], packages=("ckpkg",)) == before
-    edit("registry", "lambda x: x + 1", "lambda x: x + 2")
-    assert code_hash([registry.TASKS["t"]], packages=("ckpkg",)) != before
+def test_a_module_edited_while_a_command_runs_stops_its_rows(pkg, monkeypatch):
+    """The hash is the code that runs: once a module changed after the process started,
+    no row is recorded (`bench.codehash.check_unchanged`)."""
+    root, edit, rows = pkg
+    later = time.time() + 60  # the files were written before this process "started"
+    monkeypatch.setattr(codehash, "STARTED", later)
+    rows()
+    check_unchanged()
+    os.utime(root / "report.py", (later + 1, later + 1))  # a module no hash covers
+    check_unchanged()
+    os.utime(root / "backend.py", (later + 1, later + 1))
+    with pytest.raises(BenchError, match=r"backend.py was edited while this command ran"):
+        check_unchanged()
 
 
-def test_an_aliased_hash_is_accepted(tmp_path):
-    """A hash aliased to the current one (values proven identical) is accepted for it,
-    through a chain of aliases, and no other."""
-    aliases = tmp_path / "aliases.json"
-    aliases.write_text(json.dumps([["old", "mid"], ["mid", "new"], ["other", "elsewhere"]]))
-    assert accepted("new", aliases) == {"new", "mid", "old"}
-    assert accepted("elsewhere", aliases) == {"elsewhere", "other"}
-    assert accepted("unknown", aliases) == {"unknown"}
+def test_the_prediction_code_holds_the_glue_the_peers_and_the_bags():
+    """The roots are what a unit stores: every kind's store and the harness around them
+    (the policies' selection glue, the peers' extraction options, bags, memos); the report
+    and the command line are outside."""
+    from bench.harness.evaluate import SCORING_CODE
+    from bench.harness.predict import PREDICTION_CODE
+
+    modules = set(closure(PREDICTION_CODE))
+    assert {
+        "bench.harness.predict",
+        "bench.harness.bags",
+        "bench.harness.execute",
+        "bench.backend.peers",
+        "bench.frontend.stage",
+        "bench.frontend.tracks",
+        "bench.memo",
+        "bench.evaluation.oracle",
+    } <= modules
+    assert not any(m.startswith(("bench.report", "bench.cli")) for m in modules)
+    assert "bench.evaluation.metrics" in set(closure(SCORING_CODE))
 
 
-def test_a_digest_ignores_docstrings_and_comments(pkg):
-    stage, edit, rows = pkg
-    before = object_digest(stage)
-    edit("stage", '"""Runs."""', '"""Runs the stage (a longer docstring)."""  # and a comment')
-    assert object_digest(stage) == before
-    edit("stage", "+ late(x)", "- late(x)")
-    assert object_digest(stage) != before
+def test_library_versions_decide_the_rows_they_run(monkeypatch):
+    """pycolmap, OpenCV, numpy and scipy decide every row; torch a learned method's alone."""
+    from bench.harness import evaluate, predict
+    from bench.harness.config import RunConfig
+
+    cfg, methods = RunConfig(), ("scale", "colmap-b", "aliked-b")
+    before = {m: predict.prediction_hash(cfg, m, "sfm") for m in methods}
+    scored = evaluate.evaluation_hash()
+    real = codehash.version
+
+    def other(lib):
+        return lambda name: "9.9" if name == lib else real(name)
+
+    monkeypatch.setattr(codehash, "version", other("pycolmap"))
+    assert all(predict.prediction_hash(cfg, m, "sfm") != before[m] for m in methods)
+    evaluate.evaluation_hash.cache_clear()
+    assert evaluate.evaluation_hash() != scored
+    monkeypatch.setattr(codehash, "version", other("torch"))
+    changed = {m for m in methods if predict.prediction_hash(cfg, m, "sfm") != before[m]}
+    assert changed == {"aliked-b"}
+    evaluate.evaluation_hash.cache_clear()
 
 
-def test_the_shared_prediction_code_is_the_select_and_match_path_alone():
-    from bench.frontend import policies
+def test_what_a_method_reads_decides_its_rows(monkeypatch):
+    """Every declared field but the display ones enters the key: what a method's selection
+    reads (`Method.reads`), its pool and matcher; its label does not."""
     from bench.harness import predict
+    from bench.harness.config import RunConfig
+    from bench.vocabulary import METHODS
 
-    parts = covered(predict.SHARED_CODE)
-    modules = {m for m, _ in parts}
-    assert {"bench.frontend.signals", "bench.backend.matching"} <= modules
-    assert not any(m.startswith(("bench.evaluation", "bench.report")) for m in modules)
-    assert ("bench.codehash", "code_hash") not in parts  # the caching around it
-    assert ("bench.harness.predict", "read_record") not in parts
-    assert ("bench.frontend.stage", "front_end") not in parts
-    assert ("bench.frontend.policies", "adaptive_policy") not in parts
-    assert ("bench.frontend.policies", "select") in parts  # the contract every policy meets
-    assert ("bench.frontend.feedback", "feedback_select") not in parts
-    assert ("bench.frontend.tracks", "track_first_select") not in parts  # registered
-    own = covered([policies.POLICIES["adaptive"]])
-    assert ("bench.frontend.policies", "capped_greedy") in own
-    assert ("bench.frontend.policies", "random_policy") not in own
-    tri = covered(predict.task_code("tri"))
-    assert ("bench.backend.reconstruction", "known_pose_task") in tri
-    assert ("bench.backend.reconstruction", "mapping_task") not in tri
-
-
-def test_every_method_has_its_own_code_hash():
-    from bench.harness.predict import method_code_hash
-    from bench.vocabulary import CODE, METHODS, OWN_PIPELINE, TRACKS_PEER
-
-    assert set(METHODS) <= set(CODE)
-    hashes = {m: method_code_hash(m) for m in METHODS}
-    assert all(hashes.values())
-    colmap = [m for m in METHODS if METHODS[m].kind in (OWN_PIPELINE, TRACKS_PEER)]
-    top_b = ["response", *(m for m in METHODS if METHODS[m].matcher)]  # the strongest B
-    for same in (colmap, top_b):
-        assert len(same) > 1 and len({hashes[m] for m in same}) == 1  # one function each
-    shared = len(colmap) + len(top_b) - 2
-    assert len(set(hashes.values())) == len(METHODS) - shared
+    cfg = RunConfig()
+    before = predict.prediction_hash(cfg, "texture", "sfm")
+    declared = METHODS["texture"]
+    monkeypatch.setitem(METHODS, "texture", dataclasses.replace(declared, label="Texture!"))
+    assert predict.prediction_hash(cfg, "texture", "sfm") == before
+    monkeypatch.setitem(METHODS, "texture", dataclasses.replace(declared, reads=("response",)))
+    assert predict.prediction_hash(cfg, "texture", "sfm") != before
 
 
 def test_a_new_policy_or_a_methods_own_setting_changes_that_methods_rows_alone(tmp_path):
@@ -307,7 +279,7 @@ def test_a_new_policy_or_a_methods_own_setting_changes_that_methods_rows_alone(t
     from bench.frontend.policies import POLICIES
     from bench.harness import predict
     from bench.harness.config import RunConfig
-    from bench.vocabulary import CODE, METHODS
+    from bench.vocabulary import METHODS
 
     cfg = RunConfig()
     names = [(m, t) for m in METHODS for t in ("tri", "sfm")]
@@ -326,11 +298,9 @@ def test_a_new_policy_or_a_methods_own_setting_changes_that_methods_rows_alone(t
     )
     plugins.load_module(str(module))
     try:
-        predict.shared_code_hash.cache_clear()
-        predict._own_code_hash.cache_clear()
         assert {n: predict.prediction_hash(cfg, *n) for n in names} == before
     finally:  # the registry as it was, for the other tests
-        for registry in (METHODS, POLICIES, CODE, plugins.ORIGIN):
+        for registry in (METHODS, POLICIES, plugins.ORIGIN):
             registry.pop("cache-keys-new", None)
         plugins.load_module.cache_clear()
     looped = cfg.with_own("adaptive-loop", loop_rounds=3)
@@ -416,34 +386,10 @@ def test_a_methods_own_setting_is_set_with_its_name():
         apply_settings(RunConfig(), ["adaptive-loop.loop_rounds=-1"]).validate()
 
 
-def test_a_scenes_render_key_covers_its_own_generator_and_the_render_code_alone():
-    from bench.render.entry import RENDER_CODE, render_code_hash
-    from bench.scenes import catalog
+def test_the_render_key_covers_the_scenes_and_the_renderer_not_the_rows():
+    from bench.render.entry import RENDER_CODE
 
-    table = covered([*RENDER_CODE, catalog.generator_of("table")])
-    assert ("bench.scenes.generators", "table") in table
-    assert ("bench.camera", "write_colmap_rig") in table
-    parts = covered(
-        [*RENDER_CODE, catalog.generator_of("table")],
-        cut=[g for g in catalog.generator_functions() if g is not catalog.generator_of("table")],
-    )
-    assert ("bench.scenes.generators", "facade") not in parts
-    assert len({render_code_hash(s) for s in ("table", "facade", "corridor")}) == 3
-
-
-def test_a_render_entry_under_an_aliased_key_is_current(tmp_path, monkeypatch):
-    """A render entry under an older render key aliased to the current one is the scene's
-    entry (nothing is rendered again); without the alias the current key's name."""
-    from bench import codehash
-    from bench.render.config import RenderConfig
-    from bench.render.entry import entry_name, entry_names
-
-    cfg = RenderConfig(width=96, height=72, spp=4, max_depth=2, variant="scalar_rgb")
-    current = entry_name("table", 0, cfg, tmp_path)
-    assert entry_names("table", 0, cfg, tmp_path) == [current]
-    (tmp_path / "table-s0-0123456789ab").mkdir()
-    aliases = tmp_path / "aliases.json"
-    aliases.write_text(json.dumps([["0123456789ab", current.rpartition("-")[2]]]))
-    monkeypatch.setattr(codehash, "ALIASES", aliases)
-    assert entry_name("table", 0, cfg, tmp_path) == "table-s0-0123456789ab"
-    assert entry_names("table", 0, cfg, tmp_path) == [current, "table-s0-0123456789ab"]
+    modules = set(closure(RENDER_CODE))
+    assert {"bench.scenes.generators", "bench.render.mitsuba", "bench.render.develop"} <= modules
+    assert {"bench.camera", "bench.scenes.textures"} <= modules
+    assert not any(m.startswith(("bench.frontend", "bench.harness")) for m in modules)

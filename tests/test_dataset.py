@@ -37,7 +37,7 @@ from tests.conftest import MEDIUM, bench_run
 GRID = dict(
     seeds=(0,), methods=("texture", "grid", "adaptive", "oracle", "colmap-b"), budgets=(64,)
 )
-NOT_COMPARED = {"scene", "render_key", "render_s_per_view", "invocation", "ground_truth"}
+NOT_COMPARED = {"scene", "render_key", "pixels", "render_s_per_view", "invocation", "ground_truth"}
 NOT_COMPARED |= {"row_checksum"}  # a hash of every value, those above included
 
 

@@ -211,7 +211,7 @@ def test_rows_computed_by_other_code_are_computed_again(
 ):
     """The key that decides whether a row is finished covers the stages' code."""
     shutil.copytree(quick_results, tmp_path / "r")
-    monkeypatch.setattr(prediction, "shared_code_hash", lambda: "another-code")
+    monkeypatch.setattr(prediction, "code_hash", lambda modules: "another-code")
     calls = []
     spy(monkeypatch, calls)
     bench_run(dataclasses.replace(SMALL, scenes=("table",)), tmp_path / "r", renders_dir)
@@ -221,48 +221,58 @@ def test_rows_computed_by_other_code_are_computed_again(
     assert runs.groupby(["method", "task"])["prediction_hash"].nunique().max() == 1
 
 
-def test_rows_under_an_aliased_hash_are_current(quick_results, renders_dir, tmp_path, monkeypatch):
-    """Rows and stored predictions under older hashes proven to give the same values (the
-    alias file, `bench.codehash.accepted`) are current: nothing is predicted or scored
-    again. Without the aliases every unit is predicted again."""
-    from bench import codehash
+def test_rows_on_other_pixels_are_refused_and_rows_without_pixels_computed_again(
+    quick_results, renders_dir, tmp_path, monkeypatch, capsys
+):
+    """A row names the pixels its unit read: rows of the same render key on other pixels
+    (another machine's renders) are refused in one line naming both hashes, nothing
+    computed; rows that name none (older folders) are computed again, never trusted; and
+    a folder that mixes two pixels of one scene is refused by every reader."""
     from bench.runs import ROW_CHECKSUM, row_checksum
 
     folder = tmp_path / "r"
     shutil.copytree(quick_results, folder)
     runs = pd.read_csv(folder / "runs.csv", dtype=str, keep_default_na=False)
-    old = {h: f"old{h}" for c in ("prediction_hash", "evaluation_hash") for h in runs[c]}
-    for c in ("prediction_hash", "evaluation_hash"):
-        runs[c] = runs[c].map(old)
-    runs[ROW_CHECKSUM] = [row_checksum(r) for r in runs.to_dict("records")]
-    runs.to_csv(folder / "runs.csv", index=False)
-    for record in (folder / "models").rglob("prediction.json"):
-        stored = json.loads(record.read_text())
-        for job in stored["jobs"].values():
-            job["hash"] = old[job["hash"]]
-        record.write_text(json.dumps(stored))
-    aliases = tmp_path / "aliases.json"
-    aliases.write_text(json.dumps([[o, h] for h, o in old.items()]))
-    monkeypatch.setattr(codehash, "ALIASES", aliases)
+    mine = runs["pixels"].iloc[0]
+    assert mine.startswith("px-") and runs.groupby("scene")["pixels"].nunique().max() == 1
+
+    def rewrite(pixels):
+        runs["pixels"] = pixels
+        runs[ROW_CHECKSUM] = [row_checksum(r) for r in runs.to_dict("records")]
+        runs.to_csv(folder / "runs.csv", index=False)
+
+    rewrite(["px-elsewhere"] * len(runs))
     calls = []
     spy(monkeypatch, calls)
+    with pytest.raises(BenchError, match=r"read pixels px-elsewhere, and its entry here has px-"):
+        bench_run(SMALL, folder, renders_dir)
+    assert calls == []
+    first = runs["method"] == runs["method"].iloc[0]
+    rewrite(["px-elsewhere" if f else mine for f in first])
+    with pytest.raises(BenchError, match=r"mixes rows of \w+ seed 0 read from different pixels"):
+        read_runs(folder / "runs.csv")
+    rewrite(["" if f else mine for f in first])
+    with pytest.raises(BenchError, match="unrecorded"):
+        read_runs(folder / "runs.csv")
+    rewrite([""] * len(runs))
     again = bench_run(SMALL, folder, renders_dir)
-    assert calls == [] and again["prediction_hash"].str.startswith("old").all()
-    assert again["evaluation_hash"].str.startswith("old").all()  # none scored again
-    monkeypatch.setattr(codehash, "ALIASES", tmp_path / "none.json")
-    bench_run(SMALL, folder, renders_dir)
-    assert len(calls) == 2 * 8  # every unit of both scenes
+    assert len(calls) == 2 * 8 and (again["pixels"].str.startswith("px-")).all()
+    assert "name no pixels" in capsys.readouterr().err
 
 
 def test_a_changed_scene_is_computed_again_and_no_other(
     quick_results, renders_dir, tmp_path, monkeypatch, capsys
 ):
     """A row records the render entry it was computed on: a scene whose generator,
-    parameters or render settings changed since (here its render code) is rendered and
+    parameters or render settings changed since (here its render key) is rendered and
     computed again; the other scene's rows are kept as they are."""
     shutil.copytree(quick_results, tmp_path / "r")
-    real = render.render_code_hash
-    monkeypatch.setattr(render, "render_code_hash", lambda s: real(s) + "-edited" * (s == "table"))
+    real = render._pixel_fields
+    monkeypatch.setattr(
+        render,
+        "_pixel_fields",
+        lambda spec, *a: real(spec, *a) | ({"edited": 1} if spec.name == "table" else {}),
+    )
     calls = []
     spy(monkeypatch, calls, what=lambda unit: unit.scene)
     runs = bench_run(SMALL, tmp_path / "r", renders_dir)

@@ -51,6 +51,26 @@ def _database(path: Path, images: Path, names, cams, extracted=None, max_feature
         db.close()
 
 
+def test_the_extraction_cache_is_keyed_by_the_limit_and_the_code(
+    medium_entry, tmp_path, monkeypatch
+):
+    """One cache folder for every limit: an extraction cached at one SIFT limit is never
+    read back at another, nor after the extraction's code changed."""
+    entry = medium_entry("table")
+    images, views = Source.of(entry).images, load_views(entry)[:1]
+    names, cams, cache = [v.name for v in views], [v.camera for v in views], tmp_path / "sift"
+    full = extract(images, names, cams, 0, cache)[0]
+    capped = extract(images, names, cams, 64, cache)[0]
+    assert len(capped.keypoints) < len(full.keypoints)  # 64 locations, some two orientations
+    calls, real = [], peers._extract_now
+    monkeypatch.setattr(peers, "_extract_now", lambda *a: calls.append(a[3]) or real(*a))
+    extract(images, names, cams, 64, cache)
+    assert calls == []  # the same limit and code: read back
+    monkeypatch.setattr(peers, "code_hash", lambda modules: "edited")
+    extract(images, names, cams, 64, cache)
+    assert calls == [64]
+
+
 @pytest.mark.parametrize("max_features", [0, 64])
 def test_a_database_built_from_the_cached_extraction_is_colmaps_own(
     medium_entry, tmp_path, monkeypatch, max_features

@@ -136,7 +136,7 @@ def chooser(name: str, label: str, role: str = "contender") -> Callable[[Chooser
     decides its comparisons in Table 3: each chooser against every baseline)."""
 
     def register(fn: Chooser) -> Chooser:
-        declare_method(Method(name, label, role, kind=CHOOSER), code=(fn,))
+        declare_method(Method(name, label, role, kind=CHOOSER))
         CHOOSERS[name] = fn
         return fn
 

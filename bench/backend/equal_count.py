@@ -27,7 +27,6 @@ from pathlib import Path
 
 from bench.backend.peers import peer_extraction
 from bench.camera import Camera
-from bench.frontend.policies import MULTIVIEW, POLICIES
 from bench.frontend.tracks import NAME as TRACK_FIRST
 from bench.vocabulary import EQUAL_COUNT as EQUAL_KIND
 from bench.vocabulary import METHODS, SETTINGS, Method, declare_kind, declare_method
@@ -77,8 +76,7 @@ def declare_equal(policy: str, peer: str) -> str:
         kind=EQUAL_COUNT,
         matcher=base.matcher,
     )
-    code = (peer_counts, POLICIES.get(policy) or MULTIVIEW[policy])
-    declare_method(method, code=code, settings=SETTINGS.get(policy))
+    declare_method(method, settings=SETTINGS.get(policy))
     EQUAL[name] = (policy, peer)
     return name
 

@@ -59,6 +59,7 @@ from bench.backend.reconstruction import (
     write_images,
 )
 from bench.camera import Camera
+from bench.codehash import code_hash
 from bench.files import atomic_path, content_key
 from bench.frontend.features import strongest_first
 from bench.frontend.policies import register_policy, response_policy
@@ -70,7 +71,6 @@ from bench.vocabulary import (
     Method,
     declare_kind,
     declare_method,
-    implemented_by,
 )
 
 
@@ -149,7 +149,8 @@ def extract(
 ) -> list[Extracted]:
     """Stock COLMAP's SIFT extraction of each image (single-threaded, on the CPU) at SIFT's
     limit `max_features` (0: COLMAP's default), each image read from `cache_dir` where it
-    holds it (keyed by the image's bytes, the limit and pycolmap's version), the others
+    holds it (keyed by the image's bytes, the limit, pycolmap's version and this module's
+    code), the others
     extracted together and cached there; without `cache_dir`, extracted every call."""
     keys = [_extraction_key(Path(image_dir) / n, max_features) for n in names]
     paths = [None if cache_dir is None else Path(cache_dir) / f"{k}.npz" for k in keys]
@@ -172,7 +173,10 @@ def extract(
 
 def _extraction_key(image: Path, max_features: int) -> str:
     digest = hashlib.sha256(image.read_bytes()).hexdigest()
-    return content_key({"image": digest, "max": max_features, "pycolmap": pycolmap.__version__})
+    code = code_hash(("bench.backend.peers",))  # the extraction's options among it
+    return content_key(
+        {"image": digest, "max": max_features, "pycolmap": pycolmap.__version__, "code": code}
+    )
 
 
 def _read_extracted(path: Path | None) -> Extracted | None:
@@ -383,23 +387,18 @@ declare_kind(
     "extracts and matches with stock COLMAP, keeps in each view the keypoints of the "
     "longest verified tracks, matches them again and maps (colmap-tracks-b)",
 )
-implemented_by(
-    [  # peer rows: `colmap` (budget 0: COLMAP's default), the others one per budget
-        declare_method(m).name
-        for m in (
-            Method("colmap", "COLMAP default SIFT (peer)", "peer", True, kind=OWN_PIPELINE),
-            Method("colmap-b", "COLMAP SIFT, B largest-scale (peer)", "peer", kind=OWN_PIPELINE),
-            Method("colmap-soft-b", "COLMAP SIFT soft limit B (peer)", "peer", kind=OWN_PIPELINE),
-            Method(
-                "colmap-tracks-b",
-                "COLMAP SIFT, B of the longest tracks of 4B (peer)",
-                "peer",
-                kind=TRACKS_PEER,
-            ),
-        )
-    ],
-    run_peer,
-)
+for m in (  # peer rows: `colmap` (budget 0: COLMAP's default), the others one per budget
+    Method("colmap", "COLMAP default SIFT (peer)", "peer", True, kind=OWN_PIPELINE),
+    Method("colmap-b", "COLMAP SIFT, B largest-scale (peer)", "peer", kind=OWN_PIPELINE),
+    Method("colmap-soft-b", "COLMAP SIFT soft limit B (peer)", "peer", kind=OWN_PIPELINE),
+    Method(
+        "colmap-tracks-b",
+        "COLMAP SIFT, B of the longest tracks of 4B (peer)",
+        "peer",
+        kind=TRACKS_PEER,
+    ),
+):
+    declare_method(m)
 
 
 for _name, _detector in (("aliked-b", "ALIKED"), ("disk-b", "DISK")):

@@ -21,6 +21,8 @@ COMMANDS = (
     "scenes",
     "render",
     "run",
+    "reproduce",
+    "verdict",
     "plot",
     "publish",
     "upgrade",
@@ -31,7 +33,7 @@ COMMANDS = (
 )
 
 
-NATIVE = ("run", "upgrade", "train-weights", "select", "export")
+NATIVE = ("run", "reproduce", "verdict", "upgrade", "train-weights", "select", "export")
 """The commands that load COLMAP, whose import installs glog's failure signal handler (a
 native stack dump on SIGTERM): it is imported before ours replaces that handler."""
 

@@ -301,3 +301,23 @@ def renders_arg(parser: argparse.ArgumentParser) -> None:
 
 def results_arg(parser: argparse.ArgumentParser, default: Path | None, what: str) -> None:
     parser.add_argument("--results", type=folder, default=default, help=what)
+
+
+def snapshot_grid(snapshot: Path, rows) -> list[str]:
+    """`bench run` options that repeat a snapshot's grid and settings on `rows` (a slice of
+    its rows): its scenes, seeds, budgets, tasks and protocols, and for a rendered one its
+    render settings (its config.json; a dataset's rows need their --dataset folders)."""
+    from bench.binding import read_settings
+
+    render = read_settings(Path(snapshot))["render"]
+    protocols = sorted(set(rows["protocol"]) - {"none"})
+    out = ["--budget", ",".join(str(b) for b in sorted(set(rows["budget"]) - {0}))]
+    out += ["--tasks", ",".join(sorted(set(rows["task"])))]
+    out += ["--protocols", ",".join(protocols)] if protocols else []
+    if render is None:
+        return out
+    out += ["--scenes", ",".join(sorted(set(rows["scene"])))]
+    out += ["--seeds", ",".join(str(s) for s in sorted(set(rows["seed"])))]
+    for name in ("views", "width", "height", "spp", "max_depth", "denoise", "variant"):
+        out += [f"--{name.replace('_', '-')}", str(render[name])]
+    return out

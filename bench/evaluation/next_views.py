@@ -31,6 +31,5 @@ def best_candidate(offered: list[int], score: Callable[[int], float]) -> int:
 declare_method(
     Method(
         "oracle-view", "Oracle next view (ground truth, reference)", "reference", kind=VIEW_ORACLE
-    ),
-    code=(best_candidate,),
+    )
 )

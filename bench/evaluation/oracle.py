@@ -37,10 +37,10 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from bench.backend.matching import tentative_matches
-from bench.evaluation.truth import SceneTruth, scene_truth
+from bench.evaluation.truth import SceneTruth
 from bench.frontend.features import Candidates, strongest_first
 from bench.memo import digest, last_call
-from bench.vocabulary import GROUND_TRUTH, ORACLE, Method, declare_method, implemented_by
+from bench.vocabulary import GROUND_TRUTH, ORACLE, Method, declare_method
 
 declare_method(Method(ORACLE, "Oracle (ground truth, reference)", "reference", kind=GROUND_TRUTH))
 
@@ -116,6 +116,3 @@ def oracle_select(
                 chosen[v].append(k)
                 room[v] -= 1
     return [np.sort(np.array(c, dtype=np.int64)) for c in chosen]
-
-
-implemented_by([ORACLE], matchable_tracks, oracle_select, scene_truth)

@@ -21,10 +21,12 @@ from bench.evaluation.layers import (
     read_layers,
     surface_samples,
 )
+from bench.files import read_meta
 from bench.frontend.colmap_model import points_seen
 from bench.frontend.features import Candidates
 from bench.frontend.geometry import saturation_depth
 from bench.frontend.views import Source
+from bench.vocabulary import RECOMPUTED_TRUTH
 
 CORRESPONDENCE_PX = 3.0
 """Ground-truth correspondence: reprojection within this many pixels."""
@@ -234,7 +236,10 @@ def scene_truth(source: Path, cams: list[Camera], names: list[str], pools) -> Sc
     """The truth of a render entry, or whatever truth a dataset folder holds (with the
     points its model observes in each view)."""
     if Source.kind(source) == "render":
-        return SceneTruth.build(cams, read_layers(source), pools)
+        truth = SceneTruth.build(cams, read_layers(source), pools)
+        if "reference" in read_meta(source):  # pixels shipped, layers by the AOV pass here
+            truth.kind = RECOMPUTED_TRUTH
+        return truth
     cloud, gts = read_dataset_layers(source, names, cams)
     truth = SceneTruth.build(cams, gts, pools, cloud)
     seen = points_seen(Source.of(source).model)

@@ -125,7 +125,7 @@ def register_policy(method: Method, fn: Policy, config: type | None = None) -> P
     """Register a per-view policy's declaration (its kind: `PER_VIEW`), its selection
     function and the class of its own settings (`policy` does this for a decorated one)."""
     _check_reads(method.name, method.reads)
-    declare_method(replace(method, kind=PER_VIEW), code=(fn,), settings=config)
+    declare_method(replace(method, kind=PER_VIEW), settings=config)
     POLICIES[method.name] = fn
     return fn
 
@@ -163,7 +163,7 @@ def multiview_policy(
 
     def register(fn: MultiviewPolicy) -> MultiviewPolicy:
         method = Method(name, label or name, role, reads=tuple(reads), kind=MULTI_VIEW)
-        declare_method(method, code=(fn,), settings=config)
+        declare_method(method, settings=config)
         MULTIVIEW[name] = fn
         return fn
 

@@ -24,14 +24,12 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass, fields, replace
-from functools import cache
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from bench import BenchError
-from bench.codehash import code_hash
+from bench.codehash import code_hash, library_versions
 from bench.console import log, progress
 from bench.files import atomic_path, content_key
 from bench.frontend import features, learned
@@ -44,7 +42,7 @@ from bench.frontend.signals import (
     compute_signals,
     repeatability_redetect,
 )
-from bench.frontend.views import View, load_views, source_key
+from bench.frontend.views import View, load_views, pixels_key, source_key
 
 _CAND = [f.name for f in fields(Candidates)]
 VIEW_ALONE = ("repeatability_redetect",)
@@ -68,10 +66,8 @@ class FrontEnd:
     cached: bool
 
 
-@cache
-def frontend_code_hash() -> str:
-    """Hash of the front end's code: `compute` and what it reaches."""
-    return code_hash([compute])
+FRONTEND_CODE = ("bench.frontend.stage",)
+"""Where the front end's code starts (`compute`, `view_alone`, `subset`): its import closure."""
 
 
 def front_end(
@@ -97,13 +93,14 @@ def front_end(
     key = content_key(
         {
             "entry": source_key(entry),
+            "pixels": pixels_key(entry),
             "geometry": grant,
             "detector": asdict(det),
             "signals": asdict(sig),
-            "opencv": cv2.__version__,
-            "code": frontend_code_hash(),
+            "libraries": library_versions(),
+            "code": code_hash(FRONTEND_CODE),
+            "alone": bagged,
         }
-        | ({"view_alone": code_hash([view_alone])} if bagged else {})
         | learned.versions(det.detector)
     )
     part = "-alone" if bagged else ""

@@ -33,7 +33,15 @@ import numpy as np
 from bench import BenchError
 from bench.camera import Camera
 from bench.console import log
-from bench.files import META, checksum, content_key, entry_problem
+from bench.files import (
+    META,
+    checksum,
+    content_key,
+    entry_problem,
+    image_pixels_key,
+    images_pixels_key,
+    read_meta,
+)
 from bench.frontend.colmap_model import check_images, find_model, read_model
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".webp")
@@ -151,6 +159,21 @@ def source_key(path: Path) -> str:
     files += sorted(p for p in src.images.rglob("*") if p.is_file())
     stats = tuple((str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in files)
     return f"dataset-{_contents_key(path, stats)}"
+
+
+def pixels_key(path: Path) -> str:
+    """What the images of a set of views are, by content: for a render entry the hash of
+    its views' decoded pixels (`image_pixels_key`, recorded in its meta as it is made; the
+    reference set's are its manifest's), for a dataset its `source_key` (its files'
+    contents). Two rows with the same `pixels` read the same images, on any machine."""
+    path = Path(path)
+    if Source.kind(path) == "render":
+        meta = read_meta(path)
+        if "pixels" in meta:
+            return meta["pixels"]
+        views = sorted(p for p in path.glob("view_*.png"))
+        return images_pixels_key([image_pixels_key(cv2.imread(str(v))) for v in views])
+    return source_key(path)
 
 
 @cache

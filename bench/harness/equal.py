@@ -17,7 +17,6 @@ from bench.harness import select_match
 from bench.harness.evaluate import selection_shared
 from bench.harness.predict import store_selection
 from bench.results import PREDICTION
-from bench.vocabulary import implemented_by
 
 
 def store_equal(scene, unit, jobs, cfg, ws, record) -> None:
@@ -47,6 +46,3 @@ def equal_shared(scene, unit, record, grant, folder):
     with np.load(folder / f"{PREDICTION}-{grant}.npz") as arrays:
         sizes = [len(arrays[f"selection_{v}"]) for v in range(len(record["names"]))]
     return shared | {"keypoints_per_view": float(np.mean(sizes))}, seconds, poses
-
-
-implemented_by(list(EQUAL), store_equal, equal_shared)  # its rows' code hashes start here too

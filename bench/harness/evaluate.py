@@ -19,13 +19,12 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-from bench.codehash import code_hash
+from bench.codehash import code_hash, library_versions
 from bench.evaluation.metrics import coverage_pct, match_metrics
-from bench.evaluation.truth import scene_truth
 from bench.files import content_key
 from bench.frontend.colmap_model import read_model
 from bench.frontend.signals import seconds_of
-from bench.frontend.views import Source, source_key
+from bench.frontend.views import Source, pixels_key, source_key
 from bench.harness.bags import BAG
 from bench.harness.config import RunConfig
 from bench.harness.predict import (
@@ -40,23 +39,22 @@ from bench.render.entry import entry_meta
 from bench.results import PREDICTION, Workspace
 from bench.vocabulary import METHODS, METRICS, TASKS, Job, Unit, deciding
 
-
-def scoring_code() -> tuple:
-    """Where the scoring's code starts: the ground truth, each task's evaluation and what
-    it keeps, the readers of a stored prediction and the making of a row."""
-    tasks = [f for r in TASK_RUNNERS.values() for f in (r.evaluate, r.keep) if f is not None]
-    return (scene_truth, selection_shared, own_pipeline_shared, make_row, *tasks)
+SCORING_CODE = ("bench.harness.evaluate",)
+"""Where the scoring's code starts: the ground truth, each task's evaluation and what it
+keeps, the readers of a stored prediction and the making of a row (its import closure,
+`bench.codehash.code_hash`)."""
 
 
 @cache
 def evaluation_hash() -> str:
-    """The `evaluation_hash` of every row: the code `scoring_code` reaches and the fields
-    of the tasks and metrics that decide a row's values (`bench.vocabulary.deciding`)."""
+    """The `evaluation_hash` of every row: the scoring's code (`SCORING_CODE`), the
+    versions of the libraries it runs and the fields of the tasks and metrics that decide a
+    row's values (`bench.vocabulary.deciding`)."""
     declared = {
         "tasks": {n: deciding(t) for n, t in sorted(TASKS.items())},
         "metrics": {n: deciding(m) for n, m in sorted(METRICS.items())},
     }
-    return content_key([code_hash(scoring_code()), declared])[:12]
+    return content_key([code_hash(SCORING_CODE), library_versions(), declared])[:12]
 
 
 Shared = Callable[[LoadedScene, Unit, dict, str, Path], tuple[dict, dict, dict]]
@@ -141,6 +139,7 @@ def identities(entry: Path, unit: Unit, jobs: list[Job], cfg: RunConfig) -> list
     for the unit)."""
     shared = {
         "render_key": source_key(entry),
+        "pixels": pixels_key(entry),
         "views": len(unit.bag.split()) or len(read_model(Source.of(entry).model)),
     } | ({BAG: unit.bag} if unit.bag else {})
     return [

@@ -29,24 +29,37 @@ import pandas as pd
 
 from bench import BenchError
 from bench.binding import bind_results_dir, check_results_dir, models_replaced
-from bench.codehash import accepted
+from bench.codehash import check_unchanged, code_hash
 from bench.console import log, progress
 from bench.failures import ERROR, exclusions, failures, outcomes
 from bench.files import entry_problem
 from bench.frontend import plugins
 from bench.frontend.policies import check_methods, learned_weights
-from bench.frontend.views import source_key
+from bench.frontend.views import pixels_key, source_key
 from bench.harness.bags import BAG, dataset_bags
 from bench.harness.config import RunConfig
 from bench.harness.evaluate import evaluation_hash
 from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
 from bench.harness.manifest import git_commit, write_manifest
-from bench.harness.predict import prediction_hash
+from bench.harness.predict import PREDICTION_CODE, prediction_hash
 from bench.harness.tasks import TASK_RUNNERS
 from bench.render.config import RenderConfig
-from bench.render.entry import entry_name, entry_names, render_scene, render_scenes
+from bench.render.entry import (
+    entry_name,
+    entry_names,
+    known_pixels,
+    render_scene,
+    render_scenes,
+)
 from bench.results import DAMAGED, Workspace, holding
-from bench.runs import append_runs, keep_runs, read_runs, set_aside_damaged
+from bench.runs import (
+    NO_PIXELS,
+    append_runs,
+    keep_runs,
+    pixels_of,
+    read_runs,
+    set_aside_damaged,
+)
 from bench.scenes.spec import load_spec, scene_names
 from bench.vocabulary import (
     KEY,
@@ -277,17 +290,17 @@ def _current_rows(
     altered = df.pop("altered") if options.reevaluate else pd.Series(False, index=df.index)
     if altered.any():
         log(f"{int(altered.sum())} altered row(s) of {runs_csv}; scoring them again")
-    # each row against its method's and task's hash (or one aliased to it); a method not
-    # registered now (a module not given this time) keeps its rows as they are
+    # each row against its method's and task's hash; a method not registered now (a
+    # module not given this time) keeps its rows as they are
     known = set(METHODS)
     hashes = {
-        (m, t): accepted(prediction_hash(cfg.run, m, t))
+        (m, t): prediction_hash(cfg.run, m, t)
         for m, t in set(zip(df["method"], df["task"]))
         if m in known and t in TASK_RUNNERS
     }
     stale = pd.Series(
         [
-            (m, t) in hashes and h not in hashes[(m, t)]
+            (m, t) in hashes and h != hashes[(m, t)]
             for m, t, h in zip(df["method"], df["task"], df["prediction_hash"])
         ],
         index=df.index,
@@ -323,14 +336,47 @@ def _current_rows(
                 f"since {int(changed.sum())} row(s) were computed; computing them again"
             )
         stale |= changed
+    unnamed = ~stale & (pixels_of(df) == NO_PIXELS)
+    if unnamed.any():
+        log(
+            f"{int(unnamed.sum())} row(s) name no pixels (written before rows recorded the "
+            "images they read), so nothing shows which renders they read; computing them again"
+        )
+    stale |= unnamed
+    _check_known_pixels(cfg, ws, df[~stale])
     errored = ~stale & df["failure"].str.startswith(ERROR)
     if errored.any():
         log(f"{int(errored.sum())} row(s) could not be computed last time; computing them again")
     df = df[~(stale | errored)]
     rescore = altered[~(stale | errored)] | df["method"].isin(known) & (
-        options.reevaluate | ~df["evaluation_hash"].isin(accepted(evaluation_hash()))
+        options.reevaluate | (df["evaluation_hash"] != evaluation_hash())
     )
     return df, rescore
+
+
+def _refuse_other_pixels(rows: pd.DataFrame, scene: str, seed: int, pixels: str, ws) -> None:
+    """One line when `rows` of (scene, seed) read other pixels than its entry here has."""
+    other = rows[(rows["scene"] == scene) & (rows["seed"] == seed) & (pixels_of(rows) != pixels)]
+    if len(other):
+        raise BenchError(
+            f"{ws.runs_csv}: {len(other)} row(s) of {scene} seed {seed} read pixels "
+            f"{other['pixels'].iloc[0]}, and its entry here has {pixels} (renders differ "
+            "between machines; the reference renders do not): run into a new --results "
+            "folder, or with --overwrite"
+        )
+
+
+def _check_known_pixels(cfg: BenchConfig, ws: Workspace, rows: pd.DataFrame) -> None:
+    """Refuse rows of a rendered scene that read other pixels than its entry here, where
+    they are known before rendering (`bench.render.entry.known_pixels`; `_rendered`'s
+    entries are checked as they are made)."""
+    datasets = {Path(d).name for d in cfg.datasets}
+    for scene, seed, task in set(zip(rows["scene"], rows["seed"], rows["task"])):
+        if scene in datasets or task not in TASK_RUNNERS or scene not in cfg.scenes:
+            continue
+        px = known_pixels(scene, int(seed), cfg.render(task), ws.renders)
+        if px is not None:
+            _refuse_other_pixels(rows[rows["task"] == task], scene, seed, px, ws)
 
 
 def _keys(frame: pd.DataFrame) -> set[tuple]:
@@ -353,6 +399,7 @@ def _run_in(
         "git_commit": git_commit(),  # before this run rewrites any tracked result file
     }
     check_results_dir(ws.results, cfg.run.as_dict(), options.overwrite, RunConfig().as_dict())
+    code_hash(PREDICTION_CODE), evaluation_hash()  # taken once, from the code that starts
     df, rescore = _current_rows(cfg, ws, options)
     done, again = _keys(df[~rescore]), _keys(df[rescore])
     work, bag_of = {}, {}
@@ -389,6 +436,10 @@ def _run_in(
     groups = sorted({u.group for u in work}, key=lambda g: (cfg.scenes.index(g[0]), g[1]))
     wall = {"render": time.perf_counter()}
     entries = _rendered(cfg, ws, groups, options.cluster, stage_s)
+    same_rig = df[df["task"].map(lambda t: cfg.render(t) == cfg.render()).astype(bool)]
+    for (scene, seed), entry in entries.items():
+        if not cfg.dataset(scene):
+            _refuse_other_pixels(same_rig, scene, seed, pixels_key(entry), ws)
     wall["render"] = time.perf_counter() - wall["render"]
     plan = Plan(entries, work)
     t_runs = time.perf_counter()
@@ -401,6 +452,7 @@ def _run_in(
                     keep_runs(ws.runs_csv, done)  # the rows computed again go first
                     state["bound"] = True
                 rows = [r | {"invocation": invocation["id"]} for r in new]
+                check_unchanged()  # the rows' hashes name the code that computed them
                 append_runs(ws.runs_csv, rows, vocab)
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the rows written keep their seconds
         stage_s["runs_wall"] = wall["runs"] = time.perf_counter() - t_runs

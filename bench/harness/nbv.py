@@ -84,7 +84,6 @@ from bench.vocabulary import (
     Task,
     Unit,
     declare_metric,
-    implemented_by,
 )
 
 SCORED = {RIG: "tri", IMAGES: "sfm"}
@@ -391,11 +390,4 @@ register(
         default=False,
         settings=("nbv",),
     )
-)
-implemented_by(
-    [n for n, m in METHODS.items() if m.kind in (CHOOSER, VIEW_ORACLE)],
-    store_trajectory,
-    chooser_pick,
-    oracle_pick,
-    nbv_rows,
 )

@@ -32,7 +32,7 @@ import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import cache, partial
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -40,18 +40,18 @@ import numpy as np
 from bench import MethodFailed
 from bench.backend.matching import PairMatches
 from bench.backend.peers import CAPS, COLMAP_SIFT, TRACKS, peer_extraction, run_peer
-from bench.codehash import accepted, code_hash
+from bench.codehash import code_hash, library_versions
 from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.evaluation.truth import SceneTruth
 from bench.files import atomic_path, content_key, temp_dir_beside, write_text_atomic
 from bench.frontend import plugins
-from bench.frontend.stage import FrontEnd, compute
+from bench.frontend.stage import FrontEnd
 from bench.frontend.views import Source
 from bench.harness import select_match
 from bench.harness.config import RunConfig
 from bench.harness.tasks import TASK_RUNNERS, Matched
 from bench.results import LOOP, PREDICTION, Workspace
-from bench.vocabulary import CODE, METHODS, Job, Unit, deciding
+from bench.vocabulary import METHODS, Job, Unit, deciding
 
 
 @dataclass(frozen=True)
@@ -64,64 +64,32 @@ class LoadedScene:
     truth: SceneTruth
 
 
-SHARED_CODE = (compute, select_match.select, select_match.match)
-"""Where the code every method's rows share starts: the front end's `compute` and the one
-select-and-match path. A task's rows add its own functions (`task_code`), a method's its
-own (`bench.vocabulary.CODE`); the scoring is the evaluation hash's
-(`bench.harness.evaluate`), the caching and I/O around them no hash's."""
-
-
-def task_code(task: str) -> tuple:
-    """A task's functions that decide its predicted rows: its reconstruction and the model
-    it records without one."""
-    runner = TASK_RUNNERS[task]
-    return tuple(f for f in (runner.reconstruct, runner.record) if f is not None)
-
-
-@cache
-def shared_code_hash() -> str:
-    """Hash of the code every method's rows share (`SHARED_CODE`)."""
-    return code_hash(SHARED_CODE)
-
-
-@cache
-def task_code_hash(task: str) -> str:
-    """Hash of a task's own code (`task_code`; '' for a task without any)."""
-    code = task_code(task)
-    return code_hash(code) if code else ""
-
-
-def method_code_hash(method: str) -> str:
-    """Hash of a method's own code: its functions and what they reach ('' for a method
-    that names no functions)."""
-    code = tuple(CODE.get(method, ()))
-    return _own_code_hash(code) if code else ""
-
-
-@cache
-def _own_code_hash(code: tuple) -> str:
-    """Kept per function objects, not per name: a policy module loaded again from another
-    file registers the same name with other functions."""
-    return code_hash(code)
+PREDICTION_CODE = ("bench.harness.execute",)
+"""Where the code of every predicted row starts: the module that loads a unit's scene,
+front ends and bags and stores its prediction with its kind's `store`; its import closure
+(`bench.codehash.code_hash`) holds every method kind, task, policy and peer, the harness
+glue between them and the scoring (an edit there predicts again: the key errs toward
+computing, never toward reuse)."""
 
 
 def prediction_hash(cfg: RunConfig, method: str, task: str) -> str:
     """The `prediction_hash` of a method's rows of a task: the settings the prediction
     reads (`RunConfig.prediction`), the fields of the method and task that decide a row
-    (`bench.vocabulary.deciding`), the shared, task's and method's code, the method's own
-    settings and input files (the learned weights), and for a method from a module
-    (`--policy-module`, an entry point) its module's content as well."""
+    (`bench.vocabulary.deciding`), the code (`PREDICTION_CODE`), the versions of the
+    libraries it runs (`bench.codehash.library_versions`; a learned pool's or matcher's
+    too), the method's own settings and input files (the learned weights), and for a
+    method from a module (`--policy-module`, an entry point) its module's content as well."""
     own = cfg.policy_config(method)
     runner = TASK_RUNNERS[task]
+    declared = METHODS[method]
     base = content_key(
         {
             "settings": cfg.prediction(runner.settings),
             "own": cfg.own(method),
-            "method": deciding(METHODS[method]),
-            "task": {"grant": runner.spec.grant, "maps": runner.maps},
-            "code": shared_code_hash(),
-            "task_code": task_code_hash(task),
-            "method_code": method_code_hash(method),
+            "method": deciding(declared),
+            "task": {"name": task, "grant": runner.spec.grant, "maps": runner.maps},
+            "code": code_hash(PREDICTION_CODE),
+            "libraries": library_versions(learned=bool(declared.pool or declared.matcher)),
             "inputs": plugins.files_hash(own.inputs()) if hasattr(own, "inputs") else "",
         }
     )
@@ -131,9 +99,8 @@ def prediction_hash(cfg: RunConfig, method: str, task: str) -> str:
 
 def current(job: dict, cfg: RunConfig, method: str, task: str) -> bool:
     """Whether a job's stored prediction (its record in `prediction.json`) is current: its
-    hash is this code's and settings', or one proven to give the same values
-    (`bench.codehash.accepted`)."""
-    return job.get("hash") in accepted(prediction_hash(cfg, method, task))
+    hash is this code's, libraries' and settings'."""
+    return job.get("hash") == prediction_hash(cfg, method, task)
 
 
 Selection = tuple[list[np.ndarray], list[dict]]

@@ -14,7 +14,7 @@ import signal
 import time
 from collections.abc import Callable, Iterator
 from fractions import Fraction
-from functools import cache, partial
+from functools import partial
 from importlib.metadata import version
 from pathlib import Path
 
@@ -23,33 +23,24 @@ import numpy as np
 
 from bench import BenchError, files
 from bench.camera import write_colmap_rig
-from bench.codehash import accepted, code_hash
+from bench.codehash import code_hash
 from bench.console import log
+from bench.render import reference
 from bench.render.config import RenderConfig
-from bench.render.mitsuba import AOVS, GT_LAYERS, MITSUBA_FROM_OPENCV, render_view
+from bench.render.mitsuba import AOVS, GT_LAYERS, MITSUBA_FROM_OPENCV, render_view, truth_view
 from bench.render.variant import resolve_variant
 from bench.scenes.catalog import (
     build_scene,
-    generator_functions,
-    generator_of,
     load_spec,
     path_positions,
 )
 from bench.scenes.spec import SceneSpec
 
-RENDER_CODE = (build_scene, render_view, write_colmap_rig)
-"""Where the code that decides a render entry's content starts (with the scene's own
-generator); this module's cache plumbing is not in it, so editing it re-renders nothing."""
-
-
-@cache
-def render_code_hash(scene: str) -> str:
-    """Hash of the code that renders `scene`: `RENDER_CODE`, the scene's generator and
-    what they reach; the other scenes' generators cut out (a new scene renders itself
-    alone), and so is what no renderer reaches (COLMAP I/O beside the camera model)."""
-    own = generator_of(scene)
-    others = [g for g in generator_functions() if g is not own]
-    return code_hash([*RENDER_CODE, own], cut=others)
+RENDER_CODE = ("bench.render.mitsuba", "bench.camera")
+"""Where the code that decides a render entry's content starts (the scenes, their
+generators, the path tracer, the developing step, the rig): its import closure
+(`bench.codehash.code_hash`); this module's cache plumbing is not in it, so editing it
+re-renders nothing."""
 
 
 def _pixel_fields(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -> dict:
@@ -64,7 +55,7 @@ def _pixel_fields(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -
         "max_depth": cfg.max_depth,
         "denoise": cfg.denoise,
         "variant": variant,
-        "code": render_code_hash(spec.name),
+        "code": code_hash(RENDER_CODE),
         "aovs": AOVS,
         "mitsuba_from_opencv": MITSUBA_FROM_OPENCV.tolist(),
         "mitsuba": version("mitsuba"),
@@ -74,7 +65,7 @@ def _pixel_fields(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -
 
 def render_key(spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str) -> str:
     """Hash of everything that changes pixels: scene, seed, rig, settings, code
-    (`render_code_hash`), renderer."""
+    (`RENDER_CODE`), renderer."""
     return files.content_key({**_pixel_fields(spec, seed, cfg, variant), "views": cfg.views})
 
 
@@ -130,8 +121,11 @@ def _link(src: Path, dst: Path) -> None:
 
 def _resolved(
     name: str, seed: int, cfg: RenderConfig, renders_dir: Path
-) -> tuple[SceneSpec, str, str]:
-    """The scene's spec, the variant it renders with and the name of its cache entry."""
+) -> tuple[SceneSpec, str, str, dict | None]:
+    """The scene's spec, the variant this machine renders (or recomputes truth) with, the
+    path of its cache entry under `renders_dir`, and the reference set's record of the rig
+    when the entry is made from it (`bench.render.reference`: the set holds the rig under
+    the render key of these settings and code, and no variant was asked for by name)."""
     cfg.validate()
     if not isinstance(seed, int) or seed < 0:
         raise BenchError(f"seed must be a non-negative integer, got {seed!r}")
@@ -140,26 +134,25 @@ def _resolved(
     if why not in _announced:  # once per process (the calling one: `render_scenes`)
         _announced.add(why)
         log(why)
-    names = [f"{name}-s{seed}-{k}" for k in _keys(render_key(spec, seed, cfg, variant))]
-    found = [n for n in names if (Path(renders_dir) / n).is_dir()]
-    return spec, variant, (found or names)[0]
-
-
-def _keys(key: str) -> list[str]:
-    """A render key and the older keys aliased to it (`bench.codehash.accepted`)."""
-    return [key, *sorted(accepted(key) - {key})]
+    made_with = reference.reference_variant()
+    if made_with is not None:
+        key = render_key(spec, seed, cfg, made_with)
+        rig = reference.reference_rig(name, seed, cfg, key)
+        if rig is not None:
+            return spec, variant, f"{reference.SUBFOLDER}/{name}-s{seed}-{key}", rig
+    return spec, variant, f"{name}-s{seed}-{render_key(spec, seed, cfg, variant)}", None
 
 
 def entry_names(name: str, seed: int, cfg: RenderConfig, renders_dir: Path) -> list[str]:
-    """The names a current cache entry of (scene, seed, settings) may have: its render key's
-    and those of the older keys proven to render the same rows."""
-    spec, variant, _ = _resolved(name, seed, cfg, renders_dir)
-    return [f"{name}-s{seed}-{k}" for k in _keys(render_key(spec, seed, cfg, variant))]
+    """The name a current cache entry of (scene, seed, settings) has (what a row records
+    as its `render_key`; its `pixels` say which images it read)."""
+    return [Path(_resolved(name, seed, cfg, renders_dir)[2]).name]
 
 
 def entry_meta(entry: Path) -> dict:
     """What a render entry records of itself (`render_scene`): scene, seed, settings,
-    variant, versions, seconds per view, shape names, the cameras: the one reader of a
+    variant, versions, seconds per view, shape names, the cameras, its `pixels` (and where
+    it came from the reference set, that and how its truth was made): the one reader of a
     render entry's record."""
     return files.read_meta(entry)
 
@@ -175,19 +168,37 @@ def truth_name(view: int) -> str:
 
 
 def entry_name(name: str, seed: int, cfg: RenderConfig, renders_dir: Path) -> str:
-    """The name of the cache entry of (scene, seed, settings), without rendering it: what
-    a row of `runs.csv` records as its `render_key`, so a changed scene is noticed (an
-    entry under an older key aliased to this one where there is one, `entry_names`)."""
+    """The path, under `renders_dir`, of the cache entry of (scene, seed, settings), without
+    making it: `reference/<name>` for a rig of the reference set."""
     return _resolved(name, seed, cfg, renders_dir)[2]
+
+
+def known_pixels(name: str, seed: int, cfg: RenderConfig, renders_dir: Path) -> str | None:
+    """The `pixels` the entry of (scene, seed, settings) has, where known without making
+    it: the reference set's, or those of an entry already made here (None otherwise)."""
+    _, _, entry, rig = _resolved(name, seed, cfg, renders_dir)
+    if rig is not None:
+        return rig["pixels"]
+    entry = Path(renders_dir) / entry
+    if entry.is_dir() and files.entry_problem(entry) is None:
+        return files.read_meta(entry).get("pixels") or _pixels(entry, cfg.views)
+    return None
+
+
+def _pixels(entry: Path, views: int) -> str:
+    """The `pixels` of an entry's views (`bench.files.images_pixels_key`)."""
+    keys = [files.image_pixels_key(cv2.imread(str(entry / image_name(v)))) for v in range(views)]
+    return files.images_pixels_key(keys)
 
 
 def render_scene(
     name: str, seed: int, cfg: RenderConfig, renders_dir: Path, force: bool = False
 ) -> Path:
-    """The cache entry of (scene, seed, settings), rendered only if missing or damaged
-    (every file's size and checksum are verified on a hit)."""
+    """The cache entry of (scene, seed, settings): made from the reference set where it
+    holds the rig, else rendered; only if missing or damaged (every file's size and
+    checksum are verified on a hit)."""
     renders_dir = Path(renders_dir)
-    spec, variant, entry = _resolved(name, seed, cfg, renders_dir)
+    spec, variant, entry, rig = _resolved(name, seed, cfg, renders_dir)
     entry = renders_dir / entry
     if force or not entry.exists() or files.entry_problem(entry):
         load_renderer(variant)
@@ -196,7 +207,10 @@ def render_scene(
         if entry.exists() and problem is None and not force:
             return entry
         if problem:
-            log(f"damaged cache entry {entry.name} ({problem}); rendering it again")
+            log(f"damaged cache entry {entry.name} ({problem}); making it again")
+        if rig is not None:
+            _from_reference(spec, seed, cfg, variant, rig, entry)
+            return entry
         desc = build_scene(spec, seed, cfg.width, cfg.height, cfg.views)
         with files.atomic_dir(entry) as tmp:
             seconds, names = [], None
@@ -213,33 +227,86 @@ def render_scene(
                 seconds.append(meta["seconds"])
                 names = meta["shape_names"]
             write_colmap_rig(desc.cameras, tmp, [image_name(v) for v in range(cfg.views)])
-            files.write_meta(
-                tmp,
-                {
-                    "scene": name,
-                    "seed": seed,
-                    "params": spec.params,
-                    "views": cfg.views,
-                    "width": cfg.width,
-                    "height": cfg.height,
-                    "spp": cfg.spp,
-                    "max_depth": cfg.max_depth,
-                    "denoise": cfg.denoise,
-                    "variant": variant,
-                    "versions": {"mitsuba": version("mitsuba"), "drjit": version("drjit")},
-                    "seconds_per_view": seconds,
-                    "shape_names": names,
-                    "gt_layers": {
-                        k: "float32; NaN (shape_index -1) where the pixel saw nothing"
-                        for k in GT_LAYERS
-                    },
-                    "cameras": [
-                        {"K": c.K.tolist(), "R_cam_from_world": c.R.tolist(), "t": c.t.tolist()}
-                        for c in desc.cameras
-                    ],
-                },
-            )
+            meta = _meta(spec, seed, cfg, desc.cameras, names, seconds)
+            files.write_meta(tmp, meta | {"pixels": _pixels(tmp, cfg.views), "variant": variant})
     return entry
+
+
+def _meta(spec: SceneSpec, seed: int, cfg: RenderConfig, cameras, names, seconds) -> dict:
+    """What an entry records of itself (`entry_meta`), but its variant and pixels."""
+    return {
+        "scene": spec.name,
+        "seed": seed,
+        "params": spec.params,
+        **{k: getattr(cfg, k) for k in ("views", "width", "height", "spp", "max_depth")},
+        "denoise": cfg.denoise,
+        "versions": {"mitsuba": version("mitsuba"), "drjit": version("drjit")},
+        "seconds_per_view": seconds,
+        "shape_names": names,
+        "gt_layers": {
+            k: "float32; NaN (shape_index -1) where the pixel saw nothing" for k in GT_LAYERS
+        },
+        "cameras": [
+            {"K": c.K.tolist(), "R_cam_from_world": c.R.tolist(), "t": c.t.tolist()}
+            for c in cameras
+        ],
+    }
+
+
+def _from_reference(
+    spec: SceneSpec, seed: int, cfg: RenderConfig, variant: str, rig: dict, entry: Path
+) -> None:
+    """A render entry from the reference set (`bench.render.reference`): its shipped views
+    (checked against the manifest), ground truth recomputed by the AOV pass with this
+    machine's `variant` (`truth_view`), the rig, and a meta naming where it came from."""
+    images = reference.checked_images(rig)
+    made_by = reference.read_manifest()["made_by"]
+    desc = build_scene(spec, seed, cfg.width, cfg.height, cfg.views)
+    with files.atomic_dir(entry) as tmp:
+        seconds, names = [], None
+        for v, image in enumerate(images):
+            _stop_point()
+            t0 = time.perf_counter()
+            gt, names = truth_view(desc, v, cfg, variant)
+            cv2.imwrite(str(tmp / image_name(v)), image)
+            np.savez(tmp / truth_name(v), **gt)
+            seconds.append(time.perf_counter() - t0)
+        write_colmap_rig(desc.cameras, tmp, [image_name(v) for v in range(cfg.views)])
+        meta = _meta(spec, seed, cfg, desc.cameras, names, rig["seconds_per_view"])
+        files.write_meta(
+            tmp,
+            meta
+            | {k: made_by[k] for k in ("variant", "versions")}
+            | {
+                "pixels": rig["pixels"],
+                "reference": {"rig": reference.rig_name(spec.name, seed, cfg.views)},
+                "made_by": made_by,
+                "truth": {"variant": variant, "seconds_per_view": seconds},
+            },
+        )
+    log(f"{entry.name}: views from the reference set, truth recomputed in {sum(seconds):.0f} s")
+
+
+def reference_input(entry: Path) -> dict:
+    """A rendered entry as `bench.render.reference.write_reference` takes it: its views,
+    what made them, and its render key under today's code."""
+    meta = entry_meta(entry)
+    settings = {k: meta[k] for k in ("width", "height", "spp", "max_depth", "denoise")}
+    spec, cfg = load_spec(meta["scene"]), RenderConfig(views=meta["views"], **settings)
+    return {
+        "scene": meta["scene"],
+        "seed": meta["seed"],
+        "views": meta["views"],
+        "render_key": render_key(spec, meta["seed"], cfg, meta["variant"]),
+        "images": [cv2.imread(str(entry / image_name(v))) for v in range(meta["views"])],
+        "made_by": {
+            "renderer": "mitsuba {mitsuba}, drjit {drjit}".format(**meta["versions"]),
+            "variant": meta["variant"],
+            "versions": meta["versions"],
+            "settings": settings,
+        },
+        "seconds_per_view": meta["seconds_per_view"],
+    }
 
 
 Scene = tuple[str, int]  # a scene and seed

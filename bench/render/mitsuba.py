@@ -151,3 +151,21 @@ def render_view(desc: SceneDescription, view: int, cfg: RenderConfig, variant: s
     says; the ground-truth layers; the shape names by shape index)."""
     rgb, albedo, gt, names = expose(desc, view, cfg, variant)
     return develop(rgb, albedo, cfg.denoise), gt, names
+
+
+def truth_view(desc: SceneDescription, view: int, cfg: RenderConfig, variant: str):
+    """The ground-truth layers of one view and its shape names, without path tracing: the
+    AOV integrator alone, on the same camera rays and samples (the same sampler seed), so
+    the layers equal `render_view`'s on one machine to the last bit, at a fraction of the
+    cost (what a reference entry's truth is made with, `bench.render.reference`)."""
+    mi = _mi()
+    mi.set_variant(variant)
+    d = mitsuba_scene_dict(desc, view, cfg)
+    d["integrator"] = {"type": "aov", "aovs": AOVS}
+    sc = mi.load_dict(d)
+    aovs = np.array(
+        mi.render(sc, seed=noise_seed(desc.seed, path_positions(len(desc.cameras))[view]))
+    )
+    no_light = np.zeros((*aovs.shape[:2], 3), aovs.dtype)
+    _, _, gt = split_layers(np.concatenate([no_light, aovs], axis=-1), desc.cameras[view])
+    return gt, [s.id() for s in sc.shapes()]

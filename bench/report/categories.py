@@ -63,8 +63,11 @@ def _best(values: pd.DataFrame, methods: list[str], lower: bool) -> str:
     return str(means.idxmin() if lower else means.idxmax())
 
 
-def category_verdicts(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
-    """`verdicts.csv` (module docstring; `rows`: `headline_frame`)."""
+def category_verdicts(
+    rows: pd.DataFrame, vocab: Vocabulary, method: str | None = None
+) -> pd.DataFrame:
+    """`verdicts.csv` (module docstring; `rows`: `headline_frame`); with `method`, that
+    method against its category's peer, whichever method leads (`bench verdict`)."""
     out = []
     lower = vocab.lower_better()
     present = list(pd.unique(rows["method"]))
@@ -75,6 +78,8 @@ def category_verdicts(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
             wide = at.pivot_table(index=["scene", "seed"], columns="method", values=metric)
             for sees in CATEGORIES:
                 policies, peers = members(vocab, present, sees)
+                if method is not None:
+                    policies = [method] if method in policies else []
                 policy, peer = (_best(wide, ms, metric in lower) for ms in (policies, peers))
                 if not policy or not peer:
                     continue

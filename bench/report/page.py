@@ -49,6 +49,7 @@ from bench.vocabulary import (
     HEADLINE_BUDGET,
     HEADLINE_POLICY,
     ORACLE,
+    RECOMPUTED_TRUTH,
     SEES,
     Vocabulary,
 )
@@ -72,6 +73,13 @@ ORACLE_SAID = (
     "more than it (docs/protocol.md, Oracle)."
 )
 """What the oracle is and is not, said with the names where it ran."""
+ORACLE_RECOMPUTED = (
+    " Here its truth was recomputed on the machine that ran (`ground_truth`: rendered, "
+    "recomputed; the views are the reference renders), which can differ from the reference "
+    "machine's in a few pixels' last bits: the oracle alone selects with the truth, so its "
+    "rows alone may move between machines (docs/scenes.md, The reference renders)."
+)
+"""The oracle's caveat, said where its rows read recomputed truth."""
 FIGURES = {
     png(FIGURE3): "Headline metrics per method at the headline budget, 95% intervals",
     png(FIGURE_BUDGET): "Each headline metric against the budget",
@@ -165,10 +173,14 @@ def _grid_section(runs: pd.DataFrame, config: dict) -> list[str]:
     return out
 
 
-def _table1_section(t1: pd.DataFrame, vocab: Vocabulary, title: str) -> list[str]:
+def _table1_section(
+    t1: pd.DataFrame, vocab: Vocabulary, title: str, recomputed: bool = False
+) -> list[str]:
     if t1.empty:
         return []
-    out = [f"## {title}", "", NAMES + (ORACLE_SAID if ORACLE in set(t1["method"]) else ""), ""]
+    oracle = ORACLE in set(t1["method"])
+    said = ORACLE_SAID + (ORACLE_RECOMPUTED if recomputed else "") if oracle else ""
+    out = [f"## {title}", "", NAMES + said, ""]
     for task in vocab.tasks.values():
         prefix = "" if task.name == HEADLINE[0] else f"{task.name}_"
         cols = [prefix + c for c in task.metrics[:TASK_COLUMNS] if prefix + c in t1]
@@ -495,7 +507,8 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
     out += [said, ""] if said else []
     out += _run_section(_json(results, MANIFEST), runs) + [""]
     out += _grid_section(runs, _json(results, CONFIG)) + [""]
-    out += _table1_section(t1, vocab, "Table 1: means over runs, 95% intervals")
+    recomputed = RECOMPUTED_TRUTH in set(runs.get("ground_truth", pd.Series(dtype=str)).dropna())
+    out += _table1_section(t1, vocab, "Table 1: means over runs, 95% intervals", recomputed)
     out += _tiers_section(t1, vocab)
     out += _verdicts_section(verdicts)
     out += _cost_section(_read(results, TABLE_COST))

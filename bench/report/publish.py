@@ -34,7 +34,7 @@ from bench.results import (
     png,
     table1_of,
 )
-from bench.runs import read_runs
+from bench.runs import NO_PIXELS, pixels_of, read_runs
 
 PUBLISHED_FILES = (RUNS, CONFIG, VOCABULARY, MANIFEST, GALLERY, *TABLES, TABLE1_EQUAL, VERDICTS)
 PUBLISHED_FILES += (TABLE_COST, TRANSFER, TRANSFER_RANKS)
@@ -46,7 +46,7 @@ PER_DATASET = table1_of("*")
 
 def check_publishable(results: Path, regime: dict | None = None) -> None:
     """Refuse in one line a results folder unfit to publish: damaged rows (`read_runs`),
-    rows that could not be computed (`error: `), no Table 1 or page (`bench plot` writes
+    rows that could not be computed (`error: `), rows that name no pixels, no Table 1 or page (`bench plot` writes
     them) and, given a `regime` (its `name`, `scenes`, `seeds`, `views`, `width` and
     `height`), a grid or render size that is not that regime's."""
     results = Path(results)
@@ -54,6 +54,12 @@ def check_publishable(results: Path, regime: dict | None = None) -> None:
     if errors(rows):
         raise BenchError(
             f"{results} is not published: {errors(rows)}; the same `bench run` again computes them"
+        )
+    unnamed = int((pixels_of(rows) == NO_PIXELS).sum())
+    if unnamed:
+        raise BenchError(
+            f"{results} is not published: {unnamed} row(s) name no pixels (written before rows "
+            "recorded the images they read); the same `bench run` again computes them"
         )
     missing = [n for n in (TABLE1, PAGE) if not (results / n).is_file()]
     if missing:
