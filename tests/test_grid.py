@@ -349,6 +349,7 @@ def test_plot_rejects_bad_runs_csv_in_one_line(tmp_path, capsys, content, messag
         (["run", "--scenes", ""], "--scenes takes one comma-separated list"),  # ran all four
         (["run", "--seeds", ""], "--seeds takes one comma-separated list"),
         (["run", "--dataset", "/nonexistent/set"], "/nonexistent/set does not exist"),
+        (["run", "--policy-module", "examples"], "--policy-module examples is a directory"),
         (["train-weights", "--seeds", "5-3"], "the range 5-3 is empty"),
         (["run", "--scheduler", "x:1", "--workers", "2"], "--workers does not apply"),
         (["run", "--scheduler", "notanaddress"], "cannot reach the Dask scheduler notanaddress"),

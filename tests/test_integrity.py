@@ -230,7 +230,7 @@ def _errored(runs_csv: Path) -> None:
 @pytest.mark.parametrize(
     "damage, options, message",
     [
-        (_errored, [], "is not published: 1 row(s) could not be computed, of grid (1); the "),
+        (_errored, [], "is not published: 1 row(s) could not be computed, of grid (1)"),
         (lambda r: (r.parent / "table1.csv").unlink(), [], "has no table1.csv: `bench plot"),
         (lambda r: (r.parent / "README.md").unlink(), [], "has no README.md: `bench plot"),
         (
@@ -630,3 +630,20 @@ def test_pairs_rows_are_written_once_and_an_older_folders_twice_upgraded(tmp_pat
     ]
     assert main(["upgrade", "--results", str(tmp_path)]) == 0
     assert "up to date" in capsys.readouterr().out
+
+
+def test_a_file_that_cannot_be_written_is_one_line_and_the_rows_are_kept(
+    small_run, tmp_path, capsys
+):
+    """A page that cannot be replaced (here a folder in its place; an immutable file in
+    the report) ended in a traceback; now one line naming it, the rows untouched."""
+    r = tmp_path / "r"
+    shutil.copytree(small_run, r)
+    (r / "README.md").unlink()
+    (r / "README.md").mkdir()
+    (r / "README.md" / "x").write_text("")
+    before = (r / "runs.csv").read_bytes()
+    assert main(["plot", "--results", str(r)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "README.md" in err and "already written is kept" in err
+    assert (r / "runs.csv").read_bytes() == before

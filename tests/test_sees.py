@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -113,3 +114,27 @@ def test_a_verdict_sentence_writes_its_numbers_in_one_format():
     said = verdict_sentence(pd.Series(row))
     assert "`scale` (0.392), against" in said and "`colmap-b` (0.464)" in said
     assert ": -0.072 [-0.219, +0.076], 5/10/5 over 20 runs, tied." in said
+
+
+def test_a_partly_run_policy_is_judged_on_its_own_cells_and_never_named_best():
+    """A policy run on one easy cell (a user's module added to a snapshot, say) is not
+    the category's leader over the others' cells, nor tiered over them; asked for by
+    name, it is judged on the cells both it and the peer have, and the sentence says so."""
+    from bench.report.categories import category_verdicts, verdict_sentences
+
+    vocab = Vocabulary.current()
+    rows = _sfm_rows()
+    easy = rows[(rows["method"] == "response") & (rows["scene"] == "a") & (rows["seed"] == 0)]
+    rows = pd.concat([rows, easy.assign(method="peak-scale", maa=0.95)], ignore_index=True)
+    frame = headline_frame(rows, vocab)
+    v = category_verdicts(frame, vocab).set_index("sees")
+    assert v.loc[IMAGE, "policy"] == "response"  # not peak-scale's one cell at 0.95
+    mine = category_verdicts(frame, vocab, "peak-scale").set_index("sees").loc[IMAGE]
+    assert (mine["n"], mine["policy_runs"], mine["peer_runs"]) == (1, 1, 12)
+    assert mine["peer_mean"] == pytest.approx(0.3)  # colmap-b on that one cell, not its 12
+    said = verdict_sentences(category_verdicts(frame, vocab, "peak-scale"))[0]
+    assert (
+        "over 1 runs" in said and "(on the 1 cells both ran: `peak-scale` 1, `colmap-b` 12)" in said
+    )
+    t1 = table1(frame, vocab).set_index("method")["sfm_maa_tier"]
+    assert np.isnan(t1["peak-scale"]) and t1["colmap-b"] == 1

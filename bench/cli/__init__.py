@@ -94,6 +94,13 @@ def main(argv: list[str] | None = None) -> int:
     except BenchError as e:
         print(f"bench: error: {e}", file=sys.stderr)
         return 2
+    except OSError as e:  # a file that cannot be written or read: what was written is kept
+        where = e.filename2 or e.filename or "a file"  # a rename: its target
+        print(
+            f"bench: error: {where}: {e.strerror or e}; what was already written is kept",
+            file=sys.stderr,
+        )
+        return 2
     except BaseException as e:
         stop = _interrupted(e)
         if stop is None:

@@ -304,6 +304,9 @@ def run_config(args: argparse.Namespace):
         if given:
             log(f"{', '.join(given)} ignored with --dataset: its images are not rendered")
         render = None
+    for m in args.policy_module:
+        if Path(m).is_dir():
+            raise BenchError(f"--policy-module {m} is a directory; give the module's .py file")
     modules = tuple(str(Path(m).resolve()) for m in args.policy_module)
     plugins.load(modules)  # their policies' own settings may be --set
     run = RunConfig(

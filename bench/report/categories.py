@@ -57,7 +57,11 @@ def peer_metrics(vocab: Vocabulary) -> list[str]:
 
 
 def _best(values: pd.DataFrame, methods: list[str], lower: bool) -> str:
-    means = values.reindex(columns=methods).mean().dropna()
+    """The method of `methods` with the best mean, among those run on every cell any of
+    them has: a method with fewer cells is never named best over cells it did not run."""
+    counts = values.reindex(columns=methods).count()
+    full = counts[(counts == counts.max()) & (counts > 0)].index
+    means = values[list(full)].mean()
     if means.empty:
         return ""
     return str(means.idxmin() if lower else means.idxmax())
@@ -83,7 +87,7 @@ def category_verdicts(
                 policy, peer = (_best(wide, ms, metric in lower) for ms in (policies, peers))
                 if not policy or not peer:
                     continue
-                both = wide[[policy, peer]].dropna()
+                both = wide[[policy, peer]].dropna()  # the cells both have, and only those
                 scenes = both.index.get_level_values("scene")
                 res = paired_difference(both[policy] - both[peer], scenes, metric in lower)
                 out.append(
@@ -92,10 +96,10 @@ def category_verdicts(
                         "metric": metric,
                         "sees": sees,
                         "policy": policy,
-                        "policy_mean": wide[policy].mean(),
+                        "policy_mean": both[policy].mean(),
                         "policy_runs": int(wide[policy].count()),
                         "peer": peer,
-                        "peer_mean": wide[peer].mean(),
+                        "peer_mean": both[peer].mean(),
                         "peer_runs": int(wide[peer].count()),
                         **res,
                         "verdict": _verdict(res, metric in lower),
@@ -134,6 +138,11 @@ def verdict_sentence(r: pd.Series) -> str:
         f"{_num(r['wins'])}/{_num(r['ties'])}/{_num(r['losses'])} over {_num(r['n'])} "
         f"runs, {r['verdict']}"
     )
+    if r.get("policy_runs", 0) != r.get("peer_runs", 0):  # the means and diff: common cells
+        sentence += (
+            f" (on the {_num(r['n'])} cells both ran: `{r['policy']}` {_num(r['policy_runs'])}, "
+            f"`{r['peer']}` {_num(r['peer_runs'])})"
+        )
     if r["sees"] == VIEWS and r["metric"].startswith("pairs_"):
         sentence += f" ({SHARED_MATCHES})"
     return sentence + "."

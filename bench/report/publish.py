@@ -53,7 +53,8 @@ def check_publishable(results: Path, regime: dict | None = None) -> None:
     rows = read_runs(results / RUNS)
     if errors(rows):
         raise BenchError(
-            f"{results} is not published: {errors(rows)}; the same `bench run` again computes them"
+            f"{results} is not published: {errors(rows)}; fix what raised (a policy module "
+            "that broke its contract, say) and the same `bench run` computes them again"
         )
     unnamed = int((pixels_of(rows) == NO_PIXELS).sum())
     if unnamed:

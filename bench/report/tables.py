@@ -240,7 +240,9 @@ def with_tiers(t: pd.DataFrame, rows: pd.DataFrame, vocab: Vocabulary) -> pd.Dat
     budget and per category of what a method sees (`sees`: no method is tiered against
     one of the other category), among the budgeted methods that are no reference, over
     the (scene, seed) units every one of them has (`bench.report.power.tiers`:
-    Holm-corrected Wilcoxon tests; 1 is the best's tier); empty for the others."""
+    Holm-corrected Wilcoxon tests; 1 is the best's tier); empty for the others, and for a
+    method run on fewer units than the rest (a partly run policy is never tiered over
+    units it did not run)."""
     if t.empty:
         return t
     references = set(vocab.with_role("reference"))
@@ -251,7 +253,8 @@ def with_tiers(t: pd.DataFrame, rows: pd.DataFrame, vocab: Vocabulary) -> pd.Dat
         tier = {}
         for (budget, _), at in counted[counted["sees"] != ""].groupby(["budget", "sees"]):
             wide = at.pivot_table(index=["scene", "seed"], columns="method", values=m)
-            wide = wide.dropna(axis=1, how="all").dropna()
+            counts = wide.count()  # a method run on fewer units is not tiered
+            wide = wide.loc[:, (counts == counts.max()) & (counts > 0)].dropna()
             if wide.shape[1] >= 2 and len(wide):
                 lower = m in vocab.lower_better()
                 tier |= {(k, budget): v for k, v in tiers(wide, lower).items()}
