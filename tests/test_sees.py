@@ -138,3 +138,19 @@ def test_a_partly_run_policy_is_judged_on_its_own_cells_and_never_named_best():
     )
     t1 = table1(frame, vocab).set_index("method")["sfm_maa_tier"]
     assert np.isnan(t1["peak-scale"]) and t1["colmap-b"] == 1
+
+
+def test_a_policy_whose_peer_did_not_run_is_said_to_be_judged_by_no_verdict():
+    from bench.report.categories import category_verdicts, unjudged
+
+    vocab = Vocabulary.current()
+    rows = _sfm_rows()
+    rows = rows[rows["method"] != "colmap-tracks-b"]
+    said = unjudged(vocab, set(rows["method"]))
+    assert len(said) == 1 and "`track-first`" in said[0] and "`cross-view`" in said[0]
+    assert said[0].endswith(
+        "(`views`) judged by no verdict: no peer of the category ran; add `colmap-tracks-b` "
+        "to --methods"
+    )
+    assert set(category_verdicts(headline_frame(rows, vocab), vocab)["sees"]) == {IMAGE}
+    assert unjudged(vocab, set(_sfm_rows()["method"])) == []

@@ -49,6 +49,22 @@ def members(vocab: Vocabulary, present, sees: str) -> tuple[list[str], list[str]
     return policies, [p for p in CATEGORY_PEERS if p in same]
 
 
+def unjudged(vocab: Vocabulary, present) -> list[str]:
+    """One line for each category whose budgeted policies ran without any of its peers:
+    those policies are judged by no verdict, and the line names the peer to add."""
+    out = []
+    for sees in CATEGORIES:
+        policies, peers = members(vocab, present, sees)
+        wanted = [p for p in CATEGORY_PEERS if p in vocab.methods and vocab.sees(p) == sees]
+        if policies and not peers and wanted:
+            out.append(
+                f"{', '.join(f'`{p}`' for p in sorted(policies, key=vocab.order))} (`{sees}`) "
+                "judged by no verdict: no "
+                f"peer of the category ran; add `{wanted[0]}` to --methods"
+            )
+    return out
+
+
 def peer_metrics(vocab: Vocabulary) -> list[str]:
     """The first headline metric of each task the peers run, as the tables name them."""
     return [

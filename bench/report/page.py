@@ -17,7 +17,7 @@ from pandas.api.types import is_numeric_dtype
 from bench.binding import read_vocabulary
 from bench.failures import outcomes
 from bench.report import nbv
-from bench.report.categories import headline, verdict_sentences
+from bench.report.categories import headline, unjudged, verdict_sentences
 from bench.report.power import min_units
 from bench.report.text import ci, column_format, signed
 from bench.report.text import num as _num
@@ -389,14 +389,15 @@ def _equal_section(equal: pd.DataFrame) -> list[str]:
     return out + _table(header, body) + [""]
 
 
-def _verdicts_section(verdicts: pd.DataFrame) -> list[str]:
-    """Each category of `sees` against its peer, every budget (`verdicts.csv`)."""
+def _verdicts_section(verdicts: pd.DataFrame, missing: list[str]) -> list[str]:
+    """Each category of `sees` against its peer, every budget (`verdicts.csv`), and the
+    methods no verdict judges (`missing`: `bench.report.categories.unjudged`)."""
     said = verdict_sentences(verdicts)
-    if not said:
+    if not said and not missing:
         return []
     out = ["## Verdicts per category: each against a peer that sees what it sees", ""]
     out += [f"- `{k}`: {v}" for k, v in SEES.items()] + [""]
-    return out + [f"- {line}" for line in said] + [""]
+    return out + [f"- {line}" for line in said + [m[0].upper() + m[1:] for m in missing]] + [""]
 
 
 def _cost_section(cost: pd.DataFrame) -> list[str]:
@@ -510,7 +511,7 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
     recomputed = RECOMPUTED_TRUTH in set(runs.get("ground_truth", pd.Series(dtype=str)).dropna())
     out += _table1_section(t1, vocab, "Table 1: means over runs, 95% intervals", recomputed)
     out += _tiers_section(t1, vocab)
-    out += _verdicts_section(verdicts)
+    out += _verdicts_section(verdicts, unjudged(vocab, set(runs["method"])))
     out += _cost_section(_read(results, TABLE_COST))
     out += _equal_section(_read(results, TABLE1_EQUAL))
     ran = set(t1["method"]) if "method" in t1 else set()  # a method not run has no section

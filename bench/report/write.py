@@ -28,7 +28,7 @@ from bench.binding import read_settings, read_vocabulary
 from bench.console import log
 from bench.failures import exclusions, failures
 from bench.files import write_text_atomic
-from bench.report.categories import category_verdicts
+from bench.report.categories import category_verdicts, unjudged
 from bench.report.cost import figure_cost, table_cost
 from bench.report.figures import (
     figure2,
@@ -157,6 +157,8 @@ def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> list[pd.
         TABLE_COST: table_cost(df, frame, vocab, _settings(results)),
     }
     _write_tables(results, tables)
+    for line in unjudged(vocab, set(df["method"])):
+        log(line)
     return [tables[TABLE1], tables[TABLE1_TWOVIEW]]
 
 
