@@ -632,6 +632,30 @@ def test_pairs_rows_are_written_once_and_an_older_folders_twice_upgraded(tmp_pat
     assert "up to date" in capsys.readouterr().out
 
 
+def test_an_upgrade_never_makes_an_altered_row_valid(tmp_path, capsys):
+    """`bench upgrade` rewrites the pairs rows once per unit; a row whose value was edited
+    by hand (its checksum no longer holds) stays altered, and is refused as such after."""
+    from bench.runs import DamagedRuns, append_runs
+
+    current = Vocabulary.current()
+    tasks = {n: dataclasses.replace(t, tracks=True) for n, t in current.tasks.items()}
+    data = json.loads(dataclasses.replace(current, tasks=tasks).to_json())
+    for task in data["tasks"].values():
+        task.pop("tracks")
+    (tmp_path / "vocabulary.json").write_text(json.dumps(data))
+    older = dataclasses.replace(current, tasks=tasks)
+    rows = [_pairs_row(s, p) for s in (0, 1) for p in ("multiview", "twoview")]
+    append_runs(tmp_path / "runs.csv", rows, older)
+    text = (tmp_path / "runs.csv").read_text().splitlines()
+    kept = next(i for i, line in enumerate(text) if ",1,texture,64,pairs,multiview," in line)
+    text[kept] = text[kept].replace(",0.5,", ",0.9,")  # auc_10 edited by hand
+    (tmp_path / "runs.csv").write_text("\n".join(text) + "\n")
+    assert main(["upgrade", "--results", str(tmp_path)]) == 2  # upgraded, the damage refused
+    assert "altered" in capsys.readouterr().err
+    with pytest.raises(DamagedRuns, match="altered"):
+        read_runs(tmp_path / "runs.csv")
+
+
 def test_a_file_that_cannot_be_written_is_one_line_and_the_rows_are_kept(
     small_run, tmp_path, capsys
 ):

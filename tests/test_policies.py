@@ -70,6 +70,18 @@ def test_scale_takes_the_largest_and_keeps_larger_scales_than_response(fe):
         assert np.median(size[idx]) >= np.median(size[top])
 
 
+def test_scale_breaks_ties_of_size_by_response(fe):
+    """A pool of equal sizes (as ORB's are): `scale` keeps the strongest responses, not the
+    first indices."""
+    from dataclasses import replace
+
+    inp = _inputs(fe)[0]
+    same = replace(inp.candidates, size=np.full(len(inp.candidates.size), 7.0, np.float32))
+    idx = select("scale", replace(inp, candidates=same), BUDGET, np.random.default_rng(0))
+    r = same.response
+    assert r[idx].min() >= np.sort(r)[-BUDGET] and not np.array_equal(idx, np.arange(BUDGET))
+
+
 def test_peak_scale_takes_the_largest_scales_above_colmaps_peak_threshold_first(fe):
     from bench.frontend.policies import PEAK_THRESHOLD
 

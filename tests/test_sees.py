@@ -15,7 +15,16 @@ from bench.frontend.signals import GEOMETRIC
 from bench.harness.declared import package_vocabulary
 from bench.report.tables import headline_frame, table1
 from bench.results import VOCABULARY
-from bench.vocabulary import IMAGE, TRUTH, VIEW_SIGNALS, VIEWS, Method, Vocabulary, sees
+from bench.vocabulary import (
+    IMAGE,
+    REFERENCE_MAPS,
+    TRUTH,
+    VIEW_SIGNALS,
+    VIEWS,
+    Method,
+    Vocabulary,
+    sees,
+)
 
 OWN_IMAGE = (
     *("random", "texture", "grid", "response", "scale", "ssc", "quadtree", "all"),
@@ -154,3 +163,16 @@ def test_a_policy_whose_peer_did_not_run_is_said_to_be_judged_by_no_verdict():
     )
     assert set(category_verdicts(headline_frame(rows, vocab), vocab)["sees"]) == {IMAGE}
     assert unjudged(vocab, set(_sfm_rows()["method"])) == []
+
+
+def test_a_verdict_counts_only_the_cells_the_reference_maps():
+    """sfm's exclusion rule: a cell stock COLMAP with all features does not map measures
+    nothing, and no verdict counts it (`bench.report.tables.solvable`)."""
+    from bench.report.categories import category_verdicts
+
+    vocab = Vocabulary.current()
+    rows = _sfm_rows().assign(**{REFERENCE_MAPS: 1})
+    rows.loc[(rows["scene"] == "a") & (rows["seed"] == 0), REFERENCE_MAPS] = 0
+    v = category_verdicts(headline_frame(rows, vocab), vocab).set_index("sees")
+    assert v.loc[IMAGE, "n"] == v.loc[VIEWS, "n"] == 11  # of 12 cells
+    assert v.loc[IMAGE, "policy_runs"] == v.loc[IMAGE, "peer_runs"] == 11
