@@ -580,7 +580,7 @@ def test_a_dataset_runs_options_are_checked_before_any_work(tmp_path, capsys):
     assert main([*argv, "--budget", "0", *where]) == 2
     err = capsys.readouterr().err
     assert "--dataset repeats set; each runs once" in err
-    assert "no transfer.csv will be written: --methods gives 2 budgeted method(s) (texture, " in err
+    assert "transfer.csv will hold no tau: --methods gives 2 budgeted method(s) (texture, " in err
     assert not (tmp_path / "r").exists() and not (tmp_path / "renders").exists()
 
 

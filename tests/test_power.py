@@ -164,7 +164,7 @@ def test_the_renders_predict_a_set_less_well_or_better_only_outside_the_interval
 
     assert said(0.78) == said(0.40) == said(0.33) == "as well as"
     assert said(0.20) == "better than" and said(0.9, hi=0.85) == "less well than"
-    assert said(math.nan) == said(0.5, tau=math.nan) == "n/a"
+    assert said(math.nan) == "n/a" and said(0.5, tau=math.nan) == "cannot tell"
 
 
 def test_with_one_set_the_verdict_still_says_what_its_tau_means_and_its_ceiling():
@@ -257,3 +257,18 @@ def test_transfer_gives_each_side_its_own_reliability(tmp_path):
     summary, _ = transfer(pd.DataFrame(_pairs_rows("set", photos, methods)), vocab, tmp_path)
     (row,) = summary.to_dict("records")
     assert row["rel_rendered"] == 1.0 and row["rel_dataset"] == pytest.approx(0.8)
+
+
+def test_a_reliability_at_or_below_zero_says_why_nothing_can_be_told_and_no_nan():
+    """kitti-seq2's sfm `views` ranking: a split-half reliability of -0.25 left the ceiling
+    undefined; the sentence said 'ceiling nan' and the verdict 'as well as the others'."""
+    from bench.report.transfer import CANNOT_TELL, prediction, verdicts
+
+    row = dict(dataset="d", rendered_views=6, matched=True, budget=256, metric="sfm_maa")
+    row |= dict(kendall_tau=-0.25, tau_lo=-0.69, tau_hi=0.16, tau_note="", tau_photos=-0.18)
+    row |= dict(rel_rendered=0.88, rel_dataset=-0.25, ceiling=math.nan)
+    (line,) = verdicts(pd.DataFrame([row]), 256)
+    assert "nan" not in line
+    assert "(0.88 renders, -0.25 this set) allow no ceiling: a reliability at or below 0" in line
+    assert prediction(pd.DataFrame([row]).iloc[0]) == CANNOT_TELL
+    assert line.endswith(f"the renders predict it {CANNOT_TELL} the other photographs.")

@@ -363,15 +363,15 @@ def rendered_arg(paths: list[Path]) -> list[Path]:
 
 
 def transfer_methods(methods: tuple[str, ...]) -> None:
-    """Say before any work when a dataset run's methods are too few for `transfer.csv`."""
-    from bench.report.transfer import MIN_RANKED
+    """Say before any work when a dataset run's methods are too few for a tau."""
+    from bench.report.transfer import MIN_METHODS
     from bench.vocabulary import METHODS
 
     ranked = [m for m in methods if m in METHODS and not METHODS[m].whole_pool]
-    if len(ranked) < MIN_RANKED:
+    if len(ranked) < MIN_METHODS:
         log(
-            f"no transfer.csv will be written: --methods gives {len(ranked)} budgeted method(s) "
-            f"({', '.join(ranked) or 'none'}); a ranking needs at least {MIN_RANKED}"
+            f"transfer.csv will hold no tau: --methods gives {len(ranked)} budgeted method(s) "
+            f"({', '.join(ranked) or 'none'}); a tau needs at least {MIN_METHODS}"
         )
 
 

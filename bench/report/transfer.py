@@ -5,8 +5,8 @@ For each dataset, budget, ranking metric (each task's first headline metric,
 `bench.vocabulary.Task.headline`, named as in `paired.csv`: the `tri` task's
 `acc_completeness_pct` where the dataset has per-pixel truth, the `sfm` task's `sfm_maa`)
 and category of what a selection sees (`sees`: `image` or `views`; no ranking mixes the
-two), the budgeted methods of the category that both results folders hold (at least 3)
-are ranked by their mean, best first
+two), the budgeted methods of the category that both results folders hold (at least 3;
+a tau needs `MIN_METHODS`, 6) are ranked by their mean, best first
 (by the metric's direction, `Task.lower_better`), on the dataset and on the rendered
 benchmark (all its scenes and seeds pooled, at the same budget, under the headline
 protocol; for a task with the exclusion rule, without the cells stock COLMAP does not map
@@ -15,9 +15,12 @@ out); tied means share their mean rank. `transfer.csv` has Kendall's tau-b betwe
 two rankings with a 95% percentile bootstrap interval (the methods resampled with
 replacement, `DRAWS` draws, seed 0), the winner on each side and the methods whose rank
 moves most; `transfer_ranks.csv` has every method's values and ranks. Below `MIN_METHODS`
-methods there is no tau: `tau_note` says why instead (with five methods, an exact
-permutation test at 5 % tells only a perfect agreement or reversal from chance, with four
-or three not even that; with six, one discordant pair too).
+methods there is no tau (with five methods, an exact permutation test at 5 % tells only a
+perfect agreement or reversal from chance, with four or three not even that; with six, one
+discordant pair too). A row without a tau says why in `tau_note`, and its verdict is
+"cannot tell": too few methods, every method with the same mean on one side, or the
+category's peer scoring 0 on the set (stock COLMAP makes nothing of it, as on forward
+motion in bags for sfm).
 
 Beside each tau, its power (`bench.report.power`, docs/protocol.md "Verdicts and their
 power"): the split-half reliability of each side's ranking (`rel_rendered` over the rendered
@@ -55,11 +58,13 @@ SIGN_REFERENCES = {IMAGE: "colmap-b", VIEWS: "colmap-tracks-b"}
 DRAWS = 2000
 MOVERS = 2
 MIN_METHODS = 6
-"""The fewest methods whose rankings get a Kendall's tau (module docstring)."""
+"""The fewest methods a ranking needs: below it there is no transfer row (module docstring)."""
+MIN_RANKED = 3
+"""The fewest methods a `transfer.csv` row is written for (without a tau below six)."""
+CANNOT_TELL = "cannot tell"
 TRANSFER_TEXT = ("dataset", "metric", "tau_note", "winner_dataset", "winner_rendered")
 TRANSFER_TEXT += ("biggest_movers",)
 """The text columns of `transfer.csv` (empty where a row has none; the rest are numbers)."""
-MIN_RANKED = 3
 """The fewest budgeted methods both sides ran at a budget for a row of `transfer.csv`."""
 
 
@@ -211,6 +216,13 @@ def transfer(
                     if len(methods) < MIN_RANKED:
                         continue
                     row, rows_ranked = compare(a[methods], b[methods], lower)
+                    if reference in methods and a[reference] == 0:  # its peer maps nothing
+                        row |= {"kendall_tau": math.nan, "tau_lo": math.nan, "tau_hi": math.nan}
+                        row["tau_note"] = (
+                            f"cannot tell: the category's peer `{reference}` scores 0 on the "
+                            "set (stock COLMAP makes nothing of it), so its ranking measures "
+                            "nothing"
+                        )
                     sets = pd.DataFrame(
                         {d: m.loc[budget] for d, m in every.items() if budget in m.index}
                     ).T
@@ -246,7 +258,7 @@ def why_none(dataset_rows: pd.DataFrame, rendered: Sequence[Path]) -> str:
     b = max(shared, key=lambda k: len(shared[k]))
     return (
         f"at most {len(shared[b])} budgeted method(s) at one budget "
-        f"({', '.join(sorted(shared[b]))} at {b}); a ranking needs at least {MIN_RANKED}"
+        f"({', '.join(sorted(shared[b]))} at {b}); a tau needs at least {MIN_METHODS}"
     )
 
 
@@ -307,6 +319,11 @@ def _verdict(r, budget: int) -> str:
     cap = (
         f"the split-half reliabilities ({r.rel_rendered:.2f} renders, {r.rel_dataset:.2f} this "
         f"set) cap any tau at the ceiling {r.ceiling:.2f}"
+        if not math.isnan(r.ceiling)
+        else f"the split-half reliabilities ({_rel(r.rel_rendered)} renders, "
+        f"{_rel(r.rel_dataset)} this set) allow no ceiling: a reliability at or below 0 "
+        "means the two halves of its cells rank the methods no more alike than chance, so "
+        "nothing can be told of this ranking"
     )
     if math.isnan(r.kendall_tau):
         note = r.tau_note if isinstance(r.tau_note, str) and r.tau_note else "no tau"
@@ -331,12 +348,20 @@ def _verdict(r, budget: int) -> str:
 AS_WELL = "as well as"
 
 
+def _rel(x: float) -> str:
+    return "undefined" if math.isnan(x) else f"{x:.2f}"
+
+
 def prediction(r) -> str:
     """Whether the renders predict a set's ranking (a `transfer.csv` row) as well as the
     other sets do: `AS_WELL`, "less well than" or "better than", told apart only where the
-    other sets' tau lies outside the interval of the renders' tau; "n/a" without both."""
+    other sets' tau lies outside the interval of the renders' tau; `CANNOT_TELL` where the
+    ranking has no tau or no ceiling (a reliability at or below 0, a peer that maps
+    nothing); "n/a" without another set to compare with."""
     photos = getattr(r, "tau_photos", math.nan)
-    if math.isnan(r.kendall_tau) or math.isnan(photos):
+    if math.isnan(r.kendall_tau) or math.isnan(getattr(r, "ceiling", 0.0)):
+        return CANNOT_TELL
+    if math.isnan(photos):
         return "n/a"
     if photos > r.tau_hi:
         return "less well than"
