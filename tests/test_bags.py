@@ -60,8 +60,11 @@ def test_a_dataset_run_scores_each_bag_on_its_own_views_and_reuses_them(
     capsys.readouterr()
     assert main([*argv, "--bag-size", "4", "--bags", "2"]) == 0
     assert "2 of 2 rows already" in capsys.readouterr().err
-    assert main([*argv, "--bag-size", "0"]) == 0  # the whole set: its rows computed again
-    assert "computed on other bags" in capsys.readouterr().err
+    before = (out / "runs.csv").read_bytes()
+    assert main([*argv, "--bag-size", "0"]) == 2  # other bags: refused, every row kept
+    assert "row(s) were computed on other bags (another --bag-size" in capsys.readouterr().err
+    assert (out / "runs.csv").read_bytes() == before
+    assert main([*argv, "--bag-size", "0", "--overwrite"]) == 0  # the whole set, replacing
     whole = pd.read_csv(out / "runs.csv").query("seed == 0")
     assert len(whole) == 1 and whole["views"].iloc[0] == 6
     assert BAG not in whole or whole[BAG].isna().all()  # no bag: the whole set

@@ -410,8 +410,12 @@ def _run_in(
             work[unit] = Work(tuple(missing), rescore=redo)
         bag_of |= {(unit.scene, unit.seed, unit.method, unit.budget, *j): unit.bag for j in missing}
     other = {k for k in done | again if bag_of.get((*k[:4], *k[5:]), k[4]) != k[4]}
-    if other:
-        log(f"{len(other)} row(s) were computed on other bags; computing them again")
+    if other:  # refused as other settings are (--overwrite starts from no rows): none lost
+        raise BenchError(
+            f"{ws.runs_csv}: {len(other)} row(s) were computed on other bags (another "
+            "--bag-size or --bags); run into a new --results folder, or with --overwrite to "
+            "replace them"
+        )
     done = {(*k[:4], *k[5:]) for k in done - other}  # as `runs.csv` keys its rows
     n_rows = sum(len(w.jobs) for w in work.values())
     if not cfg.units():
