@@ -271,4 +271,4 @@ def test_a_reliability_at_or_below_zero_says_why_nothing_can_be_told_and_no_nan(
     assert "nan" not in line
     assert "(0.88 renders, -0.25 this set) allow no ceiling: a reliability at or below 0" in line
     assert prediction(pd.DataFrame([row]).iloc[0]) == CANNOT_TELL
-    assert line.endswith(f"the renders predict it {CANNOT_TELL} the other photographs.")
+    assert line.endswith(f"the other sets predict it at -0.18: {CANNOT_TELL}.")

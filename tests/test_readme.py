@@ -34,7 +34,7 @@ def test_the_photographs_verdicts_come_from_a_published_photo_folder(tmp_path):
     row = "| middlebury-temple-sparse | sfm (sfm_maa) | image | 0.50 [0.10, 0.80] | 0.90 / 0.80 |"
     assert row + " 0.85 | 0.30 | as well as the others |" in said
     assert "No snapshot of the photo sets" in results_section({"sparse": sparse}, None)
-    for name in ("table1.csv", "paired_sfm.csv", "vocabulary.json"):  # a photo run's tables
+    for name in ("table1.csv", "verdicts.csv", "vocabulary.json"):  # a photo run's tables
         (tmp_path / name).write_bytes((sparse / name).read_bytes())
     said = results_section({"sparse": sparse}, tmp_path)
     assert "| photographs | sfm (sfm_maa) | image | `peak-scale` " in said

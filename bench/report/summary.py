@@ -23,20 +23,15 @@ import pandas as pd
 
 from bench import BenchError
 from bench.binding import read_vocabulary
-from bench.report.transfer import prediction
-from bench.results import PAIRED_SFM, TABLE1, TABLE3, TRANSFER
-from bench.vocabulary import HEADLINE_BUDGET, IMAGE, VIEWS, Vocabulary
+from bench.report.transfer import CANNOT_TELL, prediction
+from bench.results import TABLE1, TABLE3, TRANSFER, VERDICTS
+from bench.vocabulary import HEADLINE_BUDGET, Vocabulary
 
 BEGIN = "<!-- results: written by `bench publish --readme` from the published snapshots -->"
 END = "<!-- end of the written results -->"
-PRIMARY = {"sfm": "sfm_maa", "pairs": "pairs_auc_10"}
-"""Each task's metric here, as Table 1 names it (the task's first headline metric)."""
-PEER = {IMAGE: "colmap-b", VIEWS: "colmap-tracks-b"}
-"""The stock-COLMAP peer of each category (DESIGN, seventh wave)."""
-FALLBACK = "colmap-b"
+POOLED = "all scenes"
 PHOTO_ROWS = "photographs"
 """The regime column of the photo sets' rows (their bags pooled: a bag is a cell)."""
-POOLED = "all scenes"
 
 
 def _num(x: float, signed: bool = False, digits: int = 3) -> str:
@@ -45,53 +40,56 @@ def _num(x: float, signed: bool = False, digits: int = 3) -> str:
     return f"{x:+.{digits}f}" if signed else f"{x:.{digits}f}"
 
 
-def _leader(t1: pd.DataFrame, vocab: Vocabulary, sees: str, metric: str) -> pd.Series | None:
-    roles = [vocab.methods[m].role if m in vocab.methods else "" for m in t1["method"]]
-    mine = t1[
-        (t1["budget"] == HEADLINE_BUDGET)
-        & pd.Series([r in ("baseline", "contender") for r in roles], index=t1.index)
-        & (t1["method"].map(vocab.sees) == sees)
-        & t1[metric].notna()
-    ]
-    return None if mine.empty else mine.loc[mine[metric].idxmax()]
+def _verdicts(snapshot: Path) -> pd.DataFrame:
+    """A snapshot's `verdicts.csv` (empty where it has none)."""
+    path = Path(snapshot) / VERDICTS
+    return (
+        pd.read_csv(path, keep_default_na=False, na_values=[""])
+        if path.is_file()
+        else (pd.DataFrame())
+    )
+
+
+def _task(vocab: Vocabulary, metric: str) -> str:
+    """The task whose first headline metric `metric` is, as the tables name it."""
+    return next(
+        (n for n, t in vocab.tasks.items() if vocab.column(n, t.headline[0]) == metric), metric
+    )
 
 
 def _rows(snapshot: Path, regime: str) -> list[str]:
-    vocab = read_vocabulary(snapshot)
-    t1 = pd.read_csv(snapshot / TABLE1)
-    paired = pd.read_csv(snapshot / PAIRED_SFM) if (snapshot / PAIRED_SFM).is_file() else None
-    at = t1[t1["budget"] == HEADLINE_BUDGET]
+    """The table's rows of a snapshot at `HEADLINE_BUDGET`: its `verdicts.csv`, the report's
+    one choice of each category's leader and peer (`bench.report.categories`)."""
+    vocab, v = read_vocabulary(snapshot), _verdicts(snapshot)
+    if v.empty:
+        return []
     out = []
-    for task, metric in PRIMARY.items():
-        if metric not in t1:
-            continue
-        for sees in (IMAGE, VIEWS):
-            lead = _leader(t1, vocab, sees, metric)
-            if lead is None:
-                continue
-            peer = PEER[sees] if (at["method"] == PEER[sees]).any() else FALLBACK
-            absent = "" if peer == PEER[sees] else f" (`{PEER[sees]}` did not run)"
-            peer_mean = at.loc[at["method"] == peer, metric]
-            diff = (math.nan, math.nan, math.nan, "")
-            if paired is not None:
-                p = paired[
-                    (paired["scene"] == POOLED)
-                    & (paired["budget"] == HEADLINE_BUDGET)
-                    & (paired["method"] == lead["method"])
-                    & (paired["baseline"] == peer)
-                    & (paired["metric"] == metric)
-                ]
-                if len(p):
-                    r = p.iloc[0]
-                    diff = (r["mean_diff"], r["lo"], r["hi"], f"{r.wins}/{r.ties}/{r.losses}")
-            d, lo, hi, wtl = diff
-            interval = f" [{_num(lo, True)}, {_num(hi, True)}]" if not math.isnan(lo) else ""
-            out.append(
-                f"| {regime} | {task} ({metric}) | {sees} | `{lead['method']}` "
-                f"{_num(lead[metric])} | `{peer}` "
-                f"{_num(peer_mean.iloc[0] if len(peer_mean) else math.nan)}{absent} | "
-                f"{_num(d, True)}{interval} | {wtl or 'n/a'} |"
-            )
+    for r in v[v["budget"] == HEADLINE_BUDGET].itertuples():
+        wtl = f"{r.wins}/{r.ties}/{r.losses}"
+        out.append(
+            f"| {regime} | {_task(vocab, r.metric)} ({r.metric}) | {r.sees} | `{r.policy}` "
+            f"{_num(r.policy_mean)} | `{r.peer}` {_num(r.peer_mean)} | {_num(r.mean_diff, True)} "
+            f"[{_num(r.lo, True)}, {_num(r.hi, True)}] | {wtl} | {r.verdict} |"
+        )
+    return out
+
+
+def _advice(snapshot: Path, regime: str) -> list[str]:
+    """One sentence per category of a snapshot: which method to use at each budget and
+    metric, from its `verdicts.csv`: the leader where it is above its peer, else the peer
+    (nothing of the category beats it there)."""
+    vocab, v = read_vocabulary(snapshot), _verdicts(snapshot)
+    out = []
+    for sees, rows in v.groupby("sees", sort=False) if len(v) else []:
+        said = []
+        for metric, at in rows.groupby("metric", sort=False):
+            picks: dict[str, list[str]] = {}
+            for r in at.sort_values("budget").itertuples():
+                pick = r.policy if r.verdict == "above" else r.peer
+                picks.setdefault(pick, []).append(_num(r.budget, digits=0))
+            which = ", ".join(f"`{m}` (B = {', '.join(bs)})" for m, bs in picks.items())
+            said.append(f"for {_task(vocab, metric)} {which}")
+        out.append(f"- {regime}, `{sees}` selections: use " + "; ".join(said) + ".")
     return out
 
 
@@ -111,16 +109,27 @@ def results_section(
         "difference is paired over the snapshot's cells (95 % interval; cells won/tied/lost;",
         f"the `{PHOTO_ROWS}` rows pool the published photo sets' bags, a bag a cell):",
         "",
-        "| regime | task (metric) | sees | leads | peer | leader - peer | won/tied/lost |",
-        "|---|---|---|---|---|---|---|",
+        "| regime | task (metric) | sees | leads | peer | leader - peer | won/tied/lost "
+        "| verdict |",
+        "|---|---|---|---|---|---|---|---|",
     ]
-    for regime, folder in found.items():
-        lines += _rows(folder, regime)
+    folders = dict(found)
     if photos is not None and (Path(photos) / TABLE1).is_file():
-        lines += _rows(Path(photos), PHOTO_ROWS)
+        folders[PHOTO_ROWS] = Path(photos)
+    for regime, folder in folders.items():
+        lines += _rows(folder, regime)
+    lines += [
+        "",
+        "Which method to use (each category's leader where its interval is above the peer's,",
+        "else the peer itself: nothing of the category beats it there; from `verdicts.csv`):",
+        "",
+    ]
+    for regime, folder in folders.items():
+        lines += _advice(folder, regime)
     lines.append("")
     if photos is not None and (Path(photos) / TRANSFER).is_file():
-        lines += _transfer_rows(pd.read_csv(Path(photos) / TRANSFER), Path(photos))
+        vocab = read_vocabulary(next(iter(found.values())))
+        lines += _transfer_rows(pd.read_csv(Path(photos) / TRANSFER), Path(photos), vocab)
     else:
         where = "none" if photos is None else Path(photos).as_posix()
         lines += [
@@ -132,7 +141,13 @@ def results_section(
     return "\n".join(lines) + "\n"
 
 
-def _transfer_rows(summary: pd.DataFrame, photos: Path) -> list[str]:
+def _predicts(r) -> str:
+    """The table's last column: how the renders predict the set against the other sets."""
+    how = prediction(r)
+    return how if how in (CANNOT_TELL, "n/a") else f"{how} the others"
+
+
+def _transfer_rows(summary: pd.DataFrame, photos: Path, vocab: Vocabulary) -> list[str]:
     """Per set, metric and category at `HEADLINE_BUDGET`: the renders' Kendall tau against
     the set's ranking, the ceiling the two rankings' reliabilities allow, the other sets'
     tau, and whether the renders predict the set as well as they do
@@ -153,7 +168,6 @@ def _transfer_rows(summary: pd.DataFrame, photos: Path) -> list[str]:
         "| other sets' tau | the renders predict it |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    task = {m: t for t, m in PRIMARY.items()}
     for r in rows.sort_values(
         ["dataset", "metric", "sees"], ascending=[True, False, False]
     ).itertuples():
@@ -163,9 +177,9 @@ def _transfer_rows(summary: pd.DataFrame, photos: Path) -> list[str]:
             else f"{r.kendall_tau:.2f} [{r.tau_lo:.2f}, {r.tau_hi:.2f}]"
         )
         out.append(
-            f"| {r.dataset} | {task.get(r.metric, r.metric)} ({r.metric}) | {r.sees} | {tau} | "
+            f"| {r.dataset} | {_task(vocab, r.metric)} ({r.metric}) | {r.sees} | {tau} | "
             f"{r.rel_rendered:.2f} / {r.rel_dataset:.2f} | {_num(r.ceiling, digits=2)} | "
-            f"{_num(r.tau_photos, digits=2)} | {prediction(r)} the others |"
+            f"{_num(r.tau_photos, digits=2)} | {_predicts(r)} |"
         )
     return out + [""]
 

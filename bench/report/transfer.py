@@ -338,6 +338,8 @@ def _verdict(r, budget: int) -> str:
     if math.isnan(photos):
         return head + said + "; no other set to compare with (the baseline needs two sets)."
     how = prediction(r)
+    if how == CANNOT_TELL:
+        return head + said + f"; the other sets predict it at {photos:.2f}: {CANNOT_TELL}."
     inside = " (theirs lies within the interval)" if how == AS_WELL else ""
     return (
         head + said + f"; the other sets predict it at {photos:.2f}: the renders predict it "
