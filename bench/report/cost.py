@@ -36,7 +36,7 @@ import numpy as np
 import pandas as pd
 
 from bench.report.categories import peer_metrics
-from bench.report.figures import plt, save
+from bench.report.figures import method_colours, plt, save
 from bench.report.tables import solvable
 from bench.vocabulary import (
     HEADLINE,
@@ -104,7 +104,7 @@ def figure_cost(cost: pd.DataFrame, vocab: Vocabulary, out: Path) -> bool:
         return False
     fig, axes = plt.subplots(1, len(metrics), figsize=(7 * len(metrics), 5.5), squeeze=False)
     markers = {"image": "o", "views": "s"}
-    colours = {m: plt.cm.tab20(k % 20) for k, m in enumerate(dict.fromkeys(cost["method"]))}
+    colours = method_colours(cost["method"], vocab)
     for ax, metric in zip(axes[0], metrics):
         for method, g in cost[cost[metric].notna()].groupby("method", sort=False):
             g = g.sort_values("budget")

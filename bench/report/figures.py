@@ -15,7 +15,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
-from matplotlib.ticker import FixedLocator, NullLocator  # noqa: E402
+from matplotlib.ticker import FixedLocator, MaxNLocator, NullLocator  # noqa: E402
 
 from bench.files import atomic_path  # noqa: E402
 from bench.results import POINT_ERRORS, Workspace
@@ -32,6 +32,30 @@ from bench.vocabulary import (  # noqa: E402
 )
 
 LOG_SCALE = {"runtime_proxy", "rmse"}
+CATEGORY_MAPS = {"image": "Blues", "views": "Oranges", "truth": "Greens"}
+SEES_ORDER = {"image": 0, "views": 1, "truth": 2}
+PEERS = ("peer",)
+"""The roles whose whole-pool rows (budget 0) stand in Figure 3: stock COLMAP's default
+(not `all`, the whole pool, which no budget holds)."""
+"""Each category of what a selection sees has its colour family (others: greys)."""
+RUNTIME_PROXY = (
+    "runtime proxy: feature scoring work + descriptor comparisons + expected RANSAC "
+    "iterations, in thousands of operations (docs/protocol.md)"
+)
+
+
+def method_colours(methods, vocab: Vocabulary) -> dict:
+    """One colour per method, unique: its category's colour family (`CATEGORY_MAPS`), a
+    shade of its own within it."""
+    by_sees: dict[str, list[str]] = {}
+    for m in dict.fromkeys(methods):
+        by_sees.setdefault(vocab.sees(m) if m in vocab.methods else "", []).append(m)
+    out = {}
+    for sees, ms in by_sees.items():
+        cmap = plt.get_cmap(CATEGORY_MAPS.get(sees, "Greys"))
+        shades = np.linspace(0.9, 0.35, len(ms)) if len(ms) > 1 else [0.7]
+        out |= {m: cmap(x) for m, x in zip(ms, shades)}
+    return out
 
 
 def headline_budget(t1: pd.DataFrame) -> int:
@@ -57,7 +81,11 @@ def figure3(
     One panel per metric the tasks draw (`Vocabulary.panels`) that has a value (the panels
     of the tasks that ran); `note` (what failed, what the means leave out) below them."""
     b = headline_budget(t1)
-    t = t1[(t1["budget"] == b) | (t1["budget"] == 0)].reset_index(drop=True)
+    whole = t1["method"].map(lambda m: m in vocab.methods and vocab.methods[m].role not in PEERS)
+    t = t1[(t1["budget"] == b) | ((t1["budget"] == 0) & ~whole)].reset_index(drop=True)
+    t = t.assign(_sees=t["method"].map(lambda m: vocab.sees(m) if m in vocab.methods else ""))
+    order = t["_sees"].map(SEES_ORDER).fillna(len(SEES_ORDER))
+    t = t.loc[order.sort_values(kind="stable").index].reset_index(drop=True)
     every = vocab.panels()
     panels = [(m, label) for m, label in every if m in t and np.isfinite(t[m].astype(float)).any()]
     panels = panels or [(m, label) for m, label in every if m in t][:1]
@@ -67,7 +95,8 @@ def figure3(
     fig, axes = plt.subplots(rows, cols, figsize=(width * cols, 3.7 * rows + 0.6), squeeze=False)
     for ax in axes.ravel()[len(panels) :]:
         fig.delaxes(ax)
-    colors = plt.cm.tab20(np.arange(len(t)) % 20)
+    colour = method_colours(t["method"], vocab)
+    colors = np.array([colour[m] for m in t["method"]])
     for ax, (m, label) in zip(axes.ravel(), panels):
         values = t[m].to_numpy(float)
         ok = np.isfinite(values)
@@ -89,9 +118,15 @@ def figure3(
         ax.set_title(label, fontsize=10)
         if m in LOG_SCALE and (values[ok] > 0).any():
             ax.set_yscale("log")
+    spread = any(t[f"{m}_lo"].notna().any() for m, _ in panels if f"{m}_lo" in t)
+    how = "mean and 95% interval over runs" if spread else "mean of one run: no interval"
     fig.suptitle(
-        title or f"Aggregate metrics per strategy (budget {b}; mean and 95% interval over runs)"
+        title
+        or f"Metrics per method at budget {b} ({how}); colour: what its selection sees "
+        "(blue: its image, orange: other views, green: the ground truth)"
     )
+    if any(m == "runtime_proxy" for m, _ in panels):
+        note = f"{note}\n{RUNTIME_PROXY}" if note else RUNTIME_PROXY
     bottom = 0.0
     if note:
         fig.text(0.01, 0.005, note, fontsize=8, wrap=True, va="bottom")
@@ -270,10 +305,14 @@ def figure_transfer(ranks: pd.DataFrame, summary: pd.DataFrame, budget: int, out
     """Rendered rank against dataset rank at one budget, a panel per dataset, category of
     `sees` and metric."""
     panels = summary[summary["budget"] == budget]
+    cols = min(4, len(panels))
+    rows = -(-len(panels) // cols)
     fig, axes = plt.subplots(
-        1, len(panels), figsize=(4.2 * len(panels), 4.2), squeeze=False, constrained_layout=True
+        rows, cols, figsize=(4.2 * cols, 4.2 * rows), squeeze=False, constrained_layout=True
     )
-    for ax, (_, s) in zip(axes[0], panels.iterrows()):
+    for ax in axes.ravel()[len(panels) :]:
+        fig.delaxes(ax)
+    for ax, (_, s) in zip(axes.ravel(), panels.iterrows()):
         r = ranks[
             (ranks["dataset"] == s["dataset"])
             & (ranks["sees"] == s["sees"])
@@ -292,9 +331,12 @@ def figure_transfer(ranks: pd.DataFrame, summary: pd.DataFrame, budget: int, out
             + (
                 f"tau {s['kendall_tau']:.2f} [{s['tau_lo']:.2f}, {s['tau_hi']:.2f}]"
                 if not s["tau_note"]
-                else f"no tau: {n} methods"
+                else s["tau_note"].partition(":")[0]  # 'no tau', 'cannot tell'
+                + f" ({n} methods)"
             ),
         )
+        for axis in (ax.xaxis, ax.yaxis):
+            axis.set_major_locator(MaxNLocator(integer=True))
         ax.invert_xaxis()
         ax.invert_yaxis()
     save(fig, out, ("png",))

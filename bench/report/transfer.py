@@ -216,7 +216,7 @@ def transfer(
                     if len(methods) < MIN_RANKED:
                         continue
                     row, rows_ranked = compare(a[methods], b[methods], lower)
-                    if reference in methods and a[reference] == 0:  # its peer maps nothing
+                    if not row["tau_note"] and reference in methods and a[reference] == 0:
                         row |= {"kendall_tau": math.nan, "tau_lo": math.nan, "tau_hi": math.nan}
                         row["tau_note"] = (
                             f"cannot tell: the category's peer `{reference}` scores 0 on the "
