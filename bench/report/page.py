@@ -133,11 +133,39 @@ def _run_section(manifest: dict, runs: pd.DataFrame) -> list[str]:
     out.append(f"- commit: {commits or 'n/a'}; render variant: {variant}")
     out.append(f"- machine: {host.get('platform', 'n/a')}, {host.get('cpus', 'n/a')} CPUs")
     out.append(f"- versions: {versions or 'n/a'}")
+    cost = rows_cost(runs)
+    if cost:
+        out.append(
+            f"- the cost of these rows, from their own timing columns: {_num(round(cost))} s of "
+            "worker time (a scene's front end once, a unit's selection, matching and "
+            "verification once, each row's task; a row reused from a cache counts what it cost "
+            "when it was computed), beside the invocations' wall seconds below"
+        )
     seconds = manifest.get("seconds", {})
     if seconds:
         out += ["", "Seconds per stage (summed over the invocations that computed these rows):", ""]
         out += _table(list(seconds), [[_num(round(v)) for v in seconds.values()]])
     return out + _wall_section(manifest)
+
+
+SHARED_MS = {("scene", "seed", "bag"): ("detect_ms", "signals_ms")}
+SHARED_MS |= {("scene", "seed", "bag", "method", "budget"): ("select_ms", "match_ms", "verify_ms")}
+"""The stages rows share, by what shares them: a scene's front end, a unit's selection,
+matching and verification (each row repeats them)."""
+
+
+def rows_cost(runs: pd.DataFrame) -> float:
+    """Seconds of worker time the rows' own timing columns add up to: each shared stage
+    once per what shares it (`SHARED_MS`), every row's task."""
+    if "task_ms" not in runs:
+        return 0.0
+    total = float(np.nansum(runs["task_ms"].to_numpy(float)))
+    for keys, stages in SHARED_MS.items():
+        keys, stages = [k for k in keys if k in runs], [c for c in stages if c in runs]
+        if stages:
+            once = runs.groupby(keys, dropna=False)[stages].max().to_numpy(float)
+            total += float(np.nansum(once))
+    return total / 1000
 
 
 def _wall_section(manifest: dict) -> list[str]:
