@@ -269,6 +269,9 @@ def test_a_method_that_crashes_never_ranks_on_the_runs_it_finished(renders_dir, 
     assert t1.loc["texture", "error_runs"] == 0 and not np.isnan(t1.loc["texture", "rmse"])
     t2 = pd.read_csv(tmp_path / "r" / "table2.csv").set_index("scene")
     assert t2.loc["all scenes", "best_baseline_rmse_policy"] == "texture"
+    assert np.isnan(t1.loc["crash-late", "pairs_auc_10_tier"])  # a method that raised: no tier
+    verdicts = tmp_path / "r" / "verdicts.csv"
+    assert not verdicts.exists() or "crash-late" not in verdicts.read_text()
 
 
 def test_progress_in_a_log_is_a_line_every_few_percent(capsys):

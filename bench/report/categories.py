@@ -23,7 +23,7 @@ import math
 import pandas as pd
 
 from bench.report.stats import paired_difference
-from bench.report.tables import solvable
+from bench.report.tables import errored, solvable
 from bench.report.text import ci
 from bench.report.text import num as _num
 from bench.vocabulary import CATEGORY_PEERS, HEADLINE_BUDGET, IMAGE, VIEWS, Vocabulary
@@ -90,7 +90,8 @@ def category_verdicts(
     method against its category's peer, whichever method leads (`bench verdict`)."""
     out = []
     lower = vocab.lower_better()
-    present = list(pd.unique(rows["method"]))
+    broken = errored(rows)  # a method that raised is judged by no verdict
+    present = [m for m in pd.unique(rows["method"]) if m not in broken]
     for metric in (m for m in peer_metrics(vocab) if m in rows):
         counted = solvable(rows, metric, vocab)
         for budget in sorted(b for b in pd.unique(counted["budget"]) if b > 0):

@@ -230,6 +230,16 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     return t.loc[order.sort_values().index].reset_index(drop=True)
 
 
+def errored(frame: pd.DataFrame) -> set[str]:
+    """The methods with a run that could not be computed (`counted`'s `error` of any
+    task): a method that raised is neither tiered nor judged, whatever it scored."""
+    cols = [c for c in frame.columns if c == "error" or c.endswith("_error")]
+    if not cols:
+        return set()
+    hit = frame[cols].fillna(False).astype(bool).any(axis=1)
+    return set(frame.loc[hit, "method"])
+
+
 def tier_column(metric: str) -> str:
     """Table 1's column of a metric's tiers."""
     return f"{metric}_tier"
@@ -242,13 +252,13 @@ def with_tiers(t: pd.DataFrame, rows: pd.DataFrame, vocab: Vocabulary) -> pd.Dat
     the (scene, seed) units every one of them has (`bench.report.power.tiers`:
     Holm-corrected Wilcoxon tests; 1 is the best's tier); empty for the others, and for a
     method run on fewer units than the rest (a partly run policy is never tiered over
-    units it did not run)."""
+    units it did not run) and a method with a run that could not be computed (`errored`)."""
     if t.empty:
         return t
-    references = set(vocab.with_role("reference"))
+    left_out = set(vocab.with_role("reference")) | errored(rows)
     for m in (m for m in vocab.first_headline() if m in rows):
         counted = solvable(rows, m, vocab)
-        counted = counted[(counted["budget"] > 0) & ~counted["method"].isin(references)]
+        counted = counted[(counted["budget"] > 0) & ~counted["method"].isin(left_out)]
         counted = counted.assign(sees=counted["method"].map(vocab.sees))
         tier = {}
         for (budget, _), at in counted[counted["sees"] != ""].groupby(["budget", "sees"]):
