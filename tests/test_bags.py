@@ -166,3 +166,24 @@ def test_a_forward_sequence_without_points_is_covisible_near_only_and_bagged_in_
     assert pairs == [(i, j) for i, j in combinations(range(30), 2) if j - i <= 5]
     for bag in draw_bags(30, pairs, 6, 10):
         assert bag[-1] - bag[0] <= 25 and max(np.diff(bag)) <= 5
+
+
+def test_forward_covisibility_tests_the_scale_change_both_ways():
+    """Two views on one forward line, the second 15/16 of the working distance ahead:
+    the point at that distance on the first's axis is 16 times nearer the second (beyond
+    one octave), and the second's point falls outside the first's narrow image. Only a
+    two-sided scale test says they are not covisible; on a straight path the other
+    direction always covers a one-sided test, so here the intrinsics differ."""
+    from bench.camera import Camera
+    from bench.evaluation.truth import SCALE_CHANGE, _facing
+
+    depth = 10.0
+
+    def cam(centre, f):
+        return Camera(640, 480, f, f, 320.0, 240.0, np.eye(3), -np.asarray(centre, float))
+
+    narrow, wide = cam([0, 0, 0], 12400.0), cam([0.5, 0, depth * 15 / 16], 200.0)
+    assert depth / (depth - wide.center[2]) > SCALE_CHANGE  # 16: beyond one octave
+    assert not _facing(narrow, wide, depth) and not _facing(wide, narrow, depth)
+    near = cam([0.5, 0, depth / 4], 200.0)  # 4/3 nearer: within an octave
+    assert _facing(narrow, near, depth)
