@@ -591,7 +591,7 @@ def test_no_transfer_says_what_the_two_sides_share():
     rows = pd.DataFrame({"method": ["texture", "adaptive", "all"], "budget": [256, 256, 0]})
     assert why_none(rows, [published]) == (
         "at most 2 budgeted method(s) at one budget (adaptive, texture at 256); a ranking "
-        "needs at least 3"
+        "needs at least 3 methods, and a tau at least 6"
     )
     assert why_none(rows.assign(budget=64), [published]).startswith(
         "no budget (the datasets ran 64; the rendered results 128, 256, 512)"

@@ -364,14 +364,14 @@ def rendered_arg(paths: list[Path]) -> list[Path]:
 
 def transfer_methods(methods: tuple[str, ...]) -> None:
     """Say before any work when a dataset run's methods are too few for a tau."""
-    from bench.report.transfer import MIN_METHODS
+    from bench.report.transfer import MIN_METHODS, NEEDS
     from bench.vocabulary import METHODS
 
     ranked = [m for m in methods if m in METHODS and not METHODS[m].whole_pool]
     if len(ranked) < MIN_METHODS:
         log(
             f"transfer.csv will hold no tau: --methods gives {len(ranked)} budgeted method(s) "
-            f"({', '.join(ranked) or 'none'}); a tau needs at least {MIN_METHODS}"
+            f"({', '.join(ranked) or 'none'}); {NEEDS}"
         )
 
 

@@ -90,7 +90,7 @@ def category_verdicts(
     method against its category's peer, whichever method leads (`bench verdict`)."""
     out = []
     lower = vocab.lower_better()
-    broken = errored(rows)  # a method that raised is judged by no verdict
+    broken = errored(rows, vocab)  # a method that raised is judged by no verdict
     present = [m for m in pd.unique(rows["method"]) if m not in broken]
     for metric in (m for m in peer_metrics(vocab) if m in rows):
         counted = solvable(rows, metric, vocab)

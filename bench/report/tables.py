@@ -230,10 +230,10 @@ def table1(rows: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
     return t.loc[order.sort_values().index].reset_index(drop=True)
 
 
-def errored(frame: pd.DataFrame) -> set[str]:
+def errored(frame: pd.DataFrame, vocab: Vocabulary) -> set[str]:
     """The methods with a run that could not be computed (`counted`'s `error` of any
     task): a method that raised is neither tiered nor judged, whatever it scored."""
-    cols = [c for c in frame.columns if c == "error" or c.endswith("_error")]
+    cols = [c for c in (vocab.column(t, "error") for t in vocab.tasks) if c in frame]
     if not cols:
         return set()
     hit = frame[cols].fillna(False).astype(bool).any(axis=1)
@@ -255,7 +255,7 @@ def with_tiers(t: pd.DataFrame, rows: pd.DataFrame, vocab: Vocabulary) -> pd.Dat
     units it did not run) and a method with a run that could not be computed (`errored`)."""
     if t.empty:
         return t
-    left_out = set(vocab.with_role("reference")) | errored(rows)
+    left_out = set(vocab.with_role("reference")) | errored(rows, vocab)
     for m in (m for m in vocab.first_headline() if m in rows):
         counted = solvable(rows, m, vocab)
         counted = counted[(counted["budget"] > 0) & ~counted["method"].isin(left_out)]

@@ -61,6 +61,8 @@ MIN_METHODS = 6
 """The fewest methods a ranking needs: below it there is no transfer row (module docstring)."""
 MIN_RANKED = 3
 """The fewest methods a `transfer.csv` row is written for (without a tau below six)."""
+NEEDS = f"a ranking needs at least {MIN_RANKED} methods, and a tau at least {MIN_METHODS}"
+"""The one way the minimums are said (the run's log, `why_none`)."""
 CANNOT_TELL = "cannot tell"
 TRANSFER_TEXT = ("dataset", "metric", "tau_note", "winner_dataset", "winner_rendered")
 TRANSFER_TEXT += ("biggest_movers",)
@@ -258,7 +260,7 @@ def why_none(dataset_rows: pd.DataFrame, rendered: Sequence[Path]) -> str:
     b = max(shared, key=lambda k: len(shared[k]))
     return (
         f"at most {len(shared[b])} budgeted method(s) at one budget "
-        f"({', '.join(sorted(shared[b]))} at {b}); a tau needs at least {MIN_METHODS}"
+        f"({', '.join(sorted(shared[b]))} at {b}); {NEEDS}"
     )
 
 
