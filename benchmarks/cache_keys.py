@@ -223,7 +223,7 @@ def main() -> None:
         )
         previous = now
     table = pd.DataFrame(grid).fillna("").sort_index()
-    print(f"source: {args.source} ({'narrow keys' if new_code else 'whole-module keys'})")
+    print(f"source: {args.source}")
     print("\n".join(summary))
     print("\nP predicted again, S scored again, + new, . reused")
     print(table.to_string())
