@@ -7,6 +7,7 @@ zero-height bar.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import matplotlib
@@ -17,7 +18,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.ticker import FixedLocator, MaxNLocator, NullLocator  # noqa: E402
 
-from bench.files import atomic_path  # noqa: E402
+from bench.files import META, atomic_path  # noqa: E402
 from bench.results import POINT_ERRORS, Workspace
 from bench.vocabulary import (  # noqa: E402
     FIGURE_SCENE,
@@ -234,6 +235,15 @@ def figure2_expected(df: pd.DataFrame) -> bool:
     return bool(((df["scene"] == FIGURE_SCENE) & (df["method"] == HEADLINE_POLICY)).any())
 
 
+def entry_of(renders: Path, key: str, pixels) -> Path:
+    """The cached render entry a row read: its `render_key`'s, among a local render and an
+    entry made from the reference renders (`renders/reference/`), the one of its `pixels`."""
+    found = [Path(renders) / key, Path(renders) / "reference" / key]
+    found = [e for e in found if (e / META).is_file()]
+    same = [e for e in found if json.loads((e / META).read_text()).get("pixels") == pixels]
+    return (same or found or [Path(renders) / key])[0]
+
+
 def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | None:
     """Two views of the figure's scene (`FIGURE_SCENE`) with the headline method's
     selection, and its sparse points coloured by their error (`POINT_ERRORS`, written by
@@ -253,7 +263,7 @@ def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | 
     r = rows.iloc[0]
     unit = Unit(FIGURE_SCENE, int(r["seed"]), HEADLINE_POLICY, int(r["budget"]))
     model_dir = Workspace(results, renders).model_dir(unit, Job(*HEADLINE))
-    entry = renders / r["render_key"]
+    entry = entry_of(renders, r["render_key"], r.get("pixels"))
     if not (model_dir / "images.txt").is_file() or not entry.is_dir():
         return f"missing {model_dir if not model_dir.is_dir() else entry}"
     images, ids, X = read_text_model(model_dir)
