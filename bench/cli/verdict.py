@@ -67,21 +67,23 @@ def run(args: argparse.Namespace) -> None:
     from bench.binding import read_vocabulary
     from bench.cli import build_parser
     from bench.frontend import plugins
+    from bench.harness import declared  # noqa: F401 (every method of the package, first)
     from bench.report.categories import category_verdicts, verdict_sentences
     from bench.report.tables import headline_frame
     from bench.results import RUNS
     from bench.runs import read_runs
+    from bench.vocabulary import METHODS
 
     module = args.module.resolve()
     if not module.is_file():
         raise BenchError(f"{args.module} is not a file (a policy module, .py)")
+    before = set(METHODS)
     plugins.load((str(module),))
-    declared = sorted(m for m, origin in plugins.ORIGIN.items() if Path(origin) == module)
-    methods = parse_list("--methods", args.methods, str) if args.methods else declared
-    if not methods or set(methods) - set(declared):
+    new = sorted(m for m in METHODS if m not in before)
+    methods = parse_list("--methods", args.methods, str) if args.methods else new
+    if not methods or set(methods) - set(new):
         raise BenchError(
-            f"{module.name} declares {', '.join(declared) or 'no policy'}; "
-            f"--methods may name only those"
+            f"{module.name} declares {', '.join(new) or 'no policy'}; --methods may name only those"
         )
     base = args.results or Path(f"results/verdict-{module.stem}")
     snapshots = [(r, []) for r in parse_list("--regimes", args.regimes, str)]
