@@ -72,14 +72,12 @@ def run(args: argparse.Namespace) -> None:
     from bench.report.tables import headline_frame
     from bench.results import RUNS
     from bench.runs import read_runs
-    from bench.vocabulary import METHODS
 
     module = args.module.resolve()
     if not module.is_file():
         raise BenchError(f"{args.module} is not a file (a policy module, .py)")
-    before = set(METHODS)
-    plugins.load((str(module),))
-    new = sorted(m for m in METHODS if m not in before)
+    plugins.load((str(module),))  # the package's methods imported first: not the module's
+    new = sorted(m for m, origin in plugins.ORIGIN.items() if Path(origin) == module)
     methods = parse_list("--methods", args.methods, str) if args.methods else new
     if not methods or set(methods) - set(new):
         raise BenchError(

@@ -238,10 +238,16 @@ def figure2_expected(df: pd.DataFrame) -> bool:
 def entry_of(renders: Path, key: str, pixels) -> Path:
     """The cached render entry a row read: its `render_key`'s, among a local render and an
     entry made from the reference renders (`renders/reference/`), the one of its `pixels`."""
-    found = [Path(renders) / key, Path(renders) / "reference" / key]
-    found = [e for e in found if (e / META).is_file()]
-    same = [e for e in found if json.loads((e / META).read_text()).get("pixels") == pixels]
+    found = [e for e in (Path(renders) / key, Path(renders) / "reference" / key) if e.is_dir()]
+    same = [e for e in found if _recorded_pixels(e) == pixels]
     return (same or found or [Path(renders) / key])[0]
+
+
+def _recorded_pixels(entry: Path) -> str | None:
+    try:
+        return json.loads((entry / META).read_text()).get("pixels")
+    except (OSError, ValueError):
+        return None
 
 
 def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | None:
