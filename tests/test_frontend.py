@@ -228,7 +228,12 @@ def test_policy_input_has_no_ground_truth_fields():
 
     from bench.frontend.features import Candidates
 
-    assert [f.name for f in dataclasses.fields(PolicyInput)] == ["view", "candidates", "signals"]
+    assert [f.name for f in dataclasses.fields(PolicyInput)] == [
+        "view",
+        "candidates",
+        "signals",
+        "scene",
+    ]
     assert [f.name for f in dataclasses.fields(View)] == [
         "index",
         "name",

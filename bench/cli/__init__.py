@@ -27,13 +27,23 @@ COMMANDS = (
     "publish",
     "upgrade",
     "train-weights",
+    "train-matchability",
     "select",
     "export",
     "gallery",
 )
 
 
-NATIVE = ("run", "reproduce", "verdict", "upgrade", "train-weights", "select", "export")
+NATIVE = (
+    "run",
+    "reproduce",
+    "verdict",
+    "upgrade",
+    "train-weights",
+    "train-matchability",
+    "select",
+    "export",
+)
 """The commands that load COLMAP, whose import installs glog's failure signal handler (a
 native stack dump on SIGTERM): it is imported before ours replaces that handler."""
 

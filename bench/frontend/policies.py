@@ -46,6 +46,9 @@ class PolicyInput:
     """The view's N candidate keypoints, (N, ...) arrays indexed alike (`Candidates`)."""
     signals: Signals
     """One (N,) float array per signal, each in [0, 1] (`Signals`)."""
+    scene: str = ""
+    """The scene's name: a rendered scene's type, a photo set's folder name (what the
+    user knows of a capture; `matchable` takes the model that never saw it)."""
 
 
 @dataclass(frozen=True)

@@ -9,12 +9,13 @@ from __future__ import annotations
 from bench.acquisition import choosers
 from bench.backend import equal_count, peers
 from bench.evaluation import next_views, oracle
-from bench.frontend import feedback, policies, tracks
+from bench.frontend import feedback, matchability, policies, tracks
 from bench.harness import nbv, tasks
 from bench.vocabulary import Vocabulary
 
 DECLARED_IN = (
     policies,
+    matchability,
     feedback,
     tracks,
     peers,

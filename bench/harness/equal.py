@@ -31,7 +31,7 @@ def store_equal(scene, unit, jobs, cfg, ws, record) -> None:
         policy = EQUAL[unit.method][0]  # given the method's own settings
         own = replace(cfg, methods=cfg.methods | {policy: cfg.own(unit.method)})
         selections, rounds, _ = select_match.select(
-            fe.views, fe.pools, fe.signals, policy, counts, unit.seed, own
+            fe.views, fe.pools, fe.signals, replace(unit, method=policy), own, counts
         )
         return selections, rounds
 

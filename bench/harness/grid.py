@@ -34,6 +34,7 @@ from bench.console import log, progress
 from bench.failures import ERROR, exclusions, failures, outcomes
 from bench.files import entry_problem
 from bench.frontend import plugins
+from bench.frontend.matchability import read_models
 from bench.frontend.policies import check_methods, learned_weights
 from bench.frontend.views import pixels_key, source_key
 from bench.harness.bags import BAG, dataset_bags
@@ -115,6 +116,24 @@ class BenchConfig:
     """The images of a dataset's bag (`bench.harness.bags`); 0: the whole dataset, seed 0.
     A dataset's seeds are its bags' numbers, up to `max(seeds) + 1` bags."""
 
+    def _check_training_seeds(self) -> None:
+        """Refuse evaluation seeds that a learned method's model was trained on."""
+        trained = {}
+        if "learned" in self.methods:
+            own = self.run.policy_config("learned").learned_weights
+            trained["learned weights", "train-weights"] = learned_weights(own)["seeds"]
+        if "matchable" in self.methods:
+            own = self.run.policy_config("matchable").matchability_model
+            trained["matchability models", "train-matchability"] = read_models(own)["seeds"]
+        for (what, command), seeds in trained.items():
+            shared = sorted(set(seeds) & set(self.seeds))
+            if shared:
+                raise BenchError(
+                    f"the {what} were trained on seed(s) {shared}, which are also "
+                    f"evaluation seeds; evaluate on other seeds, or train on others "
+                    f"(bench {command} --seeds ...)"
+                )
+
     def validate(self) -> BenchConfig:
         if self.datasets:
             names = [Path(d).name for d in self.datasets]
@@ -128,17 +147,8 @@ class BenchConfig:
                 load_spec(s)
         plugins.load(self.run.policy.modules)
         check_methods(self.methods)
-        if "learned" in self.methods and not self.datasets:
-            trained = set(
-                learned_weights(self.run.policy_config("learned").learned_weights)["seeds"]
-            )
-            shared = sorted(trained & set(self.seeds))
-            if shared:
-                raise BenchError(
-                    f"the learned weights were trained on seed(s) {shared}, which are also "
-                    "evaluation seeds; evaluate on other seeds, or train on others "
-                    "(bench train-weights --seeds ...)"
-                )
+        if not self.datasets:
+            self._check_training_seeds()
         unknown = [p for p in self.protocols if p not in PROTOCOLS]
         if unknown:
             raise BenchError(f"unknown protocol {unknown[0]!r}; valid: {', '.join(PROTOCOLS)}")

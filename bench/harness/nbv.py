@@ -192,9 +192,7 @@ def _state(ctx: Context, views: tuple, grant: str):
         vs, pools, sigs = _front(ctx, views, grant)
         cams, cfg, policy = [v.camera for v in vs], ctx.cfg, ctx.cfg.nbv.policy
         t = time.perf_counter()
-        sel, _, _ = select_match.select(
-            vs, pools, sigs, policy, ctx.unit.budget, ctx.unit.seed, cfg
-        )
+        sel, _, _ = select_match.select(vs, pools, sigs, replace(ctx.unit, method=policy), cfg)
         ctx.spent("select", t)
         pairs, seconds = select_match.match(cams, pools, sel, policy, cfg)
         for stage, s in seconds.items():

@@ -45,6 +45,7 @@ from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.evaluation.truth import SceneTruth
 from bench.files import atomic_path, content_key, temp_dir_beside, write_text_atomic
 from bench.frontend import plugins
+from bench.frontend.learned import LEARNED
 from bench.frontend.stage import FrontEnd
 from bench.frontend.views import Source
 from bench.harness import select_match
@@ -76,8 +77,8 @@ def prediction_hash(cfg: RunConfig, method: str, task: str) -> str:
     """The `prediction_hash` of a method's rows of a task: the settings the prediction
     reads (`RunConfig.prediction`), the fields of the method and task that decide a row
     (`bench.vocabulary.deciding`), the code (`PREDICTION_CODE`), the versions of the
-    libraries it runs (`bench.codehash.library_versions`; a learned pool's or matcher's
-    too), the method's own settings and input files (the learned weights), and for a
+    libraries it runs (`bench.codehash.library_versions`: a learned pool's or matcher's
+    too, and the selection models'), the method's own settings and input files (the learned weights), and for a
     method from a module (`--policy-module`, an entry point) its module's content as well."""
     own = cfg.policy_config(method)
     runner = TASK_RUNNERS[task]
@@ -89,7 +90,9 @@ def prediction_hash(cfg: RunConfig, method: str, task: str) -> str:
             "method": deciding(declared),
             "task": {"name": task, "grant": runner.spec.grant, "maps": runner.maps},
             "code": code_hash(PREDICTION_CODE),
-            "libraries": library_versions(learned=bool(declared.pool or declared.matcher)),
+            "libraries": library_versions(
+                learned=declared.pool in LEARNED or bool(declared.matcher), models=True
+            ),
             "inputs": plugins.files_hash(own.inputs()) if hasattr(own, "inputs") else "",
         }
     )
@@ -109,9 +112,7 @@ Selection = tuple[list[np.ndarray], list[dict]]
 
 def policy_selection(fe: FrontEnd, truth: SceneTruth, unit: Unit, cfg: RunConfig) -> Selection:
     """A policy's selection (`bench.frontend.selection`; it never sees `truth`)."""
-    selections, rounds, _ = select_match.select(
-        fe.views, fe.pools, fe.signals, unit.method, unit.budget, unit.seed, cfg
-    )
+    selections, rounds, _ = select_match.select(fe.views, fe.pools, fe.signals, unit, cfg)
     return selections, rounds
 
 

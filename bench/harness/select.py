@@ -34,7 +34,7 @@ from bench.frontend.views import View, load_image_folder
 from bench.harness import select_match
 from bench.harness.config import RunConfig
 from bench.harness.methods import runner
-from bench.vocabulary import METHODS
+from bench.vocabulary import METHODS, Unit
 
 
 @dataclass(frozen=True)
@@ -84,7 +84,8 @@ def select_to_database(request: SelectRequest, out: Path, seconds: dict | None =
     )
     cams = [v.camera for v in views]
     step = time.perf_counter()
-    sel, _, _ = select_match.select(views, pools, sigs, policy, budget, 0, cfg)
+    unit = Unit(request.images.resolve().name, 0, policy, budget)
+    sel, _, _ = select_match.select(views, pools, sigs, unit, cfg)
     pairs = select_match.match(cams, pools, sel, policy, cfg)[0] if request.match else []
     clock["select"] = time.perf_counter() - step
     step = time.perf_counter()

@@ -19,26 +19,27 @@ from bench.frontend.selection import select_views
 from bench.frontend.signals import Signals
 from bench.frontend.views import View
 from bench.harness.config import RunConfig
-from bench.vocabulary import METHODS
+from bench.vocabulary import METHODS, Unit
 
 
 def select(
     views: list[View],
     pools: list[Candidates],
     signals: list[Signals],
-    method: str,
-    budget: int | list[int],
-    seed: int,
+    unit: Unit,
     cfg: RunConfig,
+    budget: list[int] | None = None,
 ) -> tuple[list[np.ndarray], list[dict], float]:
-    """Each view's selection by `method` at `budget` (or a budget per view,
-    `bench.frontend.selection.by_view`), a multi-view policy's rounds, and the seconds it
-    took."""
+    """Each view's selection by the unit's method at its budget (or at `budget`, one per
+    view, `bench.frontend.selection.by_view`) and seed, a multi-view policy's rounds, and
+    the seconds it took; the policy is told the unit's scene (`PolicyInput.scene`)."""
     t = time.perf_counter()
-    inputs = [PolicyInput(v, c, s) for v, c, s in zip(views, pools, signals)]
+    inputs = [PolicyInput(v, c, s, unit.scene) for v, c, s in zip(views, pools, signals)]
     match = matcher([v.camera for v in views], pools, cfg.backend, cfg.detector.detector)
-    own = cfg.policy_config(method)
-    selections, rounds = select_views(method, inputs, budget, seed, own, match)
+    own = cfg.policy_config(unit.method)
+    selections, rounds = select_views(
+        unit.method, inputs, unit.budget if budget is None else budget, unit.seed, own, match
+    )
     return selections, rounds, time.perf_counter() - t
 
 
