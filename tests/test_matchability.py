@@ -160,3 +160,9 @@ def test_an_unreadable_model_file_is_one_line(tmp_path):
     bad.write_bytes(b"not a pickle")
     with pytest.raises(BenchError, match="cannot read the matchability model"):
         read_models(str(bad))
+
+
+def test_training_on_one_scene_type_is_refused_before_any_work(tmp_path):
+    with pytest.raises(BenchError, match="two scene types or more"):
+        train_matchability(["table"], [0], RunConfig(render=MEDIUM), tmp_path, tmp_path / "m.pkl")
+    assert not list(tmp_path.iterdir())

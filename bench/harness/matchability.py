@@ -127,6 +127,8 @@ def train_matchability(
 ) -> dict:
     """Label the training renders, fit the models (one per held-out scene type and one on
     all), measure them on the held-out types, and write the model file and its record."""
+    if len(set(scenes)) < 2:
+        raise BenchError("training needs two scene types or more: each is held out in turn")
     t = time.perf_counter()
     data: dict[str, list[tuple]] = {s: [] for s in scenes}
     with progress("label", len(scenes) * len(seeds)) as bar:
