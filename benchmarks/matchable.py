@@ -1,7 +1,7 @@
 """The paired differences issue 62 asks for, from the `runs.csv` of results folders,
 nothing recomputed: `matchable` minus each peer (`colmap-b`, `octave-scale`, `aliked-b`
-where it ran), per budget, in sfm mAA (the headline `multiview` protocol, on the cells
-where stock COLMAP maps, as the verdicts take them) and pairs AUC@10, each with the
+where it ran), per budget, in sfm mAA (the headline `multiview` protocol; on rendered
+scenes the cells where stock COLMAP maps, as the verdicts take them; a dataset's all) and pairs AUC@10, each with the
 tables' stratified 95 % interval (`bench.report.stats.paired_difference`) and wins / ties
 / losses; and the seconds `matchable` took to select, per view.
 
@@ -31,7 +31,8 @@ def differences(runs: pd.DataFrame) -> list[str]:
         rows = runs[runs["task"] == task]
         if task == "sfm":
             rows = rows[rows["protocol"] == "multiview"]
-            rows = rows[rows["reference_maps"].ne(0)]
+            rendered = rows["ground_truth"].str.startswith("rendered")
+            rows = rows[rows["reference_maps"].ne(0) | ~rendered]
         for budget, g in rows[rows["budget"] > 0].groupby("budget"):
             wide = g.pivot_table(index=["scene", "seed"], columns="method", values=metric)
             if POLICY not in wide:
