@@ -299,6 +299,35 @@ def renders_arg(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def training_args(parser: argparse.ArgumentParser, out: Path, what: str) -> None:
+    """The options of a training command: its seeds, scene types, output file (`out`, the
+    one shipped with the package; `what` names it) and render cache."""
+    from bench.scenes.spec import scene_names
+
+    parser.add_argument("--seeds", default="100-102", help="training seeds (default: %(default)s)")
+    parser.add_argument(
+        "--scenes", default=",".join(scene_names()), help="scene types (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=out,
+        help=f"{what} (default: the one shipped with the package, %(default)s)",
+    )
+    renders_arg(parser)
+
+
+def training_grid(args: argparse.Namespace) -> tuple[list[str], list[int]]:
+    """The checked scene types and seeds of a training command."""
+    from bench.scenes.spec import load_spec
+
+    seeds = parse_list("--seeds", args.seeds, int, "100-119")
+    scenes = parse_list("--scenes", args.scenes, str, "table,facade")
+    for s in scenes:
+        load_spec(s)
+    return list(scenes), list(seeds)
+
+
 def results_arg(parser: argparse.ArgumentParser, default: Path | None, what: str) -> None:
     parser.add_argument("--results", type=folder, default=default, help=what)
 

@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from bench.cli.common import parse_list, renders_arg
+from bench.cli.common import training_args, training_grid
 
 HELP = "fit the `matchable` policy's models on the exact labels of training renders"
 DESCRIPTION = (
@@ -21,31 +20,16 @@ DESCRIPTION = (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from bench.frontend.matchability import SHIPPED_MODEL
-    from bench.scenes.spec import scene_names
 
-    parser.add_argument("--seeds", default="100-102", help="training seeds (default: %(default)s)")
-    parser.add_argument(
-        "--scenes", default=",".join(scene_names()), help="scene types (default: %(default)s)"
-    )
-    parser.add_argument(
-        "--out",
-        type=Path,
-        default=SHIPPED_MODEL,
-        help="model file (default: the one shipped with the package, %(default)s)",
-    )
-    renders_arg(parser)
+    training_args(parser, SHIPPED_MODEL, "model file")
 
 
 def run(args: argparse.Namespace) -> None:
     from bench.harness.config import RunConfig
     from bench.harness.matchability import train_matchability
-    from bench.scenes.spec import load_spec
 
-    seeds = parse_list("--seeds", args.seeds, int, "100-119")
-    scenes = parse_list("--scenes", args.scenes, str, "table,facade")
-    for s in scenes:
-        load_spec(s)
-    record = train_matchability(list(scenes), list(seeds), RunConfig(), args.renders, args.out)
+    scenes, seeds = training_grid(args)
+    record = train_matchability(scenes, seeds, RunConfig(), args.renders, args.out)
     for scene, r in record["held_out"].items():
         p = r["precision"]
         print(

@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from bench.cli.common import parse_list, renders_arg
+from bench.cli.common import training_args, training_grid
 
 HELP = "fit the `learned` policy's weights on training seeds"
 DESCRIPTION = (
@@ -19,30 +18,15 @@ DESCRIPTION = (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from bench.frontend.policies import SHIPPED_WEIGHTS
-    from bench.scenes.spec import scene_names
 
-    parser.add_argument("--seeds", default="100-102", help="training seeds (default: %(default)s)")
-    parser.add_argument(
-        "--scenes", default=",".join(scene_names()), help="scene types (default: %(default)s)"
-    )
-    parser.add_argument(
-        "--out",
-        type=Path,
-        default=SHIPPED_WEIGHTS,
-        help="weights file (default: the one shipped with the package, %(default)s)",
-    )
-    renders_arg(parser)
+    training_args(parser, SHIPPED_WEIGHTS, "weights file")
 
 
 def run(args: argparse.Namespace) -> None:
     from bench.harness.config import RunConfig
     from bench.harness.training import train_weights
-    from bench.scenes.spec import load_spec
 
-    seeds = parse_list("--seeds", args.seeds, int, "100-119")
-    scenes = parse_list("--scenes", args.scenes, str, "table,facade")
-    for s in scenes:
-        load_spec(s)
-    w = train_weights(list(scenes), list(seeds), RunConfig(), args.renders, args.out)
+    scenes, seeds = training_grid(args)
+    w = train_weights(scenes, seeds, RunConfig(), args.renders, args.out)
     for k, v in w["weights"].items():
         print(f"{k:<16} learned {v:+.3f}   paper {w['paper_weights'][k]:+.2f}")
