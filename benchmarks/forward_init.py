@@ -8,7 +8,9 @@ does (`peer_extraction`, `run_peer`), and the mapper (`map_database`, the `multi
 protocol) is run under each setting below; only `init_min_tri_angle` (COLMAP's 16 deg) and
 `init_max_forward_motion` (COLMAP's 0.95: a first pair whose unit translation has
 |t_z| >= 0.95, i.e. within 18 deg of the optical axis, is refused) of the mapper's options
-change (`fixed_intrinsics_options`, patched from here; the package is not edited). Note
+change (`_map_once`: the package's mapper from one setting alone; since the package
+adopted the fallback `16 else (2, fwd 1.0)` as `map_database`'s second start, the default row
+here is COLMAP's first start alone). Note
 that COLMAP's pipeline already relaxes a failed start by itself: with no model it halves
 `init_min_num_inliers`, then the angle, twice (16 -> 8 -> 4 deg at 100 -> 50 -> 25
 inliers), so "16" below already includes first-pair attempts at 8 and 4 deg.
@@ -75,8 +77,21 @@ FALLBACKS = {
 }
 INIT_INLIERS, INIT_FORWARD, INIT_ANGLE = 100, 0.95, 16.0
 
-_real_options = recon.fixed_intrinsics_options
 _captured: list[dict] = []
+
+
+def _map_once(database, image_dir, cfg, protocol, angle, forward) -> recon.Reconstruction:
+    """The mapper from one first-pair setting alone (`map_database` without its second
+    start), as `map_database` scores it."""
+    opts = recon.fixed_intrinsics_options(cfg, protocol)
+    opts.mapper.init_min_tri_angle = angle
+    opts.mapper.init_max_forward_motion = forward
+    t = time.perf_counter()
+    best = recon._incremental(database, image_dir, opts)
+    if isinstance(best, str):
+        return recon.Reconstruction(None, best, time.perf_counter() - t)
+    recon.drop_short_tracks(best, recon.PROTOCOLS[protocol])
+    return recon.Reconstruction(best, None, time.perf_counter() - t)
 
 
 def _map_all_settings(database, image_dir, cfg, protocol):
@@ -84,22 +99,9 @@ def _map_all_settings(database, image_dir, cfg, protocol):
     the default's result returned."""
     out = {}
     for name, (angle, forward) in SETTINGS.items():
-
-        def options(cfg, protocol, angle=angle, forward=forward):
-            opts = _real_options(cfg, protocol)
-            opts.mapper.init_min_tri_angle = angle
-            opts.mapper.init_max_forward_motion = forward
-            return opts
-
-        recon.fixed_intrinsics_options = options
-        try:
-            t = time.perf_counter()
-            out[name] = (
-                recon.map_database(database, image_dir, cfg, protocol),
-                time.perf_counter() - t,
-            )
-        finally:
-            recon.fixed_intrinsics_options = _real_options
+        t = time.perf_counter()
+        rec = _map_once(database, image_dir, cfg, protocol, angle, forward)
+        out[name] = (rec, time.perf_counter() - t)
     _captured.append(out)
     return out[DEFAULT][0]
 

@@ -184,3 +184,43 @@ def test_the_hard_cap_keeps_the_largest_scales_ties_by_index_in_colmaps_order():
     assert hard_cap(kps, 3).tolist() == [1, 3, 6]
     assert hard_cap(kps, 4).tolist() == [1, 2, 3, 6]  # the tie at scale 2: the lower index
     assert hard_cap(kps, 100).tolist() == list(range(7))
+
+
+def test_a_forward_drive_is_mapped_from_a_forward_first_pair_only(tmp_path, monkeypatch):
+    # six views 1 m apart driving along their optical axis (y), 400 points 8-40 m ahead:
+    # every pair moves along the axis and its angles are small, so COLMAP's first-pair
+    # tests (16 degrees, relaxed to 4 by itself; motion off the axis) refuse every pair
+    from bench.backend import reconstruction
+    from bench.camera import look_at
+
+    cams = [look_at((0.0, y, 1.5), (0.0, y + 10.0, 1.5)) for y in range(6)]
+    rng = np.random.default_rng(5)
+    X = np.c_[rng.uniform(-12, 12, 400), rng.uniform(13, 45, 400), rng.uniform(-2, 8, 400)]
+    seen = np.all([c.project(X)[1] > 0 for c in cams], axis=0)
+    X = X[seen & np.all([_inside(c, X) for c in cams], axis=0)]
+    xy = [c.project(X)[0] for c in cams]
+    ids = np.arange(len(X))
+    pairs = [
+        PairMatches(i, j, np.c_[ids, ids], np.c_[ids, ids], "CALIBRATED")
+        for i in range(6)
+        for j in range(i + 1, 6)
+    ]
+    for n in _names(6):
+        cv2.imwrite(str(tmp_path / n), np.zeros((480, 640, 3), np.uint8))
+    rec = mapping_task(tmp_path, cams, _names(6), xy, pairs, BackendConfig())
+    est = registered_poses(rec.model, {n: k for k, n in enumerate(_names(6))})
+    row, _ = pose_metrics(est, cams)
+    assert row["registered_views"] == 6 and row["maa"] > 0.9
+    # without the second start (COLMAP's defaults again), nothing is mapped
+    monkeypatch.setattr(
+        reconstruction,
+        "FORWARD_START",
+        {"init_min_tri_angle": 16.0, "init_max_forward_motion": 0.95},
+    )
+    rec = mapping_task(tmp_path, cams, _names(6), xy, pairs, BackendConfig())
+    assert rec.model is None and "the mapper registered" in rec.failure
+
+
+def _inside(cam, X) -> np.ndarray:
+    uv = cam.project(X)[0]
+    return (uv[:, 0] > 0) & (uv[:, 0] < cam.width) & (uv[:, 1] > 0) & (uv[:, 1] < cam.height)

@@ -20,7 +20,11 @@ Track protocols (the same for every policy):
 Structure from motion (task `sfm`): COLMAP's incremental mapper on the same database,
 with the intrinsics known and fixed (no focal length, principal point or distortion
 refinement) and the poses unknown; the model with the most registered views is kept.
-The rig's poses are never read for it. The track protocol applies to its triangulation
+The rig's poses are never read for it. Where COLMAP's first-pair tests stop it (fewer than
+two views registered), the mapper starts once more from a forward-motion first pair
+(`FORWARD_START`): a capture that moves along its optical axis (a car, a survey drone, a
+corridor robot) gives first pairs of small angle whose motion lies along the axis, which
+COLMAP's defaults refuse (docs/datasets.md, "A forward-moving set"). The track protocol applies to its triangulation
 too: `multiview` is COLMAP's default mapper (two-view tracks ignored; so a scene seen by
 two views alone cannot be mapped), `twoview` keeps them.
 
@@ -213,12 +217,22 @@ def known_pose_task(
     return Reconstruction(model, failure, time.perf_counter() - t)
 
 
+FORWARD_START = {"init_min_tri_angle": 2.0, "init_max_forward_motion": 1.0}
+"""The mapper's options of the second start, where COLMAP's defaults (16 degrees, which it
+relaxes to 8 and 4 by itself; a first pair moving within 18 degrees of the optical axis
+refused) register fewer than two views: the first pair may move along the axis, at 2
+degrees of triangulation angle. Never tried where the defaults map."""
+
+
 def fixed_intrinsics_options(
-    cfg: BackendConfig, protocol: str
+    cfg: BackendConfig, protocol: str, forward: bool = False
 ) -> pycolmap.IncrementalPipelineOptions:
     """COLMAP's incremental mapper with known, fixed intrinsics under a track protocol;
-    seeded, one thread."""
+    seeded, one thread; with `forward`, the first pair of `FORWARD_START`."""
     opts = pycolmap.IncrementalPipelineOptions()
+    if forward:
+        for name, value in FORWARD_START.items():
+            setattr(opts.mapper, name, value)
     opts.triangulation.ignore_two_view_tracks = PROTOCOLS[protocol] > 2
     opts.ba_refine_focal_length = False
     opts.ba_refine_principal_point = False
@@ -228,28 +242,36 @@ def fixed_intrinsics_options(
     return opts
 
 
-def map_database(
-    database: Path, image_dir: Path, cfg: BackendConfig, protocol: str
-) -> Reconstruction:
-    """Incremental mapping of a COLMAP database under a track protocol; the largest model
-    (points of shorter tracks than the protocol allows removed), or why there is none."""
-    t = time.perf_counter()
+def _incremental(database: Path, image_dir: Path, opts) -> pycolmap.Reconstruction | str:
+    """COLMAP's incremental mapper once: the model with the most registered views (two at
+    least), or why there is none."""
     out = Path(tempfile.mkdtemp(prefix="bench-map-"))
     try:
         with quiet_colmap():
-            models = pycolmap.incremental_mapping(
-                database, image_dir, out, options=fixed_intrinsics_options(cfg, protocol)
-            )
+            models = pycolmap.incremental_mapping(database, image_dir, out, options=opts)
     except Exception as e:  # COLMAP failures become a recorded reason
-        return Reconstruction(
-            None, f"mapping failed: {type(e).__name__}: {e}", time.perf_counter() - t
-        )
+        return f"mapping failed: {type(e).__name__}: {e}"
     finally:
         shutil.rmtree(out, ignore_errors=True)
     best = max(models.values(), key=lambda m: m.num_reg_images(), default=None)
     if best is None or best.num_reg_images() < 2:
-        n = 0 if best is None else best.num_reg_images()
-        return Reconstruction(None, f"the mapper registered {n} view(s)", time.perf_counter() - t)
+        return f"the mapper registered {0 if best is None else best.num_reg_images()} view(s)"
+    return best
+
+
+def map_database(
+    database: Path, image_dir: Path, cfg: BackendConfig, protocol: str
+) -> Reconstruction:
+    """Incremental mapping of a COLMAP database under a track protocol, from COLMAP's first
+    pair, else from a forward-motion one (`FORWARD_START`); the largest model (points of
+    shorter tracks than the protocol allows removed), or why there is none."""
+    t = time.perf_counter()
+    best = _incremental(database, image_dir, fixed_intrinsics_options(cfg, protocol))
+    if isinstance(best, str):
+        forward = _incremental(database, image_dir, fixed_intrinsics_options(cfg, protocol, True))
+        best = best if isinstance(forward, str) else forward  # the first start's reason
+    if isinstance(best, str):
+        return Reconstruction(None, best, time.perf_counter() - t)
     drop_short_tracks(best, PROTOCOLS[protocol])
     return Reconstruction(best, None, time.perf_counter() - t)
 
