@@ -47,6 +47,12 @@ stock COLMAP's, and a learned detector's own top-B with LightGlue (on its pool).
 # they ran (`bench.report.categories`, `paired_sfm.csv`): `PAIRED_PEERS`, which see their
 # own image, and stock COLMAP choosing from its own first pass, which sees other views.
 CATEGORY_PEERS = (*PAIRED_PEERS, "colmap-tracks-b")
+FRONTIER_PEERS = ("colmap-b", "colmap-tracks-b")
+"""Each category's stock-COLMAP peer (its own image; other views) whose curve over the
+budgets is a frontier of `figure_cost.png` (`bench.report.cost`)."""
+FRONTIER_BUDGETS = (1024, 2048)
+"""The budgets at which a regime's grid runs `FRONTIER_PEERS` alone, beside the grid's
+budgets, so that each frontier spans 128 to 2048 keypoints per view."""
 REFERENCE_PEER = "colmap"
 """Stock COLMAP with all its features: a (scene, seed) it does not map in the sfm task
 measures nothing, so it is marked (`REFERENCE_MAPS`) and left out of the sfm means."""

@@ -57,7 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from bench.harness.grid import default_methods
     from bench.harness.tasks import TASK_RUNNERS
     from bench.scenes.spec import scene_names
-    from bench.vocabulary import PROTOCOLS, SETTINGS
+    from bench.vocabulary import FRONTIER_BUDGETS, FRONTIER_PEERS, PROTOCOLS, SETTINGS
 
     def list_arg(name: str, default: str | None, metavar: str, what: str) -> None:
         parser.add_argument(
@@ -83,6 +83,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "B1,B2",
         "features per view (default: 128,256,512, or 256 with --quick; 256 is the headline; "
         "a whole-pool method such as `all` runs once per scene and seed, as budget 0)",
+    )
+    list_arg(
+        "frontier",
+        None,
+        "B1,B2",
+        f"budgets at which the category peers {' and '.join(FRONTIER_PEERS)} alone run "
+        "besides --budget, so that figure_cost.png draws their frontiers from 128 to 2048 "
+        f"(default: {','.join(map(str, FRONTIER_BUDGETS))} on a regime's default budgets; "
+        "none with --budget, --quick or --dataset; 'none' runs none)",
     )
     tasks = "; ".join(f"{n} ({r.spec.doc})" for n, r in TASK_RUNNERS.items())
     list_arg(
@@ -419,7 +428,7 @@ def run(args: argparse.Namespace) -> None:
     from bench.report.write import write_report
     from bench.results import PAGE, Workspace
     from bench.scenes.spec import scene_names
-    from bench.vocabulary import GROUND_TRUTH, HEADLINE, METHODS
+    from bench.vocabulary import FRONTIER_BUDGETS, GROUND_TRUTH, HEADLINE, METHODS
 
     if args.scheduler is not None and args.workers is not None:
         raise BenchError("--workers does not apply with --scheduler: the cluster has its workers")
@@ -453,6 +462,10 @@ def run(args: argparse.Namespace) -> None:
         scenes = parse_list("--scenes", scenes, str, "table,facade")
         methods = with_reference(methods, tasks)
     budget = args.budget if args.budget is not None else ("256" if args.quick else "128,256,512")
+    default_frontier = args.quick or datasets or args.budget is not None
+    frontier = args.frontier or (
+        "none" if default_frontier else ",".join(map(str, FRONTIER_BUDGETS))
+    )
     cfg = BenchConfig(
         scenes=scenes,
         seeds=seeds,
@@ -463,6 +476,7 @@ def run(args: argparse.Namespace) -> None:
         run=run_cfg,
         datasets=tuple(map(str, datasets)),
         bag_size=bag_size,
+        frontier=() if frontier == "none" else parse_list("--frontier", frontier, int, "1024,2048"),
     )
     results = args.results or (
         LATEST.with_name(f"dataset-{datasets[0].name}" if len(datasets) == 1 else "datasets")

@@ -85,8 +85,14 @@ class Plan:
 
     @property
     def budgets(self) -> tuple[int, ...]:
-        """The budgets of its units (the grid's, carried by each unit alone)."""
-        return tuple(sorted({u.budget for u in self.work if u.budget > 0}))
+        """The budgets of its units that select from the front end's pools (the grid's,
+        carried by each unit alone; not a peer's, which extracts a pool of its own)."""
+        own = (OWN_PIPELINE, TRACKS_PEER)
+        return tuple(
+            sorted(
+                {u.budget for u in self.work if u.budget > 0 and METHODS[u.method].kind not in own}
+            )
+        )
 
     @property
     def grants(self) -> tuple[str, ...]:

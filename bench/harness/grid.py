@@ -63,6 +63,7 @@ from bench.runs import (
 )
 from bench.scenes.spec import load_spec, scene_names
 from bench.vocabulary import (
+    FRONTIER_PEERS,
     KEY,
     METHODS,
     NO_PROTOCOL,
@@ -115,6 +116,9 @@ class BenchConfig:
     bag_size: int = 0
     """The images of a dataset's bag (`bench.harness.bags`); 0: the whole dataset, seed 0.
     A dataset's seeds are its bags' numbers, up to `max(seeds) + 1` bags."""
+    frontier: tuple[int, ...] = ()
+    """Budgets at which `FRONTIER_PEERS` alone run besides `budgets`: the cost figure's
+    frontiers (a regime's grid: `FRONTIER_BUDGETS`)."""
 
     def _check_training_seeds(self) -> None:
         """Refuse evaluation seeds that a learned method's model was trained on."""
@@ -169,8 +173,8 @@ class BenchConfig:
             )
         if not self.seeds or min(self.seeds) < 0:
             raise BenchError(f"seeds must be non-negative integers, got {list(self.seeds)}")
-        if not self.budgets or min(self.budgets) <= 0:
-            bad = ", ".join(str(b) for b in self.budgets if b <= 0) or "none"
+        if not self.budgets or min((*self.budgets, *self.frontier)) <= 0:
+            bad = ", ".join(str(b) for b in (*self.budgets, *self.frontier) if b <= 0) or "none"
             raise BenchError(
                 f"--budget takes keypoints per view, each at least 1, got {bad} (a whole-pool "
                 "method, all or colmap, runs at its own count by itself)"
@@ -210,9 +214,17 @@ class BenchConfig:
             for sc in self.scenes
             for sd in self.seeds_of(sc)
             for m in self.methods
-            for b in ((0,) if METHODS[m].whole_pool else self.budgets)
+            for b in self.budgets_of(m)
             if self.jobs(m)
         ]
+
+    def budgets_of(self, method: str) -> tuple[int, ...]:
+        """The budgets of a method's units: 0 for a whole-pool method; the grid's, and
+        `frontier`'s for a frontier peer."""
+        if METHODS[method].whole_pool:
+            return (0,)
+        more = self.frontier if method in FRONTIER_PEERS else ()
+        return (*self.budgets, *(b for b in more if b not in self.budgets))
 
     def jobs(self, method: str) -> list[Job]:
         """Every job of a unit of `method`: the tasks its kind runs (`TaskRunner.kinds`;

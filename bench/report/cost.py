@@ -21,10 +21,13 @@ under the headline protocol):
 * each ranking metric of the tasks the peers run (`sfm_maa`, `pairs_auc_10`), its mean.
 
 `figure_cost.png`: those metrics against `ms_per_view` (log x axis), a point per method
-and budget, each category of `sees` in its own marker, and `colmap-b` at every budget it
-ran (the grid's; the slice of docs/protocol.md, "The own-image question", ran 1024 and
-2048 too) drawn as a line: the peer's frontier. A method is worth its cost where it lies
-above that line.
+and budget, each category of `sees` in its own marker, and each category's stock-COLMAP
+peer (`FRONTIER_PEERS`: `colmap-b` for its own image, `colmap-tracks-b` for other views)
+at every budget it ran drawn as a black line: that category's frontier. A regime's grid
+runs the two peers at 1024 and 2048 besides its budgets (`FRONTIER_BUDGETS`), so each
+frontier spans 128 to 2048 keypoints per view; those rows (`frontier_only`) enter this
+table and figure alone. A method is worth its cost where it lies above its category's
+frontier; with one budget a frontier is a point, and the figure says so.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ from bench.report.categories import peer_metrics
 from bench.report.figures import method_colours, plt, save
 from bench.report.tables import solvable
 from bench.vocabulary import (
+    FRONTIER_PEERS,
     HEADLINE,
     MULTI_VIEW,
     TRACKS_FIRST_PASS,
@@ -51,8 +55,17 @@ from bench.vocabulary import (
 
 TIMED = ("detect_ms", "signals_ms", "select_ms", "match_ms", "verify_ms")
 """The front end and matching stages of a row (module docstring)."""
-FRONTIER = "colmap-b"
-"""The peer whose curve over the budgets is the frontier of `figure_cost.png`."""
+FRONTIER_STYLE = {"colmap-b": "k-", "colmap-tracks-b": "k--"}
+"""Each frontier's line (`FRONTIER_PEERS`)."""
+
+
+def frontier_only(df: pd.DataFrame) -> pd.Series:
+    """The rows of a frontier peer at a budget where no other budgeted method ran (the
+    frontiers' own budgets, `FRONTIER_BUDGETS`): the cost's alone, left out of every other
+    table, figure and verdict."""
+    budgeted = df["budget"] > 0
+    others = set(df.loc[budgeted & ~df["method"].isin(FRONTIER_PEERS), "budget"])
+    return budgeted & df["method"].isin(FRONTIER_PEERS) & ~df["budget"].isin(others)
 
 
 def first_pass(method: str, budget: int, vocab: Vocabulary, settings: dict) -> float:
@@ -108,8 +121,19 @@ def figure_cost(cost: pd.DataFrame, vocab: Vocabulary, out: Path) -> bool:
     for ax, metric in zip(axes[0], metrics):
         for method, g in cost[cost[metric].notna()].groupby("method", sort=False):
             g = g.sort_values("budget")
-            if method == FRONTIER:
-                ax.plot(g["ms_per_view"], g[metric], "k-", lw=2, label=f"{method} (frontier)")
+            if method in FRONTIER_STYLE:
+                label = f"{method} ({vocab.sees(method)} frontier"
+                label += (
+                    ")" if len(g) > 1 else f"; one budget, {int(g['budget'].iloc[0])}: a point)"
+                )
+                ax.plot(
+                    g["ms_per_view"],
+                    g[metric],
+                    FRONTIER_STYLE[method],
+                    marker="x",
+                    lw=2,
+                    label=label,
+                )
                 for _, r in g.iterrows():
                     ax.annotate(f"{int(r['budget'])}", (r["ms_per_view"], r[metric]), fontsize=7)
                 continue

@@ -85,7 +85,10 @@ FIGURES = {
     png(FIGURE_BUDGET): "Each headline metric against the budget",
     png(FIGURE2): f"Figure 2: the {HEADLINE_POLICY} selection and its points coloured by error",
     png(FIGURE_TRANSFER): "The rendered ranking against each dataset's",
-    png(FIGURE_COST): "Quality against cost: each method above colmap-b's line is worth its cost",
+    png(FIGURE_COST): (
+        "Quality against cost: a method above its category's frontier (colmap-b for its own "
+        "image, colmap-tracks-b for other views; black lines over 128-2048) is worth its cost"
+    ),
     png(FIGURE_VIEWS): "Next views: each score against the views added, per chooser",
 }
 

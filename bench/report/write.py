@@ -29,7 +29,7 @@ from bench.console import log
 from bench.failures import exclusions, failures
 from bench.files import write_text_atomic
 from bench.report.categories import category_verdicts, unjudged
-from bench.report.cost import figure_cost, table_cost
+from bench.report.cost import figure_cost, frontier_only, table_cost
 from bench.report.figures import (
     figure2,
     figure2_expected,
@@ -113,7 +113,8 @@ def write_report(
     results = Path(results)
     vocab = read_vocabulary(results)
     df = with_shares(df, vocab)
-    tables = write_tables(df, results, vocab)
+    everything, df = df, df[~frontier_only(df)]  # the frontiers' rows: the cost's alone
+    tables = write_tables(df, results, vocab, everything)
     if is_dataset_run(results):
         _write_transfer(df, vocab, results, rendered)
     drawn = next((t for t in tables if not t.empty), None)  # the headline protocol first
@@ -128,10 +129,14 @@ def write_report(
     return drawn
 
 
-def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> list[pd.DataFrame]:
-    """Every table of `results` from the rows `df` (with the report's shares); Table 1 of
-    each track protocol rows ran under (the rows of a task without tracks in each, or in
+def write_tables(
+    df: pd.DataFrame, results: Path, vocab: Vocabulary, costed: pd.DataFrame | None = None
+) -> list[pd.DataFrame]:
+    """Every table of `results` from the rows `df` (with the report's shares), the cost's
+    from `costed` (`df` and the frontiers' rows, `bench.report.cost.frontier_only`); Table 1
+    of each track protocol rows ran under (the rows of a task without tracks in each, or in
     the headline's alone), the headline's first (what the figures draw: the first with rows)."""
+    costed = df if costed is None else costed
     datasets = is_dataset_run(results)
     frame = headline_frame(df, vocab, dataset=datasets)
     t1, pairs = table1(frame, vocab), paired(frame, vocab)
@@ -154,7 +159,9 @@ def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> list[pd.
         TABLE3: table3(df, vocab),
         TABLE1_EQUAL: equal_keypoints(frame, vocab),
         VERDICTS: category_verdicts(frame, vocab) if len(frame) else pd.DataFrame(),
-        TABLE_COST: table_cost(df, frame, vocab, _settings(results)),
+        TABLE_COST: table_cost(
+            costed, headline_frame(costed, vocab, dataset=datasets), vocab, _settings(results)
+        ),
     }
     _write_tables(results, tables)
     for line in unjudged(vocab, set(df["method"])):
