@@ -1,7 +1,7 @@
 """A memo that changes no value: a pure function of large inputs, called with the same
 inputs by several units of one scene on one worker, computes once.
 
-`last_call(key)` keeps the last call's result under `key(*args)`; being one of the
+`last_call(key, size)` keeps the last `size` calls' results under `key(*args)`; being one of the
 package's decorators, it enters no row's hash (`bench.codehash`): it decides no value.
 """
 
@@ -9,26 +9,31 @@ from __future__ import annotations
 
 import functools
 import hashlib
+from collections import OrderedDict
 from collections.abc import Callable
 
 import numpy as np
 
 
-def last_call(key: Callable[..., tuple]):
-    """Decorate a pure function: a call whose `key(*args)` equals the last call's returns
-    the last result (its arguments are held with it, so that an `id` in a key cannot be
-    reused by another object while it is remembered)."""
+def last_call(key: Callable[..., tuple], size: int = 1, hold: bool = True):
+    """Decorate a pure function: a call whose `key(*args)` equals one of the last `size`
+    distinct calls' returns that call's result. With `hold`, its arguments are held with it,
+    so that an `id` in a key cannot be reused by another object while it is remembered; a
+    key of digests alone needs no `hold`."""
 
     def wrap(fn):
-        last: dict = {}
+        last: OrderedDict = OrderedDict()
 
         @functools.wraps(fn)
         def call(*args):
             k = key(*args)
-            if last.get("key") != k:
-                last.clear()
-                last.update(key=k, value=fn(*args), args=args)
-            return last["value"]
+            if k in last:
+                last.move_to_end(k)
+            else:
+                last[k] = (fn(*args), args if hold else ())
+                while len(last) > size:
+                    last.popitem(last=False)
+            return last[k][0]
 
         return call
 

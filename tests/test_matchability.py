@@ -30,6 +30,7 @@ from bench.frontend.views import View
 from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig
 from bench.harness.matchability import fit, labels, precision_at, train_matchability
+from bench.memo import last_call
 from tests.conftest import MEDIUM
 
 
@@ -141,6 +142,22 @@ def test_training_holds_each_scene_type_out_and_its_model_selects_by_the_contrac
         inp = PolicyInput(v, c, sig, "table")
         idx = select("matchable", inp, 50, np.random.default_rng(0), cfg)
         assert len(idx) == len(set(idx.tolist())) == min(50, len(c))
+        # each budget's selection is the view's one order, remembered between budgets
+        order = predicted_order(model_for(models, "table"), features(inp))
+        assert idx.tolist() == order[:50].tolist()
+        assert select("matchable", inp, 20, None, cfg).tolist() == order[:20].tolist()
+
+
+def test_a_memo_remembers_the_last_calls_and_recomputes_the_rest():
+    calls = []
+
+    @last_call(lambda x: (x,), size=2, hold=False)
+    def square(x):
+        calls.append(x)
+        return x * x
+
+    assert [square(x) for x in (2, 3, 2, 4, 3, 2)] == [4, 9, 4, 16, 9, 4]
+    assert calls == [2, 3, 4, 3, 2]  # the least recently used goes: 4 puts 3 out, 3 puts 2 out
 
 
 def test_the_shipped_model_never_saw_an_evaluation_seed_and_names_its_training():
