@@ -60,13 +60,14 @@ CRITICAL = (
     "as driving forward, leave it undetermined"
 )
 """The motions that do not determine the focal length (`estimate_focal` says so): measured
-on the Middlebury rings and on `kitti-seq2` (`benchmarks/focal_estimate.py`: every window
-of 3 to 8 frames left undetermined, 1.0 to 1.5 times the matches at 1.5 x off)."""
+on the Middlebury rings and on `kitti-seq2` (`benchmarks/focal_estimate.py`, retired:
+`git show 3c3e1bd:benchmarks/focal_estimate.py`; every window of 3 to 8 frames left
+undetermined, 1.0 to 1.5 times the matches at 1.5 x off)."""
 FOCAL_OFF, FOCAL_PEAK = 1.5, 1.5
 """An estimate is determined when its calibrated relative poses explain at least FOCAL_PEAK
 times the matches they explain at FOCAL_OFF times and 1 / FOCAL_OFF times it (measured on
-the shared sets, `benchmarks/focal_estimate.py`: 1.8 to 5.6 on subsets of Herz-Jesu, at
-most 1.03 on the Middlebury rings, whose optical axes meet)."""
+the shared sets, `benchmarks/focal_estimate.py`, retired, above: 1.8 to 5.6 on subsets of
+Herz-Jesu, at most 1.03 on the Middlebury rings, whose optical axes meet)."""
 
 
 @dataclass(frozen=True)

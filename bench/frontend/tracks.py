@@ -18,7 +18,8 @@ by the back end, all pairs of views; (3) tracks: connected components of the ver
 matches, and for each candidate the number of distinct views of its track (0 if it has no
 verified match); (4) the final B: by that number first, the `cross-view` score within it,
 under the same soft tile cap. Measured on the small-budget slice in
-`benchmarks/small_budget.py` (docs/protocol.md, "The small-budget gap").
+`benchmarks/small_budget.py` (retired: `git show 3adebc1:benchmarks/small_budget.py`;
+docs/protocol.md, "The small-budget gap").
 """
 
 from __future__ import annotations
