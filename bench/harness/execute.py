@@ -87,12 +87,8 @@ class Plan:
     def budgets(self) -> tuple[int, ...]:
         """The budgets of its units that select from the front end's pools (the grid's,
         carried by each unit alone; not a peer's, which extracts a pool of its own)."""
-        own = (OWN_PIPELINE, TRACKS_PEER)
-        return tuple(
-            sorted(
-                {u.budget for u in self.work if u.budget > 0 and METHODS[u.method].kind not in own}
-            )
-        )
+        own = {m for m, d in METHODS.items() if d.kind in (OWN_PIPELINE, TRACKS_PEER)}
+        return tuple(sorted({u.budget for u in self.work if u.budget > 0 and u.method not in own}))
 
     @property
     def grants(self) -> tuple[str, ...]:
