@@ -12,8 +12,8 @@ import pytest
 
 from bench import BenchError, vocabulary
 from bench.cli import main
-from bench.harness.config import RunConfig
 from bench.runs import read_runs
+from bench.unit.config import RunConfig
 from tests.conftest import (
     bench_run,
     small_grid,
@@ -80,7 +80,7 @@ def test_a_task_is_added_in_one_place(renders_dir, tmp_path):
     are checked against its required metrics and their declared ranges, and Table 1 shows
     its columns; a second task of the same name is refused."""
     from bench.backend.reconstruction import known_pose_task
-    from bench.harness import tasks
+    from bench.unit import tasks
 
     def count_points(truth, model, names, protocol, poses):
         return {"observed_points": 0 if model is None else model.num_points3D()}

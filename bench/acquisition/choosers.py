@@ -1,5 +1,5 @@
 """View choosers: which candidate pose of the planned capture path to capture next (the
-`nbv` task, `bench.harness.nbv`).
+`nbv` task, `bench.unit.nbv`).
 
 A chooser is one function registered with `@chooser`: it receives a `ChooserInput` (the
 captured views with their images, pools, signals and selections, the verified matches,

@@ -14,7 +14,7 @@ deterministic and equal to what the peer's unit holds), read by the unit itself:
 independent of each other (none waits for another's stored prediction), and the one-way flow holds (images
 -> counts -> selection). The peer reads the images only, so the method sees no more
 than the sfm task grants. It selects (`bench.frontend.selection.select_views` with a
-budget per view), matches and is scored like its policy (`bench.harness.equal`); its own
+budget per view), matches and is scored like its policy (`bench.unit.equal`); its own
 settings are its policy's, set under its own name
 (`--set cross-view@colmap-soft-b.epipolar_weight=...`). Its rows run the tasks the
 peers run (role `peer`: sfm and pairs) and the report compares them with the peer
