@@ -90,6 +90,17 @@ TRACKS_PEER = "peer-tracks"
 TRACKS_FIRST_PASS = 4
 
 
+# What the budget column (B) of a method's rows means, by its kind (`budget_means`): named
+# once here, where the kinds are; a plugin's kind adds its entry (`declare_kind`).
+WHOLE_POOL_BUDGET = (
+    "0: no budget; the whole pool (all) or COLMAP's own count (colmap), run once per scene and seed"
+)
+KIND_BUDGET: dict[str, str] = {
+    PER_VIEW: "the keypoints each view keeps: at most B of its own pool",
+    MULTI_VIEW: "the keypoints each view keeps: at most B, chosen from every view's pool at once",
+    GROUND_TRUTH: "the keypoints each view keeps: at most B, chosen with the ground truth",
+    OWN_PIPELINE: "the keypoints each view keeps of COLMAP's extraction, held to B",
+}
 KINDS: dict[str, str] = {
     PER_VIEW: "selects from each view's candidate pool alone (`@policy`)",
     MULTI_VIEW: "selects from every view's pool at once, may match its own selections "
@@ -183,7 +194,7 @@ class Method:
     label: str = field(metadata=DISPLAY)
     role: str = field(metadata=DISPLAY)
     whole_pool: bool = False
-    """Runs once per scene and seed, as budget 0 (the whole pool, or COLMAP's default)."""
+    """Runs once per scene and seed, as budget 0 (`WHOLE_POOL_BUDGET`, `budget_means`)."""
     reads: tuple[str, ...] = ()
     """The front-end signals it reads (for its reported cost)."""
     pool: str = ""
@@ -292,13 +303,22 @@ def declare_method(method: Method, settings: type | None = None) -> Method:
     return method
 
 
-def declare_kind(name: str, doc: str) -> str:
+def declare_kind(name: str, doc: str, budget: str = "") -> str:
     """Declare a kind of method under a name no other kind has (its runner:
-    `bench.unit.methods.register_kind`)."""
+    `bench.unit.methods.register_kind`), with what the budget of its rows means
+    (`KIND_BUDGET`; empty: none said)."""
     if name in KINDS:
         raise BenchError(f"kind name {name!r} is taken; give the kind another name")
     KINDS[name] = doc
+    if budget:
+        KIND_BUDGET[name] = budget
     return name
+
+
+def budget_means(method: Method) -> str:
+    """What the budget column (B) of `method`'s rows means: `WHOLE_POOL_BUDGET` for a
+    whole-pool method, else its kind's (`KIND_BUDGET`; empty for a kind that says none)."""
+    return WHOLE_POOL_BUDGET if method.whole_pool else KIND_BUDGET.get(method.kind, "")
 
 
 def sees(method: Method) -> str:

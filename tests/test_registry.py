@@ -165,3 +165,18 @@ def test_a_refused_overwrite_keeps_the_stored_predictions_and_a_bound_one_replac
     bench_run(one, r, renders_dir, overwrite=True)
     assert [p.parent.name for p in (r / "models").rglob("prediction.json")] == ["texture-b64"]
     assert not list(r.glob(".models-replaced-*")) and len(read_runs(r / "runs.csv")) == 2
+
+
+def test_every_kind_says_once_what_its_budget_means():
+    """B means what the method's kind declares (`budget_means`): every kind of the package
+    says it, a whole-pool method's is the pool's, an equal-count method's its peer's."""
+    from bench.vocabulary import KIND_BUDGET, KINDS, METHODS, WHOLE_POOL_BUDGET, budget_means
+
+    assert set(KIND_BUDGET) == set(KINDS)
+    assert budget_means(METHODS["all"]) == budget_means(METHODS["colmap"]) == WHOLE_POOL_BUDGET
+    assert budget_means(METHODS["texture"]) == KIND_BUDGET[vocabulary.PER_VIEW]
+    equal = next(m for m in METHODS.values() if m.kind == vocabulary.EQUAL_COUNT)
+    assert "peer" in budget_means(equal) and all(budget_means(m) for m in METHODS.values())
+    assert vocabulary.declare_kind("house-test-kind", "a kind", budget="b") == "house-test-kind"
+    assert KIND_BUDGET.pop("house-test-kind") == "b"
+    del KINDS["house-test-kind"]

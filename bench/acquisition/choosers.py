@@ -67,6 +67,7 @@ CHOOSER = declare_kind(
     "view-chooser",
     "chooses the next view to capture from the captured views, their selections, matches "
     "and its own reconstruction and the candidate poses (`@chooser`: the nbv task)",
+    budget="the keypoints each captured view keeps: B, selected by the task's policy (nbv.policy)",
 )
 
 

@@ -34,6 +34,8 @@ from bench.vocabulary import METHODS, SETTINGS, Method, declare_kind, declare_me
 EQUAL_COUNT = declare_kind(
     EQUAL_KIND,
     "a per-view policy run at a peer's own keypoint count in each view (`<policy>@<peer>`)",
+    budget="the budget of the peer it is paired with: each view keeps the peer's own count in "
+    "that view (more than B where the peer holds more)",
 )
 EQUAL_PEERS = ("colmap-soft-b",)
 """The peers that hold more keypoints than B (the rest hold exactly B or fewer)."""

@@ -57,7 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from bench.scenes.spec import scene_names
     from bench.unit.config import RunConfig
     from bench.unit.tasks import TASK_RUNNERS
-    from bench.vocabulary import PROTOCOLS, SETTINGS
+    from bench.vocabulary import PROTOCOLS, SETTINGS, WHOLE_POOL_BUDGET
 
     def list_arg(name: str, default: str | None, metavar: str, what: str) -> None:
         parser.add_argument(
@@ -81,8 +81,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "budget",
         None,
         "B1,B2",
-        "features per view (default: 128,256,512, or 256 with --quick; 256 is the headline; "
-        "a whole-pool method such as `all` runs once per scene and seed, as budget 0)",
+        "features per view (default: 128,256,512, or 256 with --quick; 256 is the headline); "
+        f"a whole-pool method's budget is {WHOLE_POOL_BUDGET}",
     )
     tasks = "; ".join(f"{n} ({r.spec.doc})" for n, r in TASK_RUNNERS.items())
     list_arg(

@@ -19,6 +19,7 @@ VIEW_ORACLE = declare_kind(
     "view-oracle",
     "chooses the next view by its score against the ground truth: a reference of the "
     "evaluation side, never a chooser (the nbv task)",
+    budget="the keypoints each captured view keeps: B, selected by the task's policy (nbv.policy)",
 )
 
 

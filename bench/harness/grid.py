@@ -68,6 +68,7 @@ from bench.vocabulary import (
     NO_PROTOCOL,
     PROTOCOLS,
     REFERENCE_PEER,
+    WHOLE_POOL_BUDGET,
     Job,
     Unit,
     Vocabulary,
@@ -173,7 +174,7 @@ class BenchConfig:
             bad = ", ".join(str(b) for b in self.budgets if b <= 0) or "none"
             raise BenchError(
                 f"--budget takes keypoints per view, each at least 1, got {bad} (a whole-pool "
-                "method, all or colmap, runs at its own count by itself)"
+                f"method's budget is {WHOLE_POOL_BUDGET})"
             )
         if not self.datasets:
             self.run.render.validate()

@@ -4,7 +4,8 @@ dataset's bag) at one budget, with the run's settings (`config`). Out: its predi
 stored in its folder, and the rows of the tasks scored on it.
 
 `config` holds the settings that decide the rows; `methods` the kinds of method (how a
-unit of each kind is predicted and scored) and the meaning of its budget; `declared` the
+unit of each kind is predicted and scored; what its budget means is declared with the kind,
+`bench.vocabulary.budget_means`); `declared` the
 modules that declare the package's methods; `predict` one unit up to its exported models;
 `select_match` a selection matched and verified; `equal` the equal-count peers;
 `tasks` the task registry (each task's reconstruction, evaluation and required

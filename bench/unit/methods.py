@@ -9,6 +9,11 @@ from outside is declared by a policy module or an entry point (`bench.frontend.p
 A package that brings a new kind of method declares it (`bench.vocabulary.declare_kind`)
 and registers its runner here (`register_kind`). The view choosers and the view oracle
 pick views, one at a time, and score their own units (the nbv task, `bench.unit.nbv`).
+
+What a row's budget (B) means depends on its method's kind, and is said once, where the
+kind is declared (`declare_kind(..., budget=)`, `bench.vocabulary.budget_means`): a
+per-view keypoint budget; for a whole-pool method (`all`, `colmap`) 0, the pool; for an
+equal-count method the budget of its peer, each view keeping the peer's own count.
 """
 
 from __future__ import annotations
