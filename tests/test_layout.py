@@ -285,7 +285,7 @@ def model_reads(source: str) -> int:
 
 def test_a_colmap_model_is_read_in_one_place():
     """Every model of a photo set or an exported prediction is read by one reader
-    (`bench.frontend.colmap_model.reconstruction`, which `read_model` goes through)."""
+    (`bench.frontend.colmap_model.read_reconstruction`, which `read_model` goes through)."""
     readers = [name for name, path in MODULES.items() if model_reads(path.read_text())]
     assert readers == ["bench.frontend.colmap_model"]
     planted = MODULES["bench.unit.nbv"].read_text() + "\npycolmap.Reconstruction(str(out))\n"

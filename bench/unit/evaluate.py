@@ -16,10 +16,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-import pycolmap
 
 from bench.evaluation.metrics import coverage_pct, match_metrics
-from bench.frontend.colmap_model import read_model
+from bench.frontend.colmap_model import read_model, read_reconstruction
 from bench.frontend.signals import seconds_of
 from bench.frontend.views import Source, pixels_key, source_key
 from bench.render.entry import entry_meta
@@ -63,7 +62,7 @@ def evaluate(
         done = record["jobs"][job.key]
         metrics_of, seconds, poses = shared[done["grant"]]
         out = ws.model_dir(unit, job)
-        model = pycolmap.Reconstruction(str(out)) if done["model"] else None
+        model = read_reconstruction(out) if done["model"] else None
         t = time.perf_counter()
         runner = TASK_RUNNERS[job.task]
         scores = runner.evaluate(scene.truth, model, names, job.protocol, poses)

@@ -51,7 +51,6 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-import pycolmap
 
 from bench import BenchError, MethodFailed
 from bench.acquisition.choosers import (
@@ -64,6 +63,7 @@ from bench.acquisition.choosers import (
     chooser_rng,
 )
 from bench.evaluation.next_views import VIEW_ORACLE, best_candidate
+from bench.frontend.colmap_model import read_reconstruction
 from bench.frontend.geometry import IMAGES, RIG
 from bench.frontend.signals import compute_signals
 from bench.frontend.views import Source
@@ -376,7 +376,7 @@ def nbv_rows(
 
 
 def _read_model(folder: Path):
-    return pycolmap.Reconstruction(str(folder)) if (folder / "images.txt").is_file() else None
+    return read_reconstruction(folder) if (folder / "images.txt").is_file() else None
 
 
 register(
