@@ -8,7 +8,8 @@ only the stages before it and the shared modules of this package (`camera`, `fil
 `frontend` detects candidates, computes their signals and selects features (policies),
 `backend` matches, verifies and reconstructs with COLMAP, `acquisition` holds the view
 choosers of the next-views task, `evaluation` scores against ground truth (the only stage
-that reads it), `harness` runs the grid into a results folder (predictions, then scores),
+that reads it), `unit` decides one row (a unit's prediction and its scores), `harness`
+runs the grid into a results folder (the units' keys, predictions, then scores),
 `report` makes the tables and figures from a results folder alone, and `cli` is the
 command line.
 """
@@ -23,6 +24,7 @@ STAGES = (
     "backend",
     "acquisition",
     "evaluation",
+    "unit",
     "harness",
     "report",
     "cli",

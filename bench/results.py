@@ -40,7 +40,7 @@ MODELS = "models"
 """One folder per unit (`Workspace.unit_dir`): its prediction and models."""
 PREDICTION = "prediction"
 """A unit's stored prediction: `prediction.json` (written last) and `prediction-<grant>.npz`
-(`bench.harness.predict`)."""
+(`bench.unit.predict`)."""
 LOOP = "loop.json"
 """Beside the model of a multi-view policy: its rounds."""
 POINT_ERRORS = "point_errors.csv"

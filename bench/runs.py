@@ -36,6 +36,7 @@ from bench.binding import read_vocabulary
 from bench.files import content_key, write_text_atomic
 from bench.results import DAMAGED
 from bench.vocabulary import (
+    BAG,
     HEADLINE,
     KEY,
     NO_PROTOCOL,
@@ -50,8 +51,11 @@ HASHES = ("prediction_hash", "evaluation_hash")
 ROW_CHECKSUM = "row_checksum"
 """The last column: a hash of the row's other values as written (`row_checksum`)."""
 TEXT_COLUMNS = ("scene", "method", "task", "protocol", "render_key", "pixels", *HASHES, "status")
-TEXT_COLUMNS += ("failure", "invocation", "ground_truth", "pairs_rule", "bag", ROW_CHECKSUM)
-REQUIRED = (*KEY, "render_key", *HASHES, "status", "failure", "invocation", "wall_ms")
+TEXT_COLUMNS += ("failure", "invocation", "ground_truth", "pairs_rule", BAG, ROW_CHECKSUM)
+REQUIRED = (*(k for k in KEY if k != BAG), "render_key", *HASHES, "status", "failure")
+REQUIRED += ("invocation", "wall_ms")
+"""The columns every `runs.csv` has: the key but its `BAG`, which a folder written before
+the bag was part of the key lacks (its rows' bag is empty, `_key_of`, `_frame`)."""
 OLD_METHOD = "policy"
 """The `method` column's name before 0.3.0 (`bench upgrade` renames it)."""
 
@@ -137,14 +141,15 @@ def _altered(row: dict[str, str], vocab: Vocabulary) -> str | None:
 
 
 def _key_of(row: dict[str, str]) -> tuple:
-    return tuple(int(row[k]) if k in ("seed", "budget") else row[k] for k in KEY)
+    """A row's `KEY` (its bag empty where the file has no `BAG` column)."""
+    return tuple(int(row[k]) if k in ("seed", "budget") else row.get(k, "") for k in KEY)
 
 
 def _key_text(header: list[str], line: str) -> str:
     """` (scene, seed s, method, budget b, task, protocol)` of a row's line, if readable."""
     try:
         row = dict(zip(header, next(csv.reader([line]))))
-        return " ({}, seed {}, {}, budget {}, {}, {})".format(*(row[k] for k in KEY))
+        return " ({}, seed {}, {}, budget {}, {}, {})".format(*(row[k] for k in REQUIRED[:6]))
     except (csv.Error, StopIteration, KeyError):
         return ""
 
@@ -280,7 +285,10 @@ def _frame(header: list[str], good: list[tuple[int, str]]) -> pd.DataFrame:
         dtype={c: str for c in TEXT_COLUMNS},
         keep_default_na=False,
         na_values=[""],
-    ).assign(failure=lambda d: d["failure"].fillna(""))
+    ).assign(
+        failure=lambda d: d["failure"].fillna(""),
+        **{BAG: lambda d: d[BAG].fillna("") if BAG in d else ""},
+    )
 
 
 def mark_reference(table: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:

@@ -6,7 +6,7 @@ implemented (`bench.frontend.policies.policy`, the feedback loop, the oracle, th
 with its display label, its role and its own settings (`SETTINGS`: a
 dataclass, set as `--set <method>.<field>=value`); the display names, the baselines, the default grid
 and the budget-0 rule are derived from these declarations. A task is declared where its
-reconstruction and evaluation are (`bench.harness.tasks`). A results folder records the
+reconstruction and evaluation are (`bench.unit.tasks`). A results folder records the
 vocabulary its rows were computed under (`vocabulary.json`), and the report reads that
 record: it never imports the stages that compute.
 
@@ -21,10 +21,16 @@ from typing import NamedTuple
 
 from bench import BenchError
 
-KEY = ("scene", "seed", "method", "budget", "task", "protocol")
-"""The columns that identify a row of `runs.csv`."""
+BAG = "bag"
+"""The `runs.csv` column naming a row's bag (`Unit.bag`): a dataset's bag, its image
+names space-separated; empty for a rendered scene's rows (and a whole dataset's), and in a
+folder written before the column was part of the key (read as empty: `bench.runs`)."""
+KEY = ("scene", "seed", "method", "budget", BAG, "task", "protocol")
+"""The columns that identify a row of `runs.csv`: rows of other bags (another --bag-size
+or --bags) live side by side in one folder."""
 UNIT_KEY = KEY[:4]
-"""The columns that identify a unit of work (one selection, matched once per geometry)."""
+"""The columns that pair the units of one page's rows (one selection, matched once per
+geometry): a page reads the bags of one invocation alone, so its seeds name its bags."""
 PROTOCOLS = {"multiview": 3, "twoview": 2}
 """Track protocols: the fewest views a point's track may have (`bench.backend.reconstruction`)."""
 NO_PROTOCOL = "none"
@@ -36,7 +42,7 @@ HEADLINE_BUDGET = 256
 HEADLINE_POLICY = "adaptive"
 """The paper's method, compared with every baseline in `table2.csv` and `paired.csv`."""
 NEXT_VIEWS = "nbv"
-"""The next-views task (`bench.harness.nbv`): its gains are Table 3 and `figure_views.png`
+"""The next-views task (`bench.unit.nbv`): its gains are Table 3 and `figure_views.png`
 (`bench.report.nbv`)."""
 FIGURE_SCENE = "table"
 """The scene of Figure 2 (the headline method's selection and its points)."""
@@ -90,6 +96,17 @@ TRACKS_PEER = "peer-tracks"
 TRACKS_FIRST_PASS = 4
 
 
+# What the budget column (B) of a method's rows means, by its kind (`budget_means`): named
+# once here, where the kinds are; a plugin's kind adds its entry (`declare_kind`).
+WHOLE_POOL_BUDGET = (
+    "0: no budget; the whole pool (all) or COLMAP's own count (colmap), run once per scene and seed"
+)
+KIND_BUDGET: dict[str, str] = {
+    PER_VIEW: "the keypoints each view keeps: at most B of its own pool",
+    MULTI_VIEW: "the keypoints each view keeps: at most B, chosen from every view's pool at once",
+    GROUND_TRUTH: "the keypoints each view keeps: at most B, chosen with the ground truth",
+    OWN_PIPELINE: "the keypoints each view keeps of COLMAP's extraction, held to B",
+}
 KINDS: dict[str, str] = {
     PER_VIEW: "selects from each view's candidate pool alone (`@policy`)",
     MULTI_VIEW: "selects from every view's pool at once, may match its own selections "
@@ -98,9 +115,9 @@ KINDS: dict[str, str] = {
     "evaluation side, never a policy (the oracle)",
     OWN_PIPELINE: "extracts, matches and maps with a pipeline of its own (stock COLMAP)",
 }
-"""How a method works, which decides how its units are run (`bench.harness.methods`: one
+"""How a method works, which decides how its units are run (`bench.unit.methods`: one
 runner per kind) and whether `bench select` can run it; a plugin declares a new kind with
-`declare_kind` and its runner with `bench.harness.methods.register_kind`."""
+`declare_kind` and its runner with `bench.unit.methods.register_kind`."""
 # What a method's selection sees (`sees`), derived from its kind (`KIND_SEES`) and the
 # signals it reads (`VIEW_SIGNALS`), never declared apart: each category is judged against
 # a peer that sees what it sees. (Comments, not attribute docstrings, here and below: a
@@ -168,7 +185,7 @@ class Metric:
     median error)."""
     peers: bool = field(default=False, metadata=DISPLAY)
     """Whether a stock-COLMAP peer's rows hold it (the metrics of a peer's own keypoints
-    and matches: `bench.harness.evaluate.own_pipeline_shared`)."""
+    and matches: `bench.unit.evaluate.own_pipeline_shared`)."""
     share_of: str = field(default="", metadata=DISPLAY)
     """The report's own: this metric is `share_of` as a percentage of the ground-truth
     method's (`GROUND_TRUTH`) in the same scene, seed, budget, task and protocol."""
@@ -183,7 +200,7 @@ class Method:
     label: str = field(metadata=DISPLAY)
     role: str = field(metadata=DISPLAY)
     whole_pool: bool = False
-    """Runs once per scene and seed, as budget 0 (the whole pool, or COLMAP's default)."""
+    """Runs once per scene and seed, as budget 0 (`WHOLE_POOL_BUDGET`, `budget_means`)."""
     reads: tuple[str, ...] = ()
     """The front-end signals it reads (for its reported cost)."""
     pool: str = ""
@@ -241,7 +258,7 @@ class Unit:
     method: str
     budget: int
     bag: str = ""
-    """A dataset's bag (`bench.harness.bags`): its image names, space-separated, the row
+    """A dataset's bag (`bench.unit.bags`): its image names, space-separated, the row
     column `bag`; empty: every view of the entry."""
 
     @property
@@ -292,13 +309,22 @@ def declare_method(method: Method, settings: type | None = None) -> Method:
     return method
 
 
-def declare_kind(name: str, doc: str) -> str:
+def declare_kind(name: str, doc: str, budget: str = "") -> str:
     """Declare a kind of method under a name no other kind has (its runner:
-    `bench.harness.methods.register_kind`)."""
+    `bench.unit.methods.register_kind`), with what the budget of its rows means
+    (`KIND_BUDGET`; empty: none said)."""
     if name in KINDS:
         raise BenchError(f"kind name {name!r} is taken; give the kind another name")
     KINDS[name] = doc
+    if budget:
+        KIND_BUDGET[name] = budget
     return name
+
+
+def budget_means(method: Method) -> str:
+    """What the budget column (B) of `method`'s rows means: `WHOLE_POOL_BUDGET` for a
+    whole-pool method, else its kind's (`KIND_BUDGET`; empty for a kind that says none)."""
+    return WHOLE_POOL_BUDGET if method.whole_pool else KIND_BUDGET.get(method.kind, "")
 
 
 def sees(method: Method) -> str:

@@ -24,9 +24,9 @@ from bench.frontend.features import tentative_matches
 from bench.frontend.matchability import features, model_for, predicted_order, read_models
 from bench.frontend.policies import PolicyInput, octave_scale_policy
 from bench.frontend.stage import front_end
-from bench.harness.config import RunConfig
 from bench.render.entry import render_scene
 from bench.scenes.spec import scene_names
+from bench.unit.config import RunConfig
 
 
 def correct_at(fe, truth, orders: list[np.ndarray], budget: int, ratio: float) -> int:

@@ -2,7 +2,7 @@
 COLMAP's verification, the incremental mapper with known fixed intrinsics) map the default
 bags of a forward capture (issue 63, item 5): its first pair's angle, or the bags' baseline.
 
-For each dataset and each of its default bags (`bench.harness.bags.dataset_bags`: 6 views,
+For each dataset and each of its default bags (`bench.unit.bags.dataset_bags`: 6 views,
 10 bags, seeds 0-9), the peer's database is built and matched once, exactly as the harness
 does (`peer_extraction`, `run_peer`), and the mapper (`map_database`, the `multiview`
 protocol) is run under each setting below; only `init_min_tri_angle` (COLMAP's 16 deg) and
@@ -55,7 +55,7 @@ from bench.backend.matching import BackendConfig
 from bench.evaluation.poses import pose_metrics, registered_poses
 from bench.frontend.colmap_model import read_model
 from bench.frontend.views import Source
-from bench.harness.bags import DEFAULT_COUNT, DEFAULT_SIZE, dataset_bags
+from bench.unit.bags import DEFAULT_COUNT, DEFAULT_SIZE, dataset_bags
 from bench.vocabulary import REFERENCE_MIN_MAA, REFERENCE_PEER
 
 SETTINGS = {  # name: (init_min_tri_angle, init_max_forward_motion)

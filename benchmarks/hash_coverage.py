@@ -8,8 +8,7 @@ import argparse
 
 from bench.codehash import closure
 from bench.frontend.stage import FRONTEND_CODE
-from bench.harness.evaluate import SCORING_CODE
-from bench.harness.predict import PREDICTION_CODE
+from bench.harness.keys import PREDICTION_CODE, SCORING_CODE
 from bench.render.entry import RENDER_CODE
 
 argparse.ArgumentParser(description=__doc__.split("\n\n")[0]).parse_args()

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import bench.harness.declared  # noqa: F401 (every method, task and metric, as each entry point has them)
+import bench.unit.declared  # noqa: F401 (every method, task and metric, as each entry point has them)
 from bench.camera import Camera, look_at
 from bench.frontend.colmap_model import read_model
 from bench.render.config import RenderConfig
@@ -104,8 +104,8 @@ def spy(monkeypatch, calls: list, what=lambda unit: (unit.method, unit.budget)):
 
 def small_grid():
     """Two scenes, one seed, the paper's four policies, the references and two peers."""
-    from bench.harness.config import RunConfig
     from bench.harness.grid import BenchConfig
+    from bench.unit.config import RunConfig
 
     return BenchConfig(
         scenes=("table", "facade"),

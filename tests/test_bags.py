@@ -1,5 +1,5 @@
 """Bags: random co-visible subsets of a dataset's images, each scored as a scene of its own
-(`bench.harness.bags`)."""
+(`bench.unit.bags`)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,9 @@ from scipy.sparse.csgraph import connected_components
 from bench.cli import main
 from bench.evaluation.export import export_dataset
 from bench.evaluation.relative import MIN_SHARED
-from bench.harness.bags import BAG, draw_bags
+from bench.runs import read_runs
+from bench.unit.bags import draw_bags
+from bench.vocabulary import BAG
 
 
 def test_bags_on_a_chain_are_its_runs_of_consecutive_views_each_once():
@@ -60,21 +62,22 @@ def test_a_dataset_run_scores_each_bag_on_its_own_views_and_reuses_them(
     capsys.readouterr()
     assert main([*argv, "--bag-size", "4", "--bags", "2"]) == 0
     assert "2 of 2 rows already" in capsys.readouterr().err
-    before = (out / "runs.csv").read_bytes()
-    assert main([*argv, "--bag-size", "0"]) == 2  # other bags: refused, every row kept
-    assert "row(s) were computed on other bags (another --bag-size" in capsys.readouterr().err
-    assert (out / "runs.csv").read_bytes() == before
-    assert main([*argv, "--bag-size", "0", "--overwrite"]) == 0  # the whole set, replacing
-    whole = pd.read_csv(out / "runs.csv").query("seed == 0")
-    assert len(whole) == 1 and whole["views"].iloc[0] == 6
-    assert BAG not in whole or whole[BAG].isna().all()  # no bag: the whole set
+    assert main([*argv, "--bag-size", "0"]) == 0  # other bags: other rows, beside them
+    assert "2 of 3 rows already" in capsys.readouterr().err
+    after = read_runs(out / "runs.csv")
+    assert len(after) == 3 and set(after[BAG]) == {*rows[BAG], ""}
+    # the page reads the bags it asked for alone: one unit, not the three of the folder
+    assert pd.read_csv(out / "table_scenes.csv")["seeds"].tolist() == [1]
+    assert pd.read_csv(out / "table1.csv")["runs"].tolist() == [1]
+    whole = after[after[BAG] == ""]  # no bag: the whole set
+    assert len(whole) == 1 and whole["views"].iloc[0] == 6 and whole["seed"].iloc[0] == 0
 
 
 def test_a_bags_signals_are_those_of_its_views_alone(dataset, tmp_path):
     from bench.frontend.geometry import IMAGES
     from bench.frontend.signals import SIGNALS, compute_signals
     from bench.frontend.stage import front_end, subset
-    from bench.harness.config import RunConfig
+    from bench.unit.config import RunConfig
 
     cfg, bag = RunConfig(), (0, 2, 3, 5)
     full = front_end(dataset, cfg.detector, cfg.signals, tmp_path, IMAGES)
@@ -96,7 +99,7 @@ def test_a_bagged_whole_set_front_end_gives_every_bag_the_same_front_end(dataset
     from bench.frontend.geometry import IMAGES
     from bench.frontend.signals import SIGNALS
     from bench.frontend.stage import front_end, subset
-    from bench.harness.config import RunConfig
+    from bench.unit.config import RunConfig
 
     cfg, bag = RunConfig(), (1, 2, 4, 5)
     full = front_end(dataset, cfg.detector, cfg.signals, tmp_path, IMAGES)

@@ -217,13 +217,12 @@ def test_the_prediction_code_holds_the_glue_the_peers_and_the_bags():
     """The roots are what a unit stores: every kind's store and the harness around them
     (the policies' selection glue, the peers' extraction options, bags, memos); the report
     and the command line are outside."""
-    from bench.harness.evaluate import SCORING_CODE
-    from bench.harness.predict import PREDICTION_CODE
+    from bench.harness.keys import PREDICTION_CODE, SCORING_CODE
 
     modules = set(closure(PREDICTION_CODE))
     assert {
-        "bench.harness.predict",
-        "bench.harness.bags",
+        "bench.unit.predict",
+        "bench.unit.bags",
         "bench.harness.execute",
         "bench.backend.peers",
         "bench.frontend.stage",
@@ -237,53 +236,53 @@ def test_the_prediction_code_holds_the_glue_the_peers_and_the_bags():
 
 def test_library_versions_decide_the_rows_they_run(monkeypatch):
     """pycolmap, OpenCV, numpy and scipy decide every row; torch a learned method's alone."""
-    from bench.harness import evaluate, predict
-    from bench.harness.config import RunConfig
+    from bench.harness import keys
+    from bench.unit.config import RunConfig
 
     cfg, methods = RunConfig(), ("scale", "colmap-b", "aliked-b")
-    before = {m: predict.prediction_hash(cfg, m, "sfm") for m in methods}
-    scored = evaluate.evaluation_hash()
+    before = {m: keys.prediction_hash(cfg, m, "sfm") for m in methods}
+    scored = keys.evaluation_hash()
     real = codehash.version
 
     def other(lib):
         return lambda name: "9.9" if name == lib else real(name)
 
     monkeypatch.setattr(codehash, "version", other("pycolmap"))
-    assert all(predict.prediction_hash(cfg, m, "sfm") != before[m] for m in methods)
-    evaluate.evaluation_hash.cache_clear()
-    assert evaluate.evaluation_hash() != scored
+    assert all(keys.prediction_hash(cfg, m, "sfm") != before[m] for m in methods)
+    keys.evaluation_hash.cache_clear()
+    assert keys.evaluation_hash() != scored
     monkeypatch.setattr(codehash, "version", other("torch"))
-    changed = {m for m in methods if predict.prediction_hash(cfg, m, "sfm") != before[m]}
+    changed = {m for m in methods if keys.prediction_hash(cfg, m, "sfm") != before[m]}
     assert changed == {"aliked-b"}
-    evaluate.evaluation_hash.cache_clear()
+    keys.evaluation_hash.cache_clear()
 
 
 def test_what_a_method_reads_decides_its_rows(monkeypatch):
     """Every declared field but the display ones enters the key: what a method's selection
     reads (`Method.reads`), its pool and matcher; its label does not."""
-    from bench.harness import predict
-    from bench.harness.config import RunConfig
+    from bench.harness import keys
+    from bench.unit.config import RunConfig
     from bench.vocabulary import METHODS
 
     cfg = RunConfig()
-    before = predict.prediction_hash(cfg, "texture", "sfm")
+    before = keys.prediction_hash(cfg, "texture", "sfm")
     declared = METHODS["texture"]
     monkeypatch.setitem(METHODS, "texture", dataclasses.replace(declared, label="Texture!"))
-    assert predict.prediction_hash(cfg, "texture", "sfm") == before
+    assert keys.prediction_hash(cfg, "texture", "sfm") == before
     monkeypatch.setitem(METHODS, "texture", dataclasses.replace(declared, reads=("response",)))
-    assert predict.prediction_hash(cfg, "texture", "sfm") != before
+    assert keys.prediction_hash(cfg, "texture", "sfm") != before
 
 
 def test_a_new_policy_or_a_methods_own_setting_changes_that_methods_rows_alone(tmp_path):
     from bench.frontend import plugins
     from bench.frontend.policies import POLICIES
-    from bench.harness import predict
-    from bench.harness.config import RunConfig
+    from bench.harness import keys
+    from bench.unit.config import RunConfig
     from bench.vocabulary import METHODS
 
     cfg = RunConfig()
     names = [(m, t) for m in METHODS for t in ("tri", "sfm")]
-    before = {n: predict.prediction_hash(cfg, *n) for n in names}
+    before = {n: keys.prediction_hash(cfg, *n) for n in names}
     module = tmp_path / "new_policy.py"
     module.write_text(
         textwrap.dedent(
@@ -298,40 +297,40 @@ def test_a_new_policy_or_a_methods_own_setting_changes_that_methods_rows_alone(t
     )
     plugins.load_module(str(module))
     try:
-        assert {n: predict.prediction_hash(cfg, *n) for n in names} == before
+        assert {n: keys.prediction_hash(cfg, *n) for n in names} == before
     finally:  # the registry as it was, for the other tests
         for registry in (METHODS, POLICIES, plugins.ORIGIN):
             registry.pop("cache-keys-new", None)
         plugins.load_module.cache_clear()
     looped = cfg.with_own("adaptive-loop", loop_rounds=3)
-    changed = {m for m, t in names if predict.prediction_hash(looped, m, t) != before[(m, t)]}
+    changed = {m for m, t in names if keys.prediction_hash(looped, m, t) != before[(m, t)]}
     assert changed == {"adaptive-loop"}
     weights = tmp_path / "w.json"
     weights.write_text("{}")
     other = cfg.with_own("learned", learned_weights=str(weights))
-    changed = {m for m, t in names if predict.prediction_hash(other, m, t) != before[(m, t)]}
+    changed = {m for m, t in names if keys.prediction_hash(other, m, t) != before[(m, t)]}
     assert changed == {"learned"}
 
 
 def test_each_task_and_stage_hashes_what_it_reads():
     """A task's rows depend on its own reconstruction and on the settings it reads: an nbv
     setting or a display field changes no tri row; the tasks' keys differ."""
-    from bench.harness import predict
-    from bench.harness.config import NbvConfig, RunConfig
+    from bench.harness import keys
+    from bench.unit.config import NbvConfig, RunConfig
     from bench.vocabulary import METHODS, deciding
 
     cfg = RunConfig()
-    tri = {m: predict.prediction_hash(cfg, m, "tri") for m in METHODS}
+    tri = {m: keys.prediction_hash(cfg, m, "tri") for m in METHODS}
     nbv = dataclasses.replace(cfg, nbv=NbvConfig(initial=4))
-    assert {m: predict.prediction_hash(nbv, m, "tri") for m in METHODS} == tri
-    assert tri["texture"] != predict.prediction_hash(cfg, "texture", "sfm")
+    assert {m: keys.prediction_hash(nbv, m, "tri") for m in METHODS} == tri
+    assert tri["texture"] != keys.prediction_hash(cfg, "texture", "sfm")
     assert "label" not in deciding(METHODS["texture"])
     assert "matcher" in deciding(METHODS["texture"])
 
 
 def test_a_methods_own_setting_does_not_bind_the_folder(tmp_path):
     from bench.binding import bind_results_dir, check_results_dir
-    from bench.harness.config import RunConfig
+    from bench.unit.config import RunConfig
     from bench.vocabulary import Vocabulary
 
     bind_results_dir(tmp_path, RunConfig().as_dict(), Vocabulary.current(), False)
@@ -355,7 +354,7 @@ def test_a_setting_added_since_the_folder_was_made_binds_it_only_off_its_default
     """A folder of the code before backend.matcher existed: extending it at the default
     (the behaviour before) needs no --overwrite; asking for LightGlue does."""
     from bench.binding import check_results_dir
-    from bench.harness.config import RunConfig
+    from bench.unit.config import RunConfig
 
     old = RunConfig().shared()
     del old["backend"]["matcher"]
@@ -370,7 +369,7 @@ def test_a_setting_added_since_the_folder_was_made_binds_it_only_off_its_default
 
 def test_a_methods_own_setting_is_set_with_its_name():
     from bench.cli.common import apply_settings
-    from bench.harness.config import RunConfig
+    from bench.unit.config import RunConfig
 
     run = apply_settings(
         RunConfig(), ["adaptive-loop.loop_rounds=3", "cross-view.epipolar_weight=0.5"]

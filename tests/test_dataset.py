@@ -27,10 +27,10 @@ from bench.frontend.features import DetectorConfig, detect
 from bench.frontend.geometry import RIG, SignalConfig
 from bench.frontend.stage import front_end
 from bench.frontend.views import load_image_folder, load_views, source_key
-from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig
 from bench.harness.select import SelectRequest, select_to_database
 from bench.report.transfer import transfer
+from bench.unit.config import RunConfig
 from bench.vocabulary import KEY
 from tests.conftest import MEDIUM, bench_run
 

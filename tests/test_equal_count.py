@@ -15,11 +15,11 @@ from bench.frontend.policies import PolicyConfig, PolicyInput, settings_for
 from bench.frontend.selection import select_views
 from bench.frontend.stage import front_end
 from bench.frontend.views import Source
-from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig
 from bench.report.page import _equal_section
 from bench.report.tables import equal_keypoints, headline_frame
 from bench.results import PREDICTION, TABLE1_EQUAL, Workspace
+from bench.unit.config import RunConfig
 from bench.vocabulary import EQUAL_COUNT, METHODS, Unit, Vocabulary, equal_parts
 from tests.conftest import MEDIUM, bench_run
 

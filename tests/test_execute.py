@@ -17,11 +17,11 @@ from bench.frontend import plugins
 from bench.frontend import policies as registry
 from bench.frontend.policies import PolicyConfig
 from bench.harness import execute
-from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig
 from bench.report import figures
 from bench.report.write import write_report
 from bench.runs import read_runs
+from bench.unit.config import RunConfig
 from bench.vocabulary import KEY, Vocabulary
 from tests.conftest import (
     MEDIUM,

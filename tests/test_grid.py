@@ -17,14 +17,13 @@ import pytest
 
 from bench import BenchError, vocabulary
 from bench.cli import main
-from bench.harness import evaluate, execute
+from bench.harness import execute, keys
 from bench.harness import grid as harness
-from bench.harness import predict as prediction
-from bench.harness.config import RunConfig
 from bench.render import entry as render
 from bench.report.write import write_report
 from bench.results import Workspace
 from bench.runs import read_runs
+from bench.unit.config import RunConfig
 from bench.vocabulary import KEY, Job, Unit
 from tests.conftest import (
     MEDIUM,
@@ -211,7 +210,7 @@ def test_rows_computed_by_other_code_are_computed_again(
 ):
     """The key that decides whether a row is finished covers the stages' code."""
     shutil.copytree(quick_results, tmp_path / "r")
-    monkeypatch.setattr(prediction, "code_hash", lambda modules: "another-code")
+    monkeypatch.setattr(keys, "code_hash", lambda modules: "another-code")
     calls = []
     spy(monkeypatch, calls)
     bench_run(dataclasses.replace(SMALL, scenes=("table",)), tmp_path / "r", renders_dir)
@@ -295,7 +294,7 @@ def test_a_changed_metric_rescores_the_stored_predictions_alone(
     shutil.copytree(quick_results, tmp_path / "r")
     calls = []
     spy(monkeypatch, calls)
-    monkeypatch.setattr(evaluate, "evaluation_hash", lambda: "another-metric")
+    monkeypatch.setattr(keys, "evaluation_hash", lambda: "another-metric")
     monkeypatch.setattr(harness, "evaluation_hash", lambda: "another-metric")
     again = bench_run(SMALL, tmp_path / "r", renders_dir)
     assert calls == [] and set(again["evaluation_hash"]) == {"another-metric"}

@@ -24,14 +24,14 @@ from bench.backend.reconstruction import known_pose_model
 from bench.cli import build_parser, common, main
 from bench.cli.common import LATEST, QUICK, REGIMES, parse_list, regime_folder
 from bench.harness import execute, manifest
-from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig
-from bench.harness.predict import export_model
 from bench.render import entry as render
 from bench.report import figures
 from bench.report.publish import publish
 from bench.report.write import write_report
 from bench.runs import read_runs
+from bench.unit.config import RunConfig
+from bench.unit.predict import export_model
 from bench.vocabulary import KEY, Vocabulary
 from tests.conftest import (
     MEDIUM,

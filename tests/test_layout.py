@@ -233,3 +233,60 @@ def test_the_package_map_of_the_docs_names_every_module():
         if p.name not in ("__init__.py", "__main__.py") or p.parent.name == "cli"
     }
     assert listed == on_disk
+
+
+UNIT_MAY_NOT_IMPORT = ("bench.codehash", "bench.harness")
+"""What the unit (`bench.unit`) never imports: the code hashes and the harness, whose
+`keys` module computes a row's keys once and hands them in."""
+
+
+def unit_breaches(source: str) -> set[str]:
+    """The hashing or harness modules a unit module's source imports (at any depth)."""
+    return {
+        d
+        for d in imports_of(source)
+        if d in UNIT_MAY_NOT_IMPORT or d.startswith(tuple(f"{m}." for m in UNIT_MAY_NOT_IMPORT))
+    }
+
+
+@pytest.mark.parametrize("name", [m for m in MODULES if m.startswith("bench.unit")])
+def test_what_decides_a_row_never_imports_the_hashing_or_the_harness(name):
+    assert unit_breaches(MODULES[name].read_text()) == set()
+
+
+@pytest.mark.parametrize(
+    "planted",
+    [
+        "from bench.codehash import code_hash",
+        "import bench.codehash",
+        "from bench.harness.keys import prediction_hash",
+        "from bench.harness import grid",
+        "def later():\n    from bench.harness.execute import execute\n",
+    ],
+)
+def test_the_unit_check_catches_a_planted_import(planted):
+    source = MODULES["bench.unit.predict"].read_text() + "\n" + planted + "\n"
+    assert unit_breaches(source)
+
+
+def model_reads(source: str) -> int:
+    """The calls of a module's source that read a COLMAP model from a folder: pycolmap's
+    `Reconstruction(<path>)` (an empty `Reconstruction()` reads nothing)."""
+    return sum(
+        1
+        for n in ast.walk(ast.parse(source))
+        if isinstance(n, ast.Call)
+        and (n.args or n.keywords)
+        and isinstance(n.func, ast.Attribute)
+        and n.func.attr == "Reconstruction"
+        and getattr(n.func.value, "id", None) == "pycolmap"
+    )
+
+
+def test_a_colmap_model_is_read_in_one_place():
+    """Every model of a photo set or an exported prediction is read by one reader
+    (`bench.frontend.colmap_model.read_reconstruction`, which `read_model` goes through)."""
+    readers = [name for name, path in MODULES.items() if model_reads(path.read_text())]
+    assert readers == ["bench.frontend.colmap_model"]
+    planted = MODULES["bench.unit.nbv"].read_text() + "\npycolmap.Reconstruction(str(out))\n"
+    assert model_reads(planted)

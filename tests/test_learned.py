@@ -87,10 +87,10 @@ def test_aliked_b_runs_end_to_end_with_lightglue(tmp_path, renders_dir, monkeypa
     """`aliked-b` on a tiny grid (its rows; the report of a grid without the tri task is
     not this test's): the ALIKED pool's top B, matched by LightGlue (counted here),
     verified and scored like a policy; a SIFT grid leaves it out."""
-    from bench.harness.config import RunConfig
     from bench.harness.execute import Cluster
     from bench.harness.grid import BenchConfig, RunOptions, run_benchmark
     from bench.results import Workspace
+    from bench.unit.config import RunConfig
 
     calls = []
     match = learned.lightglue_matches

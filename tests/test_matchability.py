@@ -27,10 +27,10 @@ from bench.frontend.matchability import (
 from bench.frontend.policies import PolicyInput, select
 from bench.frontend.stage import front_end
 from bench.frontend.views import View
-from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig
 from bench.harness.matchability import fit, labels, precision_at, train_matchability
 from bench.memo import last_call
+from bench.unit.config import RunConfig
 from tests.conftest import MEDIUM
 
 

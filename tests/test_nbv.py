@@ -33,11 +33,11 @@ from bench.evaluation.export import export_dataset
 from bench.frontend.features import Candidates
 from bench.frontend.signals import SIGNALS, Signals
 from bench.frontend.views import View
-from bench.harness.config import NbvConfig, RunConfig
 from bench.harness.grid import BenchConfig
 from bench.render.entry import render_scene
 from bench.report.transfer import transfer
 from bench.runs import read_runs
+from bench.unit.config import NbvConfig, RunConfig
 from bench.vocabulary import METHODS
 from tests.conftest import MEDIUM, bench_run
 

@@ -60,8 +60,8 @@ def test_the_page_shows_each_interval_and_no_interval_where_a_table_has_none(tmp
 @pytest.fixture(scope="module")
 def every_task(renders_dir, tmp_path_factory):
     """A tiny grid of every task under both protocols, run as `bench run` runs it."""
-    from bench.harness.config import RunConfig
     from bench.harness.grid import BenchConfig
+    from bench.unit.config import RunConfig
     from tests.conftest import MEDIUM, bench_run
 
     grid = BenchConfig(

@@ -22,12 +22,13 @@ from bench.evaluation.truth import SceneTruth
 from bench.frontend.geometry import IMAGES
 from bench.frontend.stage import front_end
 from bench.frontend.views import load_views
-from bench.harness.config import RunConfig
-from bench.harness.evaluate import evaluate
 from bench.harness.execute import Work, compute_unit
-from bench.harness.methods import runner
-from bench.harness.predict import LoadedScene
+from bench.harness.keys import unit_keys
 from bench.results import Workspace
+from bench.unit.config import RunConfig
+from bench.unit.evaluate import evaluate
+from bench.unit.methods import runner
+from bench.unit.predict import LoadedScene
 from bench.vocabulary import Job, Unit, Vocabulary
 
 
@@ -181,6 +182,7 @@ def test_one_unit_end_to_end_and_scored_again_from_its_prediction(
         assert 0 <= row[m] <= 1, m
     assert row["auc_5"] <= row["auc_10"] <= row["auc_20"] and row["auc_20"] > 0
     assert not ws.model_dir(unit, jobs[0]).exists()  # nothing reconstructed, nothing exported
-    (again,) = evaluate(scene, unit, jobs, cfg, ws, runner(method).read)
+    keys = unit_keys(cfg, method)
+    (again,) = evaluate(scene, unit, jobs, cfg, ws, runner(method).read, keys)
     for m in ("auc_5", "auc_10", "auc_20", "maa_pairs", "median_pose_err_deg", "pairs_estimated"):
         assert again[m] == row[m], m

@@ -287,9 +287,9 @@ def test_sfm_selections_are_blind_to_the_poses_and_tri_selections_are_not(medium
     from bench.backend.matching import matcher
     from bench.frontend.policies import PolicyInput
     from bench.frontend.selection import select_views
-    from bench.harness.config import RunConfig
     from bench.harness.grid import default_methods
-    from bench.harness.tasks import TASK_RUNNERS
+    from bench.unit.config import RunConfig
+    from bench.unit.tasks import TASK_RUNNERS
 
     entry = medium_entry("table")
     true = _dataset(entry, tmp_path / "true")

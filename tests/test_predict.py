@@ -13,10 +13,10 @@ from bench.evaluation.layers import read_layers
 from bench.evaluation.truth import SceneTruth
 from bench.frontend.geometry import RIG
 from bench.frontend.stage import front_end
-from bench.harness.config import RunConfig
 from bench.harness.execute import Work, compute_unit
-from bench.harness.predict import LoadedScene, export_model
 from bench.results import Workspace
+from bench.unit.config import RunConfig
+from bench.unit.predict import LoadedScene, export_model
 from bench.vocabulary import Job, Unit
 from tests.conftest import (
     synthetic_rig,

@@ -12,8 +12,8 @@ import pytest
 
 from bench import BenchError, vocabulary
 from bench.cli import main
-from bench.harness.config import RunConfig
 from bench.runs import read_runs
+from bench.unit.config import RunConfig
 from tests.conftest import (
     bench_run,
     small_grid,
@@ -80,7 +80,7 @@ def test_a_task_is_added_in_one_place(renders_dir, tmp_path):
     are checked against its required metrics and their declared ranges, and Table 1 shows
     its columns; a second task of the same name is refused."""
     from bench.backend.reconstruction import known_pose_task
-    from bench.harness import tasks
+    from bench.unit import tasks
 
     def count_points(truth, model, names, protocol, poses):
         return {"observed_points": 0 if model is None else model.num_points3D()}
@@ -165,3 +165,18 @@ def test_a_refused_overwrite_keeps_the_stored_predictions_and_a_bound_one_replac
     bench_run(one, r, renders_dir, overwrite=True)
     assert [p.parent.name for p in (r / "models").rglob("prediction.json")] == ["texture-b64"]
     assert not list(r.glob(".models-replaced-*")) and len(read_runs(r / "runs.csv")) == 2
+
+
+def test_every_kind_says_once_what_its_budget_means():
+    """B means what the method's kind declares (`budget_means`): every kind of the package
+    says it, a whole-pool method's is the pool's, an equal-count method's its peer's."""
+    from bench.vocabulary import KIND_BUDGET, KINDS, METHODS, WHOLE_POOL_BUDGET, budget_means
+
+    assert set(KIND_BUDGET) == set(KINDS)
+    assert budget_means(METHODS["all"]) == budget_means(METHODS["colmap"]) == WHOLE_POOL_BUDGET
+    assert budget_means(METHODS["texture"]) == KIND_BUDGET[vocabulary.PER_VIEW]
+    equal = next(m for m in METHODS.values() if m.kind == vocabulary.EQUAL_COUNT)
+    assert "peer" in budget_means(equal) and all(budget_means(m) for m in METHODS.values())
+    assert vocabulary.declare_kind("house-test-kind", "a kind", budget="b") == "house-test-kind"
+    assert KIND_BUDGET.pop("house-test-kind") == "b"
+    del KINDS["house-test-kind"]

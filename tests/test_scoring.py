@@ -24,10 +24,10 @@ from bench.frontend.geometry import IMAGES, RIG
 from bench.frontend.stage import front_end
 from bench.frontend.views import Source, source_key
 from bench.harness import execute
-from bench.harness.config import RunConfig
 from bench.harness.execute import Work, compute_unit
-from bench.harness.predict import LoadedScene
 from bench.results import Workspace
+from bench.unit.config import RunConfig
+from bench.unit.predict import LoadedScene
 from bench.vocabulary import Job, Unit
 
 # --- exact distances ---------------------------------------------------------------

@@ -12,9 +12,9 @@ import pytest
 
 from bench.binding import read_vocabulary
 from bench.frontend.signals import GEOMETRIC
-from bench.harness.declared import package_vocabulary
 from bench.report.tables import headline_frame, table1
 from bench.results import VOCABULARY
+from bench.unit.declared import package_vocabulary
 from bench.vocabulary import (
     IMAGE,
     REFERENCE_MAPS,

@@ -15,12 +15,12 @@ from bench import BenchError
 from bench.binding import read_vocabulary
 from bench.cli import main
 from bench.evaluation.export import export_dataset
-from bench.harness.config import RunConfig
 from bench.harness.grid import BenchConfig, with_reference
 from bench.report.stats import paired_difference, stratified_interval
 from bench.report.tables import headline_frame, paired, paired_sfm, table1, with_shares
 from bench.results import VOCABULARY
 from bench.runs import ROW_CHECKSUM, append_runs, mark_reference, read_runs
+from bench.unit.config import RunConfig
 from bench.vocabulary import REFERENCE_MAPS, Vocabulary
 from tests.conftest import MEDIUM, bench_run
 
@@ -318,10 +318,10 @@ def test_a_task_and_a_metric_declared_once_are_in_every_table_figure_and_the_pag
     (`Task.metrics`, `headline`): a new task with a metric of its own where lower is better
     is in Table 1, the paired tables, Table 2, the per-scene table, the figures, the page
     and the runs contract (its range), with no other change."""
-    from bench.harness.tasks import TASK_RUNNERS, TaskRunner, register
     from bench.report import figures
     from bench.report.page import results_page
     from bench.report.write import write_tables
+    from bench.unit.tasks import TASK_RUNNERS, TaskRunner, register
     from bench.vocabulary import METRICS, TASKS, Metric, Task, declare_metric
 
     declare_metric(Metric("score", (0.0, 1.0), lower_better=True, title="Toy score"))

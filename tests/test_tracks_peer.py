@@ -14,7 +14,7 @@ from bench.evaluation.export import export_dataset
 from bench.frontend.tracks import TrackFirstConfig
 from bench.frontend.views import load_views
 from bench.harness.grid import BenchConfig, default_methods
-from bench.harness.methods import runner
+from bench.unit.methods import runner
 from bench.vocabulary import NO_PROTOCOL, TRACKS_FIRST_PASS, VIEWS, Job, Vocabulary
 from tests.test_policies import _dataset
 

@@ -1,5 +1,5 @@
 """View choosers: which candidate pose of the planned capture path to capture next (the
-`nbv` task, `bench.harness.nbv`).
+`nbv` task, `bench.unit.nbv`).
 
 A chooser is one function registered with `@chooser`: it receives a `ChooserInput` (the
 captured views with their images, pools, signals and selections, the verified matches,
@@ -67,6 +67,7 @@ CHOOSER = declare_kind(
     "view-chooser",
     "chooses the next view to capture from the captured views, their selections, matches "
     "and its own reconstruction and the candidate poses (`@chooser`: the nbv task)",
+    budget="the keypoints each captured view keeps: B, selected by the task's policy (nbv.policy)",
 )
 
 

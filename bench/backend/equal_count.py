@@ -14,7 +14,7 @@ deterministic and equal to what the peer's unit holds), read by the unit itself:
 independent of each other (none waits for another's stored prediction), and the one-way flow holds (images
 -> counts -> selection). The peer reads the images only, so the method sees no more
 than the sfm task grants. It selects (`bench.frontend.selection.select_views` with a
-budget per view), matches and is scored like its policy (`bench.harness.equal`); its own
+budget per view), matches and is scored like its policy (`bench.unit.equal`); its own
 settings are its policy's, set under its own name
 (`--set cross-view@colmap-soft-b.epipolar_weight=...`). Its rows run the tasks the
 peers run (role `peer`: sfm and pairs) and the report compares them with the peer
@@ -34,6 +34,8 @@ from bench.vocabulary import METHODS, SETTINGS, Method, declare_kind, declare_me
 EQUAL_COUNT = declare_kind(
     EQUAL_KIND,
     "a per-view policy run at a peer's own keypoint count in each view (`<policy>@<peer>`)",
+    budget="the budget of the peer it is paired with: each view keeps the peer's own count in "
+    "that view (more than B where the peer holds more)",
 )
 EQUAL_PEERS = ("colmap-soft-b",)
 """The peers that hold more keypoints than B (the rest hold exactly B or fewer)."""

@@ -386,6 +386,8 @@ declare_kind(
     TRACKS_PEER,
     "extracts and matches with stock COLMAP, keeps in each view the keypoints of the "
     "longest verified tracks, matches them again and maps (colmap-tracks-b)",
+    budget=f"the keypoints each view keeps: the B of the longest verified tracks of a first "
+    f"pass of {TRACKS_FIRST_PASS} x B",
 )
 for m in (  # peer rows: `colmap` (budget 0: COLMAP's default), the others one per budget
     Method("colmap", "COLMAP default SIFT (peer)", "peer", True, kind=OWN_PIPELINE),

@@ -63,7 +63,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _defaults() -> dict:
     """The settings' defaults (imports OpenCV and COLMAP: only where a setting is missing)."""
-    from bench.harness.config import RunConfig
+    from bench.unit.config import RunConfig
 
     return RunConfig().as_dict()
 

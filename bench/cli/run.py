@@ -53,11 +53,17 @@ DESCRIPTION = (
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The grid's lists and the settings, then `_input_arguments` and `_folder_arguments`."""
     from bench.frontend.policies import PolicyConfig, Weights, own_fields
-    from bench.harness.config import RunConfig
     from bench.harness.grid import default_methods
-    from bench.harness.tasks import TASK_RUNNERS
     from bench.scenes.spec import scene_names
-    from bench.vocabulary import FRONTIER_BUDGETS, FRONTIER_PEERS, PROTOCOLS, SETTINGS
+    from bench.unit.config import RunConfig
+    from bench.unit.tasks import TASK_RUNNERS
+    from bench.vocabulary import (
+        FRONTIER_BUDGETS,
+        FRONTIER_PEERS,
+        PROTOCOLS,
+        SETTINGS,
+        WHOLE_POOL_BUDGET,
+    )
 
     def list_arg(name: str, default: str | None, metavar: str, what: str) -> None:
         parser.add_argument(
@@ -81,8 +87,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "budget",
         None,
         "B1,B2",
-        "features per view (default: 128,256,512, or 256 with --quick; 256 is the headline; "
-        "a whole-pool method such as `all` runs once per scene and seed, as budget 0)",
+        "features per view (default: 128,256,512, or 256 with --quick; 256 is the headline); "
+        f"a whole-pool method's budget is {WHOLE_POOL_BUDGET}",
     )
     list_arg(
         "frontier",
@@ -295,7 +301,7 @@ def run_config(args: argparse.Namespace):
     from bench.frontend import plugins
     from bench.frontend.features import DetectorConfig
     from bench.frontend.policies import PolicyConfig
-    from bench.harness.config import QUICK_NBV, RunConfig
+    from bench.unit.config import QUICK_NBV, RunConfig
 
     render = QUICK_RENDER if args.quick else RenderConfig()
     if args.regime and args.views is None and not args.dataset:
@@ -401,8 +407,8 @@ def bags_arg(args: argparse.Namespace, datasets: bool, tasks: tuple[str, ...]) -
     """(`--bag-size`, `--bags`), checked; their defaults with a dataset (one bag of the
     whole dataset where the size is 0, and with a task that reads a path of its own: the
     next-views task chooses among every view of the set)."""
-    from bench.harness.bags import DEFAULT_COUNT, DEFAULT_SIZE
-    from bench.harness.tasks import TASK_RUNNERS
+    from bench.unit.bags import DEFAULT_COUNT, DEFAULT_SIZE
+    from bench.unit.tasks import TASK_RUNNERS
 
     given = [n for n, v in (("--bag-size", args.bag_size), ("--bags", args.bags)) if v is not None]
     if given and not datasets:

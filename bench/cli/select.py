@@ -69,8 +69,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> None:
     from bench.cli.common import apply_settings
-    from bench.harness.config import RunConfig
     from bench.harness.select import SelectRequest, select_to_database
+    from bench.unit.config import RunConfig
 
     if args.budget <= 0 or (args.max_candidates is not None and args.max_candidates <= 0):
         raise BenchError("--budget and --max-candidates must be positive")

@@ -25,8 +25,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> None:
-    from bench.harness.config import RunConfig
     from bench.harness.matchability import train_matchability
+    from bench.unit.config import RunConfig
 
     scenes, seeds = training_grid(args)
     record = train_matchability(scenes, seeds, RunConfig(), args.renders, args.out)

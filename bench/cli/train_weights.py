@@ -23,8 +23,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> None:
-    from bench.harness.config import RunConfig
     from bench.harness.training import train_weights
+    from bench.unit.config import RunConfig
 
     scenes, seeds = training_grid(args)
     w = train_weights(scenes, seeds, RunConfig(), args.renders, args.out)

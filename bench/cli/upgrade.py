@@ -24,8 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> None:
     from bench import BenchError
-    from bench.harness.declared import package_vocabulary
     from bench.results import holding
+    from bench.unit.declared import package_vocabulary
     from bench.upgrades import refuse_damage, upgrade
 
     if not args.results.is_dir():  # before the lock, which would be "cannot write"

@@ -67,11 +67,11 @@ def run(args: argparse.Namespace) -> None:
     from bench.binding import read_vocabulary
     from bench.cli import build_parser
     from bench.frontend import plugins
-    from bench.harness import declared  # noqa: F401 (every method of the package, first)
     from bench.report.categories import category_verdicts, verdict_sentences
     from bench.report.tables import headline_frame
     from bench.results import RUNS
     from bench.runs import read_runs
+    from bench.unit import declared  # noqa: F401 (every method of the package, first)
 
     module = args.module.resolve()
     if not module.is_file():

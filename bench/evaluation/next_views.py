@@ -2,7 +2,7 @@
 ground truth, a reference on the evaluation side (greedy: one view at a time), never a
 chooser. The front end, back end and choosers cannot import it (`tests/test_layout.py`).
 
-Its score of a capture is the nbv task's (`bench.harness.nbv`): the tri task's
+Its score of a capture is the nbv task's (`bench.unit.nbv`): the tri task's
 completeness against the path's reconstructable points where there is per-pixel truth,
 else the sfm task's mAA over the captured views (a dataset's poses are its truth). At one
 view added it is the best candidate by that score, so it bounds every chooser there;
@@ -19,6 +19,7 @@ VIEW_ORACLE = declare_kind(
     "view-oracle",
     "chooses the next view by its score against the ground truth: a reference of the "
     "evaluation side, never a chooser (the nbv task)",
+    budget="the keypoints each captured view keeps: B, selected by the task's policy (nbv.policy)",
 )
 
 

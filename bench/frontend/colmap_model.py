@@ -177,8 +177,14 @@ def _binary_problem(folder: Path) -> str | None:
     return None
 
 
-def _reconstruction(folder: Path, fmt: str) -> pycolmap.Reconstruction:
-    """pycolmap's reading of the model (a model without points gets an empty points file)."""
+def read_reconstruction(folder: Path) -> pycolmap.Reconstruction:
+    """The one reader of a COLMAP model in `folder` (a photo set's, a dataset's, a
+    prediction's exported model): pycolmap's reading of it, binary where both are there (a
+    model without points gets an empty points file). `read_model` checks it first."""
+    folder = Path(folder)
+    fmt = model_format(folder)
+    if fmt is None:
+        raise BenchError(f"{folder} holds no COLMAP model (cameras and images, .txt or .bin)")
     if (folder / f"points3D.{fmt}").is_file():
         return pycolmap.Reconstruction(str(folder))
     with tempfile.TemporaryDirectory() as tmp:
@@ -209,7 +215,7 @@ def read_model(folder: Path) -> list[tuple[str, Camera]]:
     if fmt == "txt":
         check_text_model(folder)
     try:
-        rec = _reconstruction(folder, fmt)
+        rec = read_reconstruction(folder)
     except Exception as e:  # pycolmap raises ValueError or RuntimeError
         where = _binary_problem(folder) if fmt == "bin" else None
         raise BenchError(
@@ -234,7 +240,7 @@ def read_model(folder: Path) -> list[tuple[str, Camera]]:
 def points_seen(folder: Path) -> dict[str, np.ndarray]:
     """The ids of the model's 3D points each image observes, by image name (empty arrays
     for a model without points)."""
-    rec = _reconstruction(Path(folder), model_format(Path(folder)))
+    rec = read_reconstruction(folder)
     return {
         image.name: np.array(
             [p.point3D_id for p in image.points2D if p.has_point3D()], dtype=np.int64

@@ -3,15 +3,15 @@ cluster of N single-threaded worker processes, or an existing cluster by address
 
 Units of work, with their dependencies: the front end of each (scene, seed), after its
 render (one per geometry its tasks grant); then each unit, which waits for its scene's
-front end, predicts (`bench.harness.predict`; skipped when it only re-scores a current
-stored prediction) and scores (`bench.harness.evaluate`). Renders come first, from the main
+front end, predicts (`bench.unit.predict`; skipped when it only re-scores a current
+stored prediction) and scores (`bench.unit.evaluate`). Renders come first, from the main
 process: with N local workers, N scenes side by side, each in a process of its own
 (`bench.render.entry.render_scenes`: Mitsuba's LLVM variant uses every core and the CUDA
 variant the GPU, and the developing step of one scene runs while another is traced).
 Each worker process holds one thread per library (`one_thread_per_library`). Units are
 submitted scene by scene, the costliest of each scene first (`largest_first`). A worker
 holds one scene at a time (`_scene`; a dataset's bag, `Unit.bag`, is a scene of its own,
-`bench.harness.bags`). Rows come
+`bench.unit.bags`). Rows come
 back to the main process, which alone writes `runs.csv`. A method that fails (its policy
 raises or breaks the contract: `bench.MethodFailed`) is a value, in process as on a worker: the
 unit's rows are recorded as failed, saying what and where, and the grid goes on. A unit
@@ -46,13 +46,14 @@ from bench.frontend.geometry import RIG
 from bench.frontend.selection import check_budgets
 from bench.frontend.stage import FrontEnd, front_end
 from bench.frontend.views import load_views
-from bench.harness import bags
-from bench.harness.config import RunConfig
-from bench.harness.evaluate import identities
-from bench.harness.methods import runner
-from bench.harness.predict import LoadedScene, has_prediction, predict
-from bench.harness.tasks import TASK_RUNNERS
+from bench.harness.keys import unit_keys
 from bench.results import Workspace
+from bench.unit import bags
+from bench.unit.config import RunConfig
+from bench.unit.evaluate import identities
+from bench.unit.methods import runner
+from bench.unit.predict import Keys, LoadedScene, has_prediction, predict
+from bench.unit.tasks import TASK_RUNNERS
 from bench.vocabulary import (
     GROUND_TRUTH,
     METHODS,
@@ -124,7 +125,7 @@ def _scene(entry: Path, cfg: RunConfig, renders: Path, grants, bag: str = "") ->
         _HELD.clear()  # let the previous scene go before loading the next
         fronts = _front_ends(entry, cfg, renders, grants, bag)
         if len(bag.split()) not in (0, len(next(iter(fronts.values())).views)):
-            # a bag's views alone (`bench.harness.bags`); a bag of every view is the entry
+            # a bag's views alone (`bench.unit.bags`); a bag of every view is the entry
             fronts = bags.bag_fronts(fronts, bag, cfg.detector, cfg.signals)
             truth = bags.bag_truth(entry, fronts)
         else:  # the evaluation side may read the poses: the rig's front end holds them
@@ -154,15 +155,15 @@ def compute_unit(
     """The rows of one unit: predicted (unless it only re-scores a current prediction),
     then scored; failed rows saying where, if its policy fails."""
     plugins.load(cfg.policy.modules)  # in a worker process, the policies from outside
-    jobs, run = list(work.jobs), runner(unit.method)
+    jobs, run, keys = list(work.jobs), runner(unit.method), unit_keys(cfg, unit.method)
     try:
-        if not (work.rescore and has_prediction(ws, unit, jobs, cfg)):
-            predict(scene, unit, jobs, cfg, ws, run.store)
+        if not (work.rescore and has_prediction(ws, unit, jobs, keys)):
+            predict(scene, unit, jobs, cfg, ws, run.store, keys)
     except MethodFailed as e:
         tasks = ", ".join(e.tasks) or "?"
         why = f"{e} in {unit.scene} seed {unit.seed}, task {tasks}"
-        return failed_rows(scene.entry, unit, jobs, cfg, why)
-    return run.score(scene, unit, jobs, cfg, ws, run.read)
+        return failed_rows(scene.entry, unit, jobs, keys, why)
+    return run.score(scene, unit, jobs, cfg, ws, run.read, keys)
 
 
 def unit_task(unit: Unit, plan: Plan, cfg: RunConfig, ws: Workspace, *_after) -> list[dict]:
@@ -171,14 +172,14 @@ def unit_task(unit: Unit, plan: Plan, cfg: RunConfig, ws: Workspace, *_after) ->
     return compute_unit(scene, unit, plan.work[unit], cfg, ws)
 
 
-def failed_rows(entry: Path, unit: Unit, jobs, cfg: RunConfig, why: str) -> list[dict]:
+def failed_rows(entry: Path, unit: Unit, jobs, keys: Keys, why: str) -> list[dict]:
     """Rows recording a unit that could not be computed (their failure: `ERROR` + why),
     with no value for any metric a task needs (so a report of such rows alone is drawn)."""
     failure = ERROR + " ".join(why.split())[:400]
     empty = {k: math.nan for r in TASK_RUNNERS.values() for k in r.spec.needs}
     return [
         ident | empty | {"wall_ms": math.nan, "status": "failed", "failure": failure}
-        for ident in identities(entry, unit, jobs, cfg)
+        for ident in identities(entry, unit, jobs, keys)
     ]
 
 
@@ -376,8 +377,8 @@ def _on_dask(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, on_sce
             exc = future.exception()
             if exc is not None:
                 why = f"failed on a worker, retried once: {type(exc).__name__}: {exc}"
-                failed = failed_rows(plan.entries[unit.group], unit, plan.work[unit].jobs, cfg, why)
-                yield failed
+                keys = unit_keys(cfg, unit.method)
+                yield failed_rows(plan.entries[unit.group], unit, plan.work[unit].jobs, keys, why)
             else:
                 yield _result(future)
     finally:

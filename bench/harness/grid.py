@@ -37,13 +37,9 @@ from bench.frontend import plugins
 from bench.frontend.matchability import read_models
 from bench.frontend.policies import check_methods, learned_weights
 from bench.frontend.views import pixels_key, source_key
-from bench.harness.bags import BAG, dataset_bags
-from bench.harness.config import RunConfig
-from bench.harness.evaluate import evaluation_hash
 from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
+from bench.harness.keys import PREDICTION_CODE, evaluation_hash, prediction_hash
 from bench.harness.manifest import git_commit, write_manifest
-from bench.harness.predict import PREDICTION_CODE, prediction_hash
-from bench.harness.tasks import TASK_RUNNERS
 from bench.render.config import RenderConfig
 from bench.render.entry import (
     entry_name,
@@ -62,13 +58,18 @@ from bench.runs import (
     set_aside_damaged,
 )
 from bench.scenes.spec import load_spec, scene_names
+from bench.unit.bags import dataset_bags
+from bench.unit.config import RunConfig
+from bench.unit.tasks import TASK_RUNNERS
 from bench.vocabulary import (
+    BAG,
     FRONTIER_PEERS,
     KEY,
     METHODS,
     NO_PROTOCOL,
     PROTOCOLS,
     REFERENCE_PEER,
+    WHOLE_POOL_BUDGET,
     Job,
     Unit,
     Vocabulary,
@@ -114,7 +115,7 @@ class BenchConfig:
     """Dataset folders (`bench run --dataset`) instead of rendered scenes: each is one
     scene, named by its folder; its seeds number its bags (`bag_size`)."""
     bag_size: int = 0
-    """The images of a dataset's bag (`bench.harness.bags`); 0: the whole dataset, seed 0.
+    """The images of a dataset's bag (`bench.unit.bags`); 0: the whole dataset, seed 0.
     A dataset's seeds are its bags' numbers, up to `max(seeds) + 1` bags."""
     frontier: tuple[int, ...] = ()
     """Budgets at which `FRONTIER_PEERS` alone run besides `budgets`: the cost figure's
@@ -177,7 +178,7 @@ class BenchConfig:
             bad = ", ".join(str(b) for b in (*self.budgets, *self.frontier) if b <= 0) or "none"
             raise BenchError(
                 f"--budget takes keypoints per view, each at least 1, got {bad} (a whole-pool "
-                "method, all or colmap, runs at its own count by itself)"
+                f"method's budget is {WHOLE_POOL_BUDGET})"
             )
         if not self.datasets:
             self.run.render.validate()
@@ -192,7 +193,7 @@ class BenchConfig:
         return next((Path(d) for d in self.datasets if Path(d).name == scene), None)
 
     def bags(self, scene: str) -> dict[int, str]:
-        """The bags of a dataset scene by seed (`Unit.bag`, `bench.harness.bags`; none: a
+        """The bags of a dataset scene by seed (`Unit.bag`, `bench.unit.bags`; none: a
         rendered scene, or a dataset scored whole)."""
         folder = self.dataset(scene)
         if folder is None or not self.bag_size:
@@ -402,10 +403,8 @@ def _check_known_pixels(cfg: BenchConfig, ws: Workspace, rows: pd.DataFrame) -> 
 
 
 def _keys(frame: pd.DataFrame) -> set[tuple]:
-    """The rows' keys as a unit's job is keyed (`_job_key`): `KEY` with the unit's bag."""
-    bag = frame[BAG].astype(object).fillna("") if BAG in frame else pd.Series("", frame.index)
-    cols = [*(frame[k] for k in KEY[:4]), bag, *(frame[k] for k in KEY[4:])]
-    return set(zip(*cols))
+    """The rows' keys (`KEY`), as a unit's job is keyed (`_job_key`)."""
+    return set(zip(*(frame[k] for k in KEY)))
 
 
 def _job_key(unit: Unit, job: Job) -> tuple:
@@ -424,21 +423,12 @@ def _run_in(
     code_hash(PREDICTION_CODE), evaluation_hash()  # taken once, from the code that starts
     df, rescore = _current_rows(cfg, ws, options)
     done, again = _keys(df[~rescore]), _keys(df[rescore])
-    work, bag_of = {}, {}
+    work = {}  # the rows of other bags (another --bag-size or --bags) are other rows, kept
     for unit in cfg.units():
         missing = [j for j in cfg.jobs(unit.method) if _job_key(unit, j) not in done]
         if missing:
             redo = all(_job_key(unit, j) in again for j in missing)
             work[unit] = Work(tuple(missing), rescore=redo)
-        bag_of |= {(unit.scene, unit.seed, unit.method, unit.budget, *j): unit.bag for j in missing}
-    other = {k for k in done | again if bag_of.get((*k[:4], *k[5:]), k[4]) != k[4]}
-    if other:  # refused as other settings are (--overwrite starts from no rows): none lost
-        raise BenchError(
-            f"{ws.runs_csv}: {len(other)} row(s) were computed on other bags (another "
-            "--bag-size or --bags); run into a new --results folder, or with --overwrite to "
-            "replace them"
-        )
-    done = {(*k[:4], *k[5:]) for k in done - other}  # as `runs.csv` keys its rows
     n_rows = sum(len(w.jobs) for w in work.values())
     if not cfg.units():
         only = [
@@ -496,7 +486,7 @@ def _run_in(
     write_manifest(ws, cfg.run.as_dict(), invocation, out)  # before the report: its page shows it
     if report is not None:
         t = time.perf_counter()
-        report(out, ws.results, ws.renders)
+        report(of_bags(cfg, out), ws.results, ws.renders)
         invocation["seconds"]["report"] = invocation["wall"]["report"] = time.perf_counter() - t
         invocation["seconds"]["total"] = time.perf_counter() - t_start
         invocation["wall"]["total"] = invocation["seconds"]["total"]
@@ -566,11 +556,20 @@ def _cluster_record(cluster: Cluster) -> dict:
 
 def in_grid(cfg: BenchConfig, rows: pd.DataFrame) -> pd.DataFrame:
     """The rows of `cfg`'s grid (a results folder may hold more)."""
-    units = {(u.scene, u.seed, u.method, u.budget) for u in cfg.units()}
+    units = {astuple(u) for u in cfg.units()}
     keep = [
-        (sc, sd, p, b) in units and t in cfg.tasks and pr in cfg.protocols_of(t)
-        for sc, sd, p, b, t, pr in rows[list(KEY)].itertuples(index=False)
+        (sc, sd, p, b, bag) in units and t in cfg.tasks and pr in cfg.protocols_of(t)
+        for sc, sd, p, b, bag, t, pr in rows[list(KEY)].itertuples(index=False)
     ]
+    return rows[keep]
+
+
+def of_bags(cfg: BenchConfig, rows: pd.DataFrame) -> pd.DataFrame:
+    """The rows a page of `cfg`'s invocation reads: every row but those of its datasets'
+    other bags (another --bag-size or --bags, kept in the folder beside them)."""
+    asked = {(u.scene, u.bag) for u in cfg.units()}
+    scenes = {Path(d).name for d in cfg.datasets}
+    keep = [sc not in scenes or (sc, bag) in asked for sc, bag in zip(rows["scene"], rows[BAG])]
     return rows[keep]
 
 

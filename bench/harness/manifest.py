@@ -14,10 +14,10 @@ import pandas as pd
 from bench import ROOT
 from bench.files import write_text_atomic
 from bench.frontend.views import Source
-from bench.harness.evaluate import evaluation_hash
+from bench.harness.keys import evaluation_hash
 from bench.render.entry import entry_meta
 from bench.results import MANIFEST, Workspace
-from bench.vocabulary import KEY
+from bench.vocabulary import BAG, KEY
 
 
 def git_commit() -> str:
@@ -92,7 +92,7 @@ def write_manifest(ws: Workspace, settings: dict, invocation: dict, rows: pd.Dat
         "host": {"node": platform.node(), "platform": platform.platform(), "cpus": os.cpu_count()},
         "settings": settings,
         "evaluation_hash": evaluation_hash(),
-        "grid": {k: sorted(map(str, rows[k].unique())) for k in KEY},
+        "grid": {k: sorted(map(str, rows[k].unique())) for k in KEY if k != BAG},
         "git_commit": sorted({inv["git_commit"] for inv in kept}),
         "invocations": kept,
         "seconds": total,

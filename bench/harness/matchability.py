@@ -47,8 +47,8 @@ from bench.files import atomic_path, write_text_atomic
 from bench.frontend.matchability import EVERY_TYPE, FEATURES, features, predicted_order
 from bench.frontend.policies import PolicyInput, octave_scale_policy, response_policy
 from bench.frontend.stage import front_end
-from bench.harness.config import RunConfig
 from bench.render.entry import render_scene
+from bench.unit.config import RunConfig
 
 PRECISION_BUDGETS = (128, 256, 512)
 GROUPS = {

@@ -31,9 +31,9 @@ from bench.frontend import plugins
 from bench.frontend.selection import check_budgets
 from bench.frontend.stage import compute
 from bench.frontend.views import View, load_image_folder
-from bench.harness import select_match
-from bench.harness.config import RunConfig
-from bench.harness.methods import runner
+from bench.unit import select_match
+from bench.unit.config import RunConfig
+from bench.unit.methods import runner
 from bench.vocabulary import METHODS, Unit
 
 

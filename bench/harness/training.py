@@ -31,8 +31,8 @@ from bench.files import write_text_atomic
 from bench.frontend.policies import ADAPTIVE_SIGNALS, Weights
 from bench.frontend.stage import front_end
 from bench.frontend.views import Source
-from bench.harness.config import RunConfig
 from bench.render.entry import render_scene
+from bench.unit.config import RunConfig
 
 LABEL_TAU = 0.10
 L2 = 1e-4

@@ -14,7 +14,7 @@ is declared on its `Task` and read from the results folder's recorded vocabulary
   AUC and mAA (`bench.evaluation.relative`). The track protocol does not apply: one row
   per unit, its protocol `none` (`Task.tracks`).
 
-The next-views task (`nbv`) is registered where it is run, `bench.harness.nbv`: only the
+The next-views task (`nbv`) is registered where it is run, `bench.unit.nbv`: only the
 view choosers run it (`TaskRunner.kinds`), each unit whole, on the scene's planned path
 (`TaskRunner.rig`), and it is not in the default grid (`TaskRunner.default`).
 """
@@ -46,8 +46,8 @@ from bench.results import POINT_ERRORS
 from bench.vocabulary import PROTOCOLS, Task, declare_task
 
 if TYPE_CHECKING:  # (RunConfig imports the declaring modules, this one among them)
-    from bench.harness.config import RunConfig
     from bench.render.config import RenderConfig
+    from bench.unit.config import RunConfig
 
 
 @dataclass(frozen=True)
@@ -92,11 +92,11 @@ class TaskRunner:
     """Whether `bench run` runs it without `--tasks`."""
     settings: tuple[str, ...] = ()
     """The sections of the run's settings its predicted rows read beyond every task's
-    (`bench.harness.config.PREDICTION`): the nbv task's `nbv`."""
+    (`bench.unit.config.PREDICTION`): the nbv task's `nbv`."""
 
 
 TASK_RUNNERS: dict[str, TaskRunner] = {}
-"""Every task's runner, by name (as `bench.harness.methods.KIND_RUNNERS` holds every kind's)."""
+"""Every task's runner, by name (as `bench.unit.methods.KIND_RUNNERS` holds every kind's)."""
 
 
 def register(runner: TaskRunner) -> None:

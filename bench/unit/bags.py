@@ -13,7 +13,7 @@ A bag is a scene of its own to the units that read it: its views, their candidat
 dataset's, detected once per image and cached), the signals computed on the bag's views
 alone (`bag_fronts`: those that read other views see only the bag's), and the ground
 truth of its views (`bag_truth`). The bag is a field of its units (`Unit.bag`: its image
-names, space-separated), so of its rows' key (column `BAG`; `views`: its size): a row of
+names, space-separated), so of its rows' key (column `bench.vocabulary.BAG`, part of `KEY`; `views`: its size): a row of
 another bag is another row.
 """
 
@@ -32,9 +32,6 @@ from bench.frontend.geometry import RIG
 from bench.frontend.stage import FrontEnd, subset
 from bench.frontend.views import Source, load_views
 
-BAG = "bag"
-"""The `runs.csv` column naming a dataset row's bag (`Unit.bag`): its image names,
-space-separated."""
 REDRAWS = 100
 """The draws of one bag that may repeat an earlier bag before the bags stop."""
 DEFAULT_SIZE, DEFAULT_COUNT = 6, 10

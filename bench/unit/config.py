@@ -1,7 +1,7 @@
 """The settings that decide a run's rows (`RunConfig`), stored beside the results
 (`config.json`). The shared ones decide every row and bind the results folder; a
 method's own settings (`bench.vocabulary.SETTINGS`) decide its rows alone
-(`bench.harness.predict.prediction_hash`)."""
+(`bench.harness.keys.prediction_hash`)."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ MAX_ADDED = 8
 
 @dataclass(frozen=True)
 class NbvConfig:
-    """The next-views task (`--tasks nbv`, `bench.harness.nbv`): from an initial capture,
+    """The next-views task (`--tasks nbv`, `bench.unit.nbv`): from an initial capture,
     a view chooser adds views one at a time from the candidate poses of the planned path."""
 
     policy: str = "cross-view"
@@ -109,7 +109,7 @@ class RunConfig:
 
     def prediction(self, extra: tuple[str, ...] = ()) -> dict:
         """The shared settings a task's predicted rows read: `PREDICTION` and `extra` (the
-        task's own sections, `bench.harness.tasks.TaskRunner.settings`)."""
+        task's own sections, `bench.unit.tasks.TaskRunner.settings`)."""
         shared = self.shared()
         return {k: shared[k] for k in (*PREDICTION, *extra)}
 

@@ -10,7 +10,7 @@ from bench.acquisition import choosers
 from bench.backend import equal_count, peers
 from bench.evaluation import next_views, oracle
 from bench.frontend import feedback, matchability, policies, tracks
-from bench.harness import nbv, tasks
+from bench.unit import nbv, tasks
 from bench.vocabulary import Vocabulary
 
 DECLARED_IN = (

@@ -1,8 +1,8 @@
 """How an equal-count unit (`bench.backend.equal_count`) computes and stores its
 prediction: the peer's count per view from the unit's images, then its policy's selection
-at those counts through the one select-and-match path (`bench.harness.select_match`, with
+at those counts through the one select-and-match path (`bench.unit.select_match`, with
 the method's own settings), matched, verified and reconstructed like any selection
-(`bench.harness.predict.store_selection`)."""
+(`bench.unit.predict.store_selection`)."""
 
 from __future__ import annotations
 
@@ -13,14 +13,14 @@ import numpy as np
 from bench.backend.equal_count import EQUAL, peer_counts
 from bench.backend.peers import COLMAP_SIFT
 from bench.frontend.views import Source
-from bench.harness import select_match
-from bench.harness.evaluate import selection_shared
-from bench.harness.predict import store_selection
 from bench.results import PREDICTION
+from bench.unit import select_match
+from bench.unit.evaluate import selection_shared
+from bench.unit.predict import store_selection
 
 
 def store_equal(scene, unit, jobs, cfg, ws, record) -> None:
-    """The `Store` of an equal-count method (`bench.harness.predict.Store`)."""
+    """The `Store` of an equal-count method (`bench.unit.predict.Store`)."""
     fe = next(iter(scene.fronts.values()))
     names, cams = [v.name for v in fe.views], [v.camera for v in fe.views]
     peer = EQUAL[unit.method][1]
@@ -40,7 +40,7 @@ def store_equal(scene, unit, jobs, cfg, ws, record) -> None:
 
 
 def equal_shared(scene, unit, record, grant, folder):
-    """`selection_shared` (`bench.harness.evaluate.Shared`) with the mean number of keypoints
+    """`selection_shared` (`bench.unit.evaluate.Shared`) with the mean number of keypoints
     per view that the unit selected: its counts differ from B, unlike a policy's."""
     shared, seconds, poses = selection_shared(scene, unit, record, grant, folder)
     with np.load(folder / f"{PREDICTION}-{grant}.npz") as arrays:

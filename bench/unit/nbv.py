@@ -51,7 +51,6 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-import pycolmap
 
 from bench import BenchError, MethodFailed
 from bench.acquisition.choosers import (
@@ -64,15 +63,16 @@ from bench.acquisition.choosers import (
     chooser_rng,
 )
 from bench.evaluation.next_views import VIEW_ORACLE, best_candidate
+from bench.frontend.colmap_model import read_reconstruction
 from bench.frontend.geometry import IMAGES, RIG
 from bench.frontend.signals import compute_signals
 from bench.frontend.views import Source
-from bench.harness import select_match
-from bench.harness.config import MAX_ADDED, RunConfig
-from bench.harness.evaluate import identities, make_row, render_seconds
-from bench.harness.predict import LoadedScene, clear_model, export_model, read_record
-from bench.harness.tasks import TASK_RUNNERS, Matched, TaskRunner, register
 from bench.results import Workspace
+from bench.unit import select_match
+from bench.unit.config import MAX_ADDED, RunConfig
+from bench.unit.evaluate import identities, make_row, render_seconds
+from bench.unit.predict import Keys, LoadedScene, clear_model, export_model, read_record
+from bench.unit.tasks import TASK_RUNNERS, Matched, TaskRunner, register
 from bench.vocabulary import (
     AT_LEAST_0,
     FRACTION,
@@ -307,7 +307,7 @@ def _trajectory(ctx: Context, pick: Pick, protocol: str) -> tuple[list[int], lis
 
 
 def store_trajectory(pick: Pick) -> Callable:
-    """The `Store` (`bench.harness.predict`) of a kind of method that picks views."""
+    """The `Store` (`bench.unit.predict`) of a kind of method that picks views."""
 
     def store(scene, unit, jobs, cfg, ws, record) -> None:
         ctx = Context(scene, unit, cfg)
@@ -343,11 +343,17 @@ def store_trajectory(pick: Pick) -> Callable:
 
 
 def nbv_rows(
-    scene: LoadedScene, unit: Unit, jobs: list[Job], cfg: RunConfig, ws: Workspace, read=None
+    scene: LoadedScene,
+    unit: Unit,
+    jobs: list[Job],
+    cfg: RunConfig,
+    ws: Workspace,
+    read: None,
+    keys: Keys,
 ) -> list[dict]:
     """The rows of a unit's jobs, scored from its stored models (module docstring)."""
     record, rows = read_record(ws.unit_dir(unit)), []
-    for job, ident in zip(jobs, identities(scene.entry, unit, jobs, cfg)):
+    for job, ident in zip(jobs, identities(scene.entry, unit, jobs, keys)):
         done = record["jobs"][job.key]
         t = time.perf_counter()
         got = {}
@@ -370,7 +376,7 @@ def nbv_rows(
 
 
 def _read_model(folder: Path):
-    return pycolmap.Reconstruction(str(folder)) if (folder / "images.txt").is_file() else None
+    return read_reconstruction(folder) if (folder / "images.txt").is_file() else None
 
 
 register(

@@ -11,7 +11,7 @@ learned peer (`aliked-b`) selects and matches like a policy, with LightGlue.
 What a unit predicted is stored in its folder (`Workspace.unit_dir`): the selections and
 verified matches (`prediction-<grant>.npz`, a peer's keypoints in `prediction-peer.npz`),
 the models exported per job, and `prediction.json` (written last: the view names, each
-stage's seconds, each job's prediction hash and failure). `bench.harness.evaluate`
+stage's seconds, each job's prediction hash and failure). `bench.unit.evaluate`
 scores it; nothing here scores.
 
 The arrays, by key: `prediction-<grant>.npz` holds `selection_{v}` (the indices into view
@@ -40,19 +40,16 @@ import numpy as np
 from bench import MethodFailed
 from bench.backend.matching import PairMatches
 from bench.backend.peers import CAPS, COLMAP_SIFT, TRACKS, peer_extraction, run_peer
-from bench.codehash import code_hash, library_versions
 from bench.evaluation.oracle import matchable_tracks, oracle_select
 from bench.evaluation.truth import SceneTruth
-from bench.files import atomic_path, content_key, temp_dir_beside, write_text_atomic
-from bench.frontend import plugins
-from bench.frontend.learned import LEARNED
+from bench.files import atomic_path, temp_dir_beside, write_text_atomic
 from bench.frontend.stage import FrontEnd
 from bench.frontend.views import Source
-from bench.harness import select_match
-from bench.harness.config import RunConfig
-from bench.harness.tasks import TASK_RUNNERS, Matched
 from bench.results import LOOP, PREDICTION, Workspace
-from bench.vocabulary import METHODS, Job, Unit, deciding
+from bench.unit import select_match
+from bench.unit.config import RunConfig
+from bench.unit.tasks import TASK_RUNNERS, Matched
+from bench.vocabulary import Job, Unit
 
 
 @dataclass(frozen=True)
@@ -65,45 +62,22 @@ class LoadedScene:
     truth: SceneTruth
 
 
-PREDICTION_CODE = ("bench.harness.execute",)
-"""Where the code of every predicted row starts: the module that loads a unit's scene,
-front ends and bags and stores its prediction with its kind's `store`; its import closure
-(`bench.codehash.code_hash`) holds every method kind, task, policy and peer, the harness
-glue between them and the scoring (an edit there predicts again: the key errs toward
-computing, never toward reuse)."""
+@dataclass(frozen=True)
+class Keys:
+    """The keys a unit's rows carry, computed by the harness (`bench.harness.keys`) and
+    handed in: nothing in the unit hashes code, libraries or settings."""
+
+    prediction: Callable[[str], str]
+    """A task -> the `prediction_hash` of the unit's method's rows of that task (what a
+    stored job records, and what makes it current)."""
+    evaluation: str
+    """The `evaluation_hash` of every row."""
 
 
-def prediction_hash(cfg: RunConfig, method: str, task: str) -> str:
-    """The `prediction_hash` of a method's rows of a task: the settings the prediction
-    reads (`RunConfig.prediction`), the fields of the method and task that decide a row
-    (`bench.vocabulary.deciding`), the code (`PREDICTION_CODE`), the versions of the
-    libraries it runs (`bench.codehash.library_versions`: a learned pool's or matcher's
-    too, and the selection models'), the method's own settings and input files (the learned weights), and for a
-    method from a module (`--policy-module`, an entry point) its module's content as well."""
-    own = cfg.policy_config(method)
-    runner = TASK_RUNNERS[task]
-    declared = METHODS[method]
-    base = content_key(
-        {
-            "settings": cfg.prediction(runner.settings),
-            "own": cfg.own(method),
-            "method": deciding(declared),
-            "task": {"name": task, "grant": runner.spec.grant, "maps": runner.maps},
-            "code": code_hash(PREDICTION_CODE),
-            "libraries": library_versions(
-                learned=declared.pool in LEARNED or bool(declared.matcher), models=True
-            ),
-            "inputs": plugins.files_hash(own.inputs()) if hasattr(own, "inputs") else "",
-        }
-    )
-    origin = plugins.ORIGIN.get(method)
-    return content_key([base, plugins.files_hash([origin])]) if origin else base
-
-
-def current(job: dict, cfg: RunConfig, method: str, task: str) -> bool:
+def current(job: dict, keys: Keys, task: str) -> bool:
     """Whether a job's stored prediction (its record in `prediction.json`) is current: its
-    hash is this code's, libraries' and settings'."""
-    return job.get("hash") == prediction_hash(cfg, method, task)
+    hash is this code's, libraries' and settings' (`keys`)."""
+    return job.get("hash") == keys.prediction(task)
 
 
 Selection = tuple[list[np.ndarray], list[dict]]
@@ -162,11 +136,17 @@ def _export_or_clear(model, out: Path) -> None:
 
 Store = Callable[[LoadedScene, Unit, list[Job], RunConfig, Workspace, dict], None]
 """How a kind of method computes and stores a unit's prediction, filling its record
-(`bench.harness.methods`)."""
+(`bench.unit.methods`)."""
 
 
 def predict(
-    scene: LoadedScene, unit: Unit, jobs: list[Job], cfg: RunConfig, ws: Workspace, store: Store
+    scene: LoadedScene,
+    unit: Unit,
+    jobs: list[Job],
+    cfg: RunConfig,
+    ws: Workspace,
+    store: Store,
+    keys: Keys,
 ) -> None:
     """Compute and store the prediction of `unit` for `jobs` with its kind's `store`
     (module docstring)."""
@@ -179,14 +159,14 @@ def predict(
         for k, j in job_records(earlier).items()
         if k not in {j.key for j in jobs}
         and k.partition("/")[0] in TASK_RUNNERS
-        and current(j, cfg, unit.method, k.partition("/")[0])
+        and current(j, keys, k.partition("/")[0])
     }
     if kept:
         record |= {k: earlier[k] for k in ("grants", "peer") if k in earlier}
         record["jobs"] = kept
     store(scene, unit, jobs, cfg, ws, record)
     for job in jobs:
-        record["jobs"][job.key]["hash"] = prediction_hash(cfg, unit.method, job.task)
+        record["jobs"][job.key]["hash"] = keys.prediction(job.task)
     write_text_atomic(folder / f"{PREDICTION}.json", json.dumps(record, indent=1))
 
 
@@ -302,10 +282,10 @@ def job_records(record: dict) -> dict[str, dict]:
     return {k: unit | j for k, j in record.get("jobs", {}).items()}
 
 
-def has_prediction(ws: Workspace, unit: Unit, jobs: list[Job], cfg: RunConfig) -> bool:
+def has_prediction(ws: Workspace, unit: Unit, jobs: list[Job], keys: Keys) -> bool:
     """Whether the unit's folder holds a current prediction of every job in `jobs`."""
     done = job_records(read_record(ws.unit_dir(unit)))
-    return all(j.key in done and current(done[j.key], cfg, unit.method, j.task) for j in jobs)
+    return all(j.key in done and current(done[j.key], keys, j.task) for j in jobs)
 
 
 def pose_arrays(pairs: list[PairMatches]) -> dict[str, np.ndarray]:

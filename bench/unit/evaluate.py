@@ -2,7 +2,7 @@
 protocol) with the identification, every metric, the seconds of each stage (ms) and a
 failure reason if any.
 
-It reads the prediction `bench.harness.predict` stored (selections, verified matches,
+It reads the prediction `bench.unit.predict` stored (selections, verified matches,
 exported models, seconds) and never selects, matches or maps, so `bench run --reevaluate`
 (or a change to a metric alone) re-scores a grid in seconds per unit. What a task keeps
 beside a model (`TaskRunner.keep`: tri's point errors, for Figure 2) is written here.
@@ -13,58 +13,41 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from functools import cache
 from pathlib import Path
 
 import numpy as np
-import pycolmap
 
-from bench.codehash import code_hash, library_versions
 from bench.evaluation.metrics import coverage_pct, match_metrics
-from bench.files import content_key
-from bench.frontend.colmap_model import read_model
+from bench.frontend.colmap_model import read_model, read_reconstruction
 from bench.frontend.signals import seconds_of
 from bench.frontend.views import Source, pixels_key, source_key
-from bench.harness.bags import BAG
-from bench.harness.config import RunConfig
-from bench.harness.predict import (
+from bench.render.entry import entry_meta
+from bench.results import PREDICTION, Workspace
+from bench.unit.config import RunConfig
+from bench.unit.predict import (
+    Keys,
     LoadedScene,
-    prediction_hash,
     read_record,
     stored_pairs,
     stored_poses,
 )
-from bench.harness.tasks import TASK_RUNNERS
-from bench.render.entry import entry_meta
-from bench.results import PREDICTION, Workspace
-from bench.vocabulary import METHODS, METRICS, TASKS, Job, Unit, deciding
-
-SCORING_CODE = ("bench.harness.evaluate",)
-"""Where the scoring's code starts: the ground truth, each task's evaluation and what it
-keeps, the readers of a stored prediction and the making of a row (its import closure,
-`bench.codehash.code_hash`)."""
-
-
-@cache
-def evaluation_hash() -> str:
-    """The `evaluation_hash` of every row: the scoring's code (`SCORING_CODE`), the
-    versions of the libraries it runs and the fields of the tasks and metrics that decide a
-    row's values (`bench.vocabulary.deciding`)."""
-    declared = {
-        "tasks": {n: deciding(t) for n, t in sorted(TASKS.items())},
-        "metrics": {n: deciding(m) for n, m in sorted(METRICS.items())},
-    }
-    return content_key([code_hash(SCORING_CODE), library_versions(), declared])[:12]
-
+from bench.unit.tasks import TASK_RUNNERS
+from bench.vocabulary import BAG, METHODS, METRICS, Job, Unit
 
 Shared = Callable[[LoadedScene, Unit, dict, str, Path], tuple[dict, dict, dict]]
-"""How a kind of method's stored prediction is read back (`bench.harness.methods`): (the
+"""How a kind of method's stored prediction is read back (`bench.unit.methods`): (the
 scene, the unit, its record, a grant, its folder) -> (the metrics the grant's jobs share,
 the seconds of the stages before the task, the stored relative poses of its pairs)."""
 
 
 def evaluate(
-    scene: LoadedScene, unit: Unit, jobs: list[Job], cfg: RunConfig, ws: Workspace, read: Shared
+    scene: LoadedScene,
+    unit: Unit,
+    jobs: list[Job],
+    cfg: RunConfig,
+    ws: Workspace,
+    read: Shared,
+    keys: Keys,
 ) -> list[dict]:
     """The rows of `jobs` from the unit's stored prediction, read back by its kind's
     `read` (module docstring)."""
@@ -75,11 +58,11 @@ def evaluate(
     for grant in {record["jobs"][j.key]["grant"] for j in jobs}:
         shared[grant] = read(scene, unit, record, grant, folder)
     rows, render_s = [], render_seconds(scene.entry)
-    for job, ident in zip(jobs, identities(scene.entry, unit, jobs, cfg)):
+    for job, ident in zip(jobs, identities(scene.entry, unit, jobs, keys)):
         done = record["jobs"][job.key]
         metrics_of, seconds, poses = shared[done["grant"]]
         out = ws.model_dir(unit, job)
-        model = pycolmap.Reconstruction(str(out)) if done["model"] else None
+        model = read_reconstruction(out) if done["model"] else None
         t = time.perf_counter()
         runner = TASK_RUNNERS[job.task]
         scores = runner.evaluate(scene.truth, model, names, job.protocol, poses)
@@ -133,26 +116,27 @@ def selection_shared(scene: LoadedScene, unit: Unit, record: dict, grant: str, f
     return shared, seconds, poses
 
 
-def identities(entry: Path, unit: Unit, jobs: list[Job], cfg: RunConfig) -> list[dict]:
-    """For each job, the columns that say which run its row is (a dataset's bag among them,
-    `Unit.bag`) and which code and settings computed it (what they share, computed once
-    for the unit)."""
+def identities(entry: Path, unit: Unit, jobs: list[Job], keys: Keys) -> list[dict]:
+    """For each job, the columns that say which run its row is (its key, `KEY`: a dataset's
+    bag among them, `Unit.bag`, empty for a rendered scene) and which code and settings
+    computed it (what they share, computed once for the unit)."""
     shared = {
         "render_key": source_key(entry),
         "pixels": pixels_key(entry),
         "views": len(unit.bag.split()) or len(read_model(Source.of(entry).model)),
-    } | ({BAG: unit.bag} if unit.bag else {})
+    }
     return [
         {
             "scene": unit.scene,
             "seed": unit.seed,
             "method": unit.method,
             "budget": unit.budget,
+            BAG: unit.bag,
             "task": job.task,
             "protocol": job.protocol,
             **shared,
-            "prediction_hash": prediction_hash(cfg, unit.method, job.task),
-            "evaluation_hash": evaluation_hash(),
+            "prediction_hash": keys.prediction(job.task),
+            "evaluation_hash": keys.evaluation,
         }
         for job in jobs
     ]

@@ -1,8 +1,8 @@
 """One path from a scene's views to a method's verified matches, for every caller: the
 policy selects B per view (`bench.frontend.selection`: a multi-view policy with the back
 end's matcher), then the back end matches and verifies the selection (with the method's
-own matcher where it names one). The grid (`bench.harness.predict`), the next-views task
-(`bench.harness.nbv`) and `bench select` (`bench.harness.select`) all run through it."""
+own matcher where it names one). The grid (`bench.unit.predict`), the next-views task
+(`bench.unit.nbv`) and `bench select` (`bench.harness.select`) all run through it."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from bench.frontend.policies import PolicyInput
 from bench.frontend.selection import select_views
 from bench.frontend.signals import Signals
 from bench.frontend.views import View
-from bench.harness.config import RunConfig
+from bench.unit.config import RunConfig
 from bench.vocabulary import METHODS, Unit
 
 

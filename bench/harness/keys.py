@@ -1,0 +1,76 @@
+"""The keys of a run's rows, computed by the harness when it plans a grid and handed to
+each unit (`bench.unit.predict.Keys`): a row's `prediction_hash` (the settings, code and
+libraries its prediction reads) and its `evaluation_hash` (the scoring's). The unit
+(`bench.unit`) hashes nothing itself: what decides a row is there, what names it is here.
+"""
+
+from __future__ import annotations
+
+from functools import cache, partial
+
+from bench.codehash import code_hash, library_versions
+from bench.files import content_key
+from bench.frontend import plugins
+from bench.frontend.learned import LEARNED
+from bench.unit.config import RunConfig
+from bench.unit.predict import Keys
+from bench.unit.tasks import TASK_RUNNERS
+from bench.vocabulary import METHODS, METRICS, TASKS, deciding
+
+PREDICTION_CODE = ("bench.harness.execute",)
+"""Where the code of every predicted row starts: the module that loads a unit's scene,
+front ends and bags and stores its prediction with its kind's `store`; its import closure
+(`bench.codehash.code_hash`) holds every method kind, task, policy and peer, the harness
+glue between them and the scoring (an edit there predicts again: the key errs toward
+computing, never toward reuse)."""
+
+
+def prediction_hash(cfg: RunConfig, method: str, task: str) -> str:
+    """The `prediction_hash` of a method's rows of a task: the settings the prediction
+    reads (`RunConfig.prediction`), the fields of the method and task that decide a row
+    (`bench.vocabulary.deciding`), the code (`PREDICTION_CODE`), the versions of the
+    libraries it runs (`bench.codehash.library_versions`: a learned pool's or matcher's
+    too, and the selection models'), the method's own settings and input files (the learned
+    weights), and for a method from a module (`--policy-module`, an entry point) its
+    module's content as well."""
+    own = cfg.policy_config(method)
+    runner = TASK_RUNNERS[task]
+    declared = METHODS[method]
+    base = content_key(
+        {
+            "settings": cfg.prediction(runner.settings),
+            "own": cfg.own(method),
+            "method": deciding(declared),
+            "task": {"name": task, "grant": runner.spec.grant, "maps": runner.maps},
+            "code": code_hash(PREDICTION_CODE),
+            "libraries": library_versions(
+                learned=declared.pool in LEARNED or bool(declared.matcher), models=True
+            ),
+            "inputs": plugins.files_hash(own.inputs()) if hasattr(own, "inputs") else "",
+        }
+    )
+    origin = plugins.ORIGIN.get(method)
+    return content_key([base, plugins.files_hash([origin])]) if origin else base
+
+
+SCORING_CODE = ("bench.unit.evaluate",)
+"""Where the scoring's code starts: the ground truth, each task's evaluation and what it
+keeps, the readers of a stored prediction and the making of a row (its import closure,
+`bench.codehash.code_hash`)."""
+
+
+@cache
+def evaluation_hash() -> str:
+    """The `evaluation_hash` of every row: the scoring's code (`SCORING_CODE`), the
+    versions of the libraries it runs and the fields of the tasks and metrics that decide a
+    row's values (`bench.vocabulary.deciding`)."""
+    declared = {
+        "tasks": {n: deciding(t) for n, t in sorted(TASKS.items())},
+        "metrics": {n: deciding(m) for n, m in sorted(METRICS.items())},
+    }
+    return content_key([code_hash(SCORING_CODE), library_versions(), declared])[:12]
+
+
+def unit_keys(cfg: RunConfig, method: str) -> Keys:
+    """The keys of a method's units under `cfg` (what `bench.unit` is handed)."""
+    return Keys(partial(prediction_hash, cfg, method), evaluation_hash())
