@@ -39,9 +39,9 @@ from bench.frontend.features import tentative_matches
 from bench.frontend.matchability import features
 from bench.frontend.policies import PolicyInput, octave_scale_policy
 from bench.frontend.stage import front_end
-from bench.harness.config import RunConfig
 from bench.render.entry import render_scene
 from bench.scenes.spec import scene_names
+from bench.unit.config import RunConfig
 
 LABEL_K = (256, 512, 1024)
 TOP = 1024
