@@ -71,6 +71,12 @@ def test_a_dataset_run_scores_each_bag_on_its_own_views_and_reuses_them(
     assert pd.read_csv(out / "table1.csv")["runs"].tolist() == [1]
     whole = after[after[BAG] == ""]  # no bag: the whole set
     assert len(whole) == 1 and whole["views"].iloc[0] == 6 and whole["seed"].iloc[0] == 0
+    # the folder alone cannot say which bags a page is of: one line, and the rows kept
+    assert main(["plot", "--results", str(out), "--renders", str(renders_dir)]) == 2
+    assert "has rows of bags of 4 and 6 views: a page is of one bag size" in (
+        capsys.readouterr().err
+    )
+    assert len(read_runs(out / "runs.csv")) == 3
 
 
 def test_a_bags_signals_are_those_of_its_views_alone(dataset, tmp_path):

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from bench import BenchError
 from bench.binding import read_settings, read_vocabulary
 from bench.console import log
 from bench.failures import exclusions, failures
@@ -79,7 +80,7 @@ from bench.results import (
     png,
     table1_of,
 )
-from bench.vocabulary import HEADLINE, PROTOCOLS, Vocabulary
+from bench.vocabulary import BAG, HEADLINE, PROTOCOLS, Vocabulary
 
 
 def _drop(*paths: Path) -> None:
@@ -111,6 +112,7 @@ def write_report(
     the rendered results folders `rendered`; last, the folder's page. Returns the Table 1
     the figures draw (the headline protocol's, else the first with rows), or None."""
     results = Path(results)
+    check_one_bag_size(df)
     vocab = read_vocabulary(results)
     df = with_shares(df, vocab)
     everything, df = df, df[~frontier_only(df)]  # the frontiers' rows: the cost's alone
@@ -127,6 +129,23 @@ def write_report(
         _drop(results / png(FIGURE_VIEWS))
     write_text_atomic(results / PAGE, results_page(results, df))
     return drawn
+
+
+def check_one_bag_size(df: pd.DataFrame) -> None:
+    """Refuse rows of one dataset in bags of several sizes (a folder keeps every bag
+    setting's rows, `KEY`): bag k of each size is a seed k of its own, so the tables would
+    pair bags of different sizes. `bench run` hands its page its own bags alone."""
+    if BAG not in df or not (df[BAG] != "").any():
+        return
+    sizes = df[df["views"].notna()].groupby("scene")["views"].unique()
+    several = sizes[sizes.map(len) > 1]
+    if len(several):
+        scene, views = several.index[0], sorted(int(v) for v in several.iloc[0])
+        raise BenchError(
+            f"{scene} has rows of bags of {' and '.join(map(str, views))} views: a page is of one "
+            "bag size; run the `bench run --dataset ... --bag-size N` of the bags you want (it "
+            "reuses every row and writes their page)"
+        )
 
 
 def write_tables(
