@@ -197,10 +197,12 @@ def figure_budget(t1: pd.DataFrame, vocab: Vocabulary, out: Path) -> None:
         for handle, label in zip(*ax.get_legend_handles_labels()):
             entries.setdefault(label, handle)
     fig.legend(
-        entries.values(), entries.keys(), loc="lower center", ncol=5, fontsize=8, frameon=False
+        entries.values(), entries.keys(), loc="lower center", ncol=3, fontsize=8, frameon=False
     )
     fig.suptitle("Headline metrics against the budget (mean and 95% interval band over runs)")
-    fig.tight_layout(rect=(0, 0.07, 1, 1))  # the legend below the panels, over no curve
+    legend_in = 0.17 * -(-len(entries) // 3) + 0.2  # three long names a line, inside the width
+    bottom = legend_in / fig.get_figheight()
+    fig.tight_layout(rect=(0, bottom, 1, 0.97))  # the legend below the panels, over no curve
     save(fig, out, ("png",))
 
 
