@@ -18,6 +18,7 @@ from bench.binding import read_vocabulary
 from bench.failures import outcomes
 from bench.report import nbv
 from bench.report.categories import headline, unjudged, verdict_sentences
+from bench.report.cost import frontier_only
 from bench.report.power import min_units
 from bench.report.text import ci, column_format, signed
 from bench.report.text import num as _num
@@ -521,9 +522,12 @@ def _exclusions(runs: pd.DataFrame, t1: pd.DataFrame, vocab: Vocabulary) -> list
 
 
 def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
-    """The page of a results folder, from its files (`runs`: its rows, if already read)."""
+    """The page of a results folder, from its files (`runs`: its rows, if already read); the
+    cost figure's frontier rows (`bench.report.cost.frontier_only`) count in the run and the
+    grid, and enter no other section."""
     results = Path(results)
-    runs = pd.read_csv(results / RUNS) if runs is None else runs
+    everything = pd.read_csv(results / RUNS) if runs is None else runs
+    runs = everything[~frontier_only(everything)]
     vocab = read_vocabulary(results)
     t1 = _read(results, TABLE1)
     out = [
@@ -537,8 +541,8 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
     verdicts = _read(results, VERDICTS)
     said = headline(verdicts)
     out += [said, ""] if said else []
-    out += _run_section(_json(results, MANIFEST), runs) + [""]
-    out += _grid_section(runs, _json(results, CONFIG)) + [""]
+    out += _run_section(_json(results, MANIFEST), everything) + [""]
+    out += _grid_section(everything, _json(results, CONFIG)) + [""]
     recomputed = RECOMPUTED_TRUTH in set(runs.get("ground_truth", pd.Series(dtype=str)).dropna())
     out += _table1_section(t1, vocab, "Table 1: means over runs, 95% intervals", recomputed)
     out += _tiers_section(t1, vocab)

@@ -46,6 +46,7 @@ import numpy as np
 import pandas as pd
 
 from bench.binding import read_settings, read_vocabulary
+from bench.report.cost import frontier_only
 from bench.report.power import ceiling, real_to_real, sign_agreement, split_half
 from bench.report.tables import headline_frame, solvable
 from bench.results import RUNS
@@ -68,6 +69,13 @@ TRANSFER_TEXT = ("dataset", "metric", "tau_note", "winner_dataset", "winner_rend
 TRANSFER_TEXT += ("biggest_movers",)
 """The text columns of `transfer.csv` (empty where a row has none; the rest are numbers)."""
 """The fewest budgeted methods both sides ran at a budget for a row of `transfer.csv`."""
+
+
+def rendered_rows(rendered: Path) -> pd.DataFrame:
+    """A rendered results folder's rows that rank methods: not the cost figure's frontier
+    rows (`bench.report.cost.frontier_only`), which hold its peers alone."""
+    rows = read_runs(Path(rendered) / RUNS)
+    return rows[~frontier_only(rows)]
 
 
 def kendall_tau(x: np.ndarray, y: np.ndarray) -> float:
@@ -199,7 +207,7 @@ def transfer(
     """(`transfer.csv`, `transfer_ranks.csv`) of a dataset folder's rows (under their
     vocabulary) against the rendered results folder `rendered` (module docstring)."""
     mine = headline_frame(dataset_rows, vocab, dataset=True)
-    theirs = headline_frame(read_runs(Path(rendered) / RUNS), read_vocabulary(rendered))
+    theirs = headline_frame(rendered_rows(rendered), read_vocabulary(rendered))
     views = read_settings(rendered)["render"]["views"]
     summary, ranks = [], []
     for dataset, rows in mine.groupby("scene", sort=False):
@@ -249,7 +257,7 @@ def why_none(dataset_rows: pd.DataFrame, rendered: Sequence[Path]) -> str:
         return {int(b): set(g["method"]) for b, g in rows.groupby("budget")}
 
     mine = ran(dataset_rows)
-    theirs = [ran(read_runs(Path(r) / RUNS)) for r in rendered]
+    theirs = [ran(rendered_rows(r)) for r in rendered]
     shared = {b: mine[b] & t[b] for t in theirs for b in mine.keys() & t.keys()}
     if not shared:
         budgets = sorted({b for t in theirs for b in t})

@@ -116,7 +116,7 @@ def write_report(
     vocab = read_vocabulary(results)
     df = with_shares(df, vocab)
     everything, df = df, df[~frontier_only(df)]  # the frontiers' rows: the cost's alone
-    tables = write_tables(df, results, vocab, everything)
+    tables = write_tables(everything, results, vocab)
     if is_dataset_run(results):
         _write_transfer(df, vocab, results, rendered)
     drawn = next((t for t in tables if not t.empty), None)  # the headline protocol first
@@ -127,7 +127,7 @@ def write_report(
         _write_figures(df, drawn, results, Path(renders))
     if not figure_views(df, vocab, results / FIGURE_VIEWS):
         _drop(results / png(FIGURE_VIEWS))
-    write_text_atomic(results / PAGE, results_page(results, df))
+    write_text_atomic(results / PAGE, results_page(results, everything))
     return drawn
 
 
@@ -148,14 +148,12 @@ def check_one_bag_size(df: pd.DataFrame) -> None:
         )
 
 
-def write_tables(
-    df: pd.DataFrame, results: Path, vocab: Vocabulary, costed: pd.DataFrame | None = None
-) -> list[pd.DataFrame]:
-    """Every table of `results` from the rows `df` (with the report's shares), the cost's
-    from `costed` (`df` and the frontiers' rows, `bench.report.cost.frontier_only`); Table 1
-    of each track protocol rows ran under (the rows of a task without tracks in each, or in
-    the headline's alone), the headline's first (what the figures draw: the first with rows)."""
-    costed = df if costed is None else costed
+def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> list[pd.DataFrame]:
+    """Every table of `results` from the rows `df` (with the report's shares; the frontiers'
+    rows, `bench.report.cost.frontier_only`, in the cost's alone); Table 1 of each track
+    protocol rows ran under (the rows of a task without tracks in each, or in the
+    headline's alone), the headline's first (what the figures draw: the first with rows)."""
+    costed, df = df, df[~frontier_only(df)]
     datasets = is_dataset_run(results)
     frame = headline_frame(df, vocab, dataset=datasets)
     t1, pairs = table1(frame, vocab), paired(frame, vocab)
