@@ -31,15 +31,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-from budget_matches import correct_at
+from budget_matches import correct_at, labelled_scene
 from sklearn.ensemble import HistGradientBoostingClassifier
 
-from bench.evaluation.truth import scene_truth
 from bench.frontend.features import tentative_matches
 from bench.frontend.matchability import features
-from bench.frontend.policies import PolicyInput, octave_scale_policy
-from bench.frontend.stage import front_end
-from bench.render.entry import render_scene
+from bench.frontend.policies import octave_scale_policy
 from bench.scenes.spec import scene_names
 from bench.unit.config import RunConfig
 
@@ -90,14 +87,7 @@ def main() -> None:
     cells: dict[str, list] = {s: [] for s in scene_names()}
     for scene in cells:
         for seed in (int(s) for s in args.seeds.split(",")):
-            entry = render_scene(scene, seed, cfg.render, args.renders)
-            fe = front_end(entry, cfg.detector, cfg.signals, args.renders / "frontend")
-            truth = scene_truth(
-                entry, [v.camera for v in fe.views], [v.name for v in fe.views], fe.pools
-            )
-            inputs = [
-                PolicyInput(v, c, s, scene) for v, c, s in zip(fe.views, fe.pools, fe.signals)
-            ]
+            fe, truth, inputs = labelled_scene(scene, seed, cfg, args.renders)
             orders = [octave_scale_policy(i, len(i.candidates), None, None) for i in inputs]
             ys = budget_label(fe, truth, orders, LABEL_K, cfg.backend.ratio)
             y1024 = budget_label(fe, truth, orders, (1024,), cfg.backend.ratio)

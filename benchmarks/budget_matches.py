@@ -42,6 +42,15 @@ def correct_at(fe, truth, orders: list[np.ndarray], budget: int, ratio: float) -
     return total
 
 
+def labelled_scene(scene: str, seed: int, cfg: RunConfig, renders: Path):
+    """A training render's front end, its truth and each view's policy input."""
+    entry = render_scene(scene, seed, cfg.render, renders)
+    fe = front_end(entry, cfg.detector, cfg.signals, renders / "frontend")
+    truth = scene_truth(entry, [v.camera for v in fe.views], [v.name for v in fe.views], fe.pools)
+    inputs = [PolicyInput(v, c, s, scene) for v, c, s in zip(fe.views, fe.pools, fe.signals)]
+    return fe, truth, inputs
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--models", nargs="*", default=[""], help="model files ('' the shipped one)")
@@ -55,14 +64,7 @@ def main() -> None:
     for scene in scene_names():
         counts = {(n, b): 0 for n in names for b in budgets}
         for seed in (int(s) for s in args.seeds.split(",")):
-            entry = render_scene(scene, seed, cfg.render, args.renders)
-            fe = front_end(entry, cfg.detector, cfg.signals, args.renders / "frontend")
-            truth = scene_truth(
-                entry, [v.camera for v in fe.views], [v.name for v in fe.views], fe.pools
-            )
-            inputs = [
-                PolicyInput(v, c, s, scene) for v, c, s in zip(fe.views, fe.pools, fe.signals)
-            ]
+            fe, truth, inputs = labelled_scene(scene, seed, cfg, args.renders)
             for name, file in names.items():
                 if file is None:
                     orders = [octave_scale_policy(i, len(i.candidates), None, None) for i in inputs]
