@@ -16,7 +16,7 @@ from bench.backend.matching import (
 )
 from bench.backend.reconstruction import mapping_task, triangulate
 from bench.evaluation.poses import pose_metrics, registered_poses
-from bench.frontend.features import tentative_matches
+from bench.frontend.features import descriptor_distances, nearest_two, tentative_matches
 from tests.conftest import synthetic_rig
 
 
@@ -94,6 +94,38 @@ def test_tentative_matches_are_mutual_and_pass_the_ratio_test():
     noisy = a + rng.normal(0, 0.01, a.shape).astype(np.float32)
     m2 = tentative_matches(noisy, twin, 0.8)
     assert set(m2[:, 0].tolist()) == set(range(10, 50))
+
+
+def test_the_two_nearest_are_what_a_partition_finds_with_ties_and_infinities():
+    rng = np.random.default_rng(3)
+    D = rng.integers(0, 4, (40, 7)).astype(np.float32)  # many ties
+    D[5] = np.inf
+    D[6, 2:] = np.inf
+    two = np.partition(D, 1, axis=1)[:, :2]
+    col, first, second = nearest_two(D.copy())
+    assert np.array_equal(first, two[:, 0]) and np.array_equal(second, two[:, 1])
+    assert np.array_equal(col, D.argmin(1))
+
+
+def test_tentative_matches_are_mutual_argmins_where_distances_tie():
+    """Binary descriptors tie often: a row is matched only where it is its nearest column's
+    argmin (the first row holding that column's minimum), as the definition reads."""
+    rng = np.random.default_rng(4)
+    matched = tied = 0
+    for _ in range(20):
+        base = rng.integers(0, 256, (6, 32), np.uint8)  # six descriptors, slightly flipped
+        a, b = base[rng.integers(0, 6, 60)], base[rng.integers(0, 6, 45)]
+        a[rng.random(a.shape) < 0.05] ^= 1
+        b[rng.random(b.shape) < 0.05] ^= 1
+        D = descriptor_distances(a, b)
+        tied += int(((D == D.min(0)).sum(0) > 1).sum())
+        two = np.partition(D, 1, axis=1)[:, :2]
+        rows = np.arange(len(a))
+        keep = (D.argmin(0)[D.argmin(1)] == rows) & (two[:, 0] < 1.0 * two[:, 1])
+        expected = np.stack([rows[keep], D.argmin(1)[keep]], 1)
+        assert np.array_equal(tentative_matches(a, b, 1.0), expected)
+        matched += len(expected)
+    assert matched > 50 and tied > 200  # the case is one of ties, and matches are found
 
 
 def test_expected_ransac_iterations():

@@ -191,8 +191,28 @@ def tentative_matches(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float) -> n
     if len(desc_a) < 2 or len(desc_b) < 2:
         return np.zeros((0, 2), np.int64)
     D = descriptor_distances(desc_a, desc_b)
-    two = np.partition(D, 1, axis=1)[:, :2]
-    nn_ab, nn_ba = D.argmin(1), D.argmin(0)
+    column_min = D.min(0)
+    winners = D == column_min
+    tied = np.flatnonzero(winners.sum(0) > 1)
+    first_of_tie = np.full(D.shape[1], -1)
+    first_of_tie[tied] = winners[:, tied].argmax(0)
+    nn_ab, first, second = nearest_two(D)
     a = np.arange(len(desc_a))
-    keep = (nn_ba[nn_ab] == a) & (two[:, 0] < ratio * two[:, 1])
+    # mutual: row a is its nearest column's argmin, i.e. holds the column's minimum, the
+    # first row to hold it where several do (D.argmin(0) reads D strided, at 10-20 times
+    # the cost)
+    tie = first_of_tie[nn_ab]
+    mutual = np.where(tie < 0, first == column_min[nn_ab], tie == a)
+    keep = mutual & (first < ratio * second)
     return np.stack([a[keep], nn_ab[keep]], 1)
+
+
+def nearest_two(D: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per row of D: the column of its smallest value (the first, as argmin), that value, and
+    the second smallest (the values `np.partition(D, 1, axis=1)[:, :2]` finds, in a
+    fraction of its time). Overwrites each row's smallest entry with infinity."""
+    rows = np.arange(len(D))
+    col = D.argmin(1)
+    first = D[rows, col]
+    D[rows, col] = np.inf
+    return col, first, D.min(1)

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from bench import BenchError
-from bench.frontend.features import descriptor_distances
+from bench.frontend.features import descriptor_distances, nearest_two
 from bench.frontend.policies import PolicyConfig, PolicyInput, policy
 from bench.memo import digest, last_call
 
@@ -106,9 +106,9 @@ def _own_neighbours(xy: np.ndarray, desc: np.ndarray) -> tuple[np.ndarray, np.nd
             continue
         D = descriptor_distances(desc[rows], desc)
         D[near] = np.inf
-        two = np.partition(D, 1, axis=1)[:, :2]
-        ok = np.isfinite(two[:, 1]) & (two[:, 1] > 0)
-        ratio[rows] = np.where(ok, two[:, 0] / np.where(ok, two[:, 1], 1), 1.0)
+        _, first, second = nearest_two(D)
+        ok = np.isfinite(second) & (second > 0)
+        ratio[rows] = np.where(ok, first / np.where(ok, second, 1), 1.0)
     return twins, ratio
 
 
