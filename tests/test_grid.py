@@ -355,7 +355,12 @@ def test_plot_rejects_bad_runs_csv_in_one_line(tmp_path, capsys, content, messag
         (["run", "--scheduler", "tcp://127.0.0.1:1"], "cannot reach the Dask scheduler tcp://"),
     ],
 )
-def test_run_bad_input_is_one_clear_line(argv, message, tmp_path, capsys):
+def test_run_bad_input_is_one_clear_line(argv, message, tmp_path, capsys, monkeypatch):
+    import distributed.comm
+
+    # a refused port is tried again until the connect timeout (10 s): 1 s tells the same
+    real = distributed.comm.connect
+    monkeypatch.setattr(distributed.comm, "connect", lambda a, timeout: real(a, timeout="1s"))
     where = ["--results", str(tmp_path / "r")] if argv[0] == "run" else []
     with pytest.raises(SystemExit) as e:
         raise SystemExit(main([*argv, *where]))
