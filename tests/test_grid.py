@@ -139,14 +139,11 @@ def test_several_budgets_give_a_budget_figure(quick_results, tmp_path, renders_d
     assert sorted(set(t1["budget"])) == [0, 32, 64] and len(t1) == 2 * 6 + 2
 
 
-def test_same_command_gives_identical_metrics(quick_results, renders_dir, tmp_path):
-    bench_run(SMALL, tmp_path, renders_dir)
-    a, b = (pd.read_csv(d / "runs.csv") for d in (quick_results, tmp_path))
-    metrics = [c for c in a.columns if c not in TIMING]
-    pd.testing.assert_frame_equal(a[metrics], b[metrics])
-
-
-def test_interrupted_run_resumes_without_redoing_rows(renders_dir, tmp_path, monkeypatch):
+@pytest.fixture(scope="module")
+def resumed(renders_dir, tmp_path_factory):
+    """The small grid interrupted after three units, resumed, then run once more: the
+    folder, and what each of the three invocations did (read by the tests below)."""
+    folder, seen = tmp_path_factory.mktemp("resumed"), {}
     calls = []
     real = execute.predict
 
@@ -156,34 +153,53 @@ def test_interrupted_run_resumes_without_redoing_rows(renders_dir, tmp_path, mon
         calls.append(unit)
         return real(scene, unit, *args)
 
-    monkeypatch.setattr(execute, "predict", interrupt_after_three)
-    with pytest.raises(KeyboardInterrupt):
-        bench_run(SMALL, tmp_path, renders_dir)
-    assert len(pd.read_csv(tmp_path / "runs.csv")) == 3 * 5  # tri, sfm x protocols; pairs
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        monkeypatch.setattr(execute, "predict", interrupt_after_three)
+        with pytest.raises(KeyboardInterrupt):
+            bench_run(SMALL, folder, renders_dir)
+        seen["interrupted_rows"] = len(pd.read_csv(folder / "runs.csv"))
+        seen["killed"] = json.loads((folder / "manifest.json").read_text())["invocations"]
+        monkeypatch.setattr(execute, "predict", real)
+        calls.clear()
+        spy(monkeypatch, calls)
+        bench_run(SMALL, folder, renders_dir)
+        seen["resumed_calls"] = list(calls)
+        seen["runs"] = pd.read_csv(folder / "runs.csv")
+        seen["manifest"] = json.loads((folder / "manifest.json").read_text())
+        calls.clear()
+        rendered = []
+        monkeypatch.setattr(harness, "render_scene", lambda *a, **k: rendered.append(a))
+        bench_run(SMALL, folder, renders_dir)  # all done: nothing rendered, nothing run
+        seen["done_calls"], seen["rendered"] = list(calls), rendered
+    return folder, seen
+
+
+def test_same_command_gives_identical_metrics(quick_results, resumed):
+    """The grid once more (interrupted and resumed) gives the metrics of its first run."""
+    a, b = (pd.read_csv(d / "runs.csv") for d in (quick_results, resumed[0]))
+    metrics = [c for c in a.columns if c not in TIMING]
+    pd.testing.assert_frame_equal(a[metrics], b[metrics])
+
+
+def test_interrupted_run_resumes_without_redoing_rows(resumed):
+    _, seen = resumed
+    assert seen["interrupted_rows"] == 3 * 5  # tri, sfm x protocols; pairs
     # the interrupted invocation is in the manifest with its rows and seconds (it was not:
     # after a resume the page said frontend 0 and listed the resuming invocation alone)
-    killed = json.loads((tmp_path / "manifest.json").read_text())["invocations"]
+    killed = seen["killed"]
     assert [(i["rows_now"], i["interrupted"]) for i in killed] == [(15, True)]
     assert killed[0]["seconds"]["frontend"] > 0
-    monkeypatch.setattr(execute, "predict", real)
-    calls.clear()
-    spy(monkeypatch, calls)
-    bench_run(SMALL, tmp_path, renders_dir)
-    assert len(calls) == 2 * 8 - 3  # every unit of both scenes, but the three done
-    runs = pd.read_csv(tmp_path / "runs.csv")
+    assert len(seen["resumed_calls"]) == 2 * 8 - 3  # every unit of both scenes, but the three
+    runs = seen["runs"]
     assert len(runs) == ROWS and not runs.duplicated(list(KEY)).any()
-    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    manifest = seen["manifest"]
     both = manifest["invocations"]
     assert [i["id"] for i in both[:1]] == [killed[0]["id"]] and len(both) == 2
     assert sum(i["rows_now"] for i in both) == ROWS
     assert manifest["seconds"]["frontend"] == pytest.approx(
         sum(i["seconds"]["frontend"] for i in both)
     )
-    calls.clear()
-    rendered = []
-    monkeypatch.setattr(harness, "render_scene", lambda *a, **k: rendered.append(a))
-    bench_run(SMALL, tmp_path, renders_dir)  # all done: nothing rendered, nothing run
-    assert calls == [] and rendered == []
+    assert seen["done_calls"] == [] and seen["rendered"] == []
 
 
 def test_growing_a_results_folder_runs_only_the_new_rows(
