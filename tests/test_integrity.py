@@ -518,19 +518,19 @@ def test_bad_input_leaves_no_lock_or_temporary_file(tmp_path, capsys):
     assert not results.exists()
 
 
-def test_a_rerun_that_does_nothing_keeps_the_manifest_timings(quick_results, renders_dir, tmp_path):
-    shutil.copytree(quick_results, tmp_path / "r")
+def test_a_rerun_that_does_nothing_keeps_the_manifest_timings(small_run, renders_dir, tmp_path):
+    shutil.copytree(small_run, tmp_path / "r")
     first = json.loads((tmp_path / "r" / "manifest.json").read_text())
-    bench_run(SMALL, tmp_path / "r", renders_dir)  # every row done
+    bench_run(GRID, tmp_path / "r", renders_dir)  # every row done
     again = json.loads((tmp_path / "r" / "manifest.json").read_text())
     assert again["seconds"] == first["seconds"] and again["seconds"]["total"] > 0
     (inv,) = again["invocations"]
     runs = pd.read_csv(tmp_path / "r" / "runs.csv")
-    assert inv["rows"] == inv["rows_now"] == ROWS and set(runs["invocation"]) == {inv["id"]}
+    assert inv["rows"] == inv["rows_now"] == 2 and set(runs["invocation"]) == {inv["id"]}
 
 
 def test_the_manifest_names_whichever_distribution_provides_a_module(
-    quick_results, renders_dir, tmp_path, monkeypatch
+    small_run, renders_dir, tmp_path, monkeypatch
 ):
     """OpenCV from another distribution, pycolmap from none: the run still ends well."""
     from importlib.metadata import PackageNotFoundError, packages_distributions, version
@@ -547,8 +547,8 @@ def test_the_manifest_names_whichever_distribution_provides_a_module(
 
     monkeypatch.setattr(manifest, "packages_distributions", lambda: provided, raising=False)
     monkeypatch.setattr(manifest, "version", installed)
-    shutil.copytree(quick_results, tmp_path / "r")
-    bench_run(SMALL, tmp_path / "r", renders_dir)
+    shutil.copytree(small_run, tmp_path / "r")
+    bench_run(GRID, tmp_path / "r", renders_dir)
     versions = json.loads((tmp_path / "r" / "manifest.json").read_text())["versions"]
     assert versions["cv2"] == "opencv-python-headless 5.0.0.1"
     assert versions["pycolmap"] == "unknown" and versions["numpy"] == version("numpy")
