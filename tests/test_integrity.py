@@ -432,13 +432,13 @@ def test_a_damaged_runs_csv_is_refused_naming_the_row_and_set_aside_on_request(
     r = tmp_path / "r"
     shutil.copytree(quick_results, r)
     before = (r / "table1.csv").read_bytes()
-    cut = _cut(r / "runs.csv", 30)
+    cut = _cut(r / "runs.csv", ROWS)  # the last row: one unit's job to compute again
     medium = ["--width", "320", "--height", "240", "--spp", "16", "--max-depth", "2"]
     grid = ["run", "--scenes", "table,facade", "--seeds", "0", "--budget", "64", *medium]
     for argv in (["plot"], grid):
         assert main([*argv, "--results", str(r), "--renders", str(renders_dir)]) == 2
         err = capsys.readouterr().err.strip().splitlines()
-        assert f"{r / 'runs.csv'} is damaged: row at line 31" in err[-1]
+        assert f"{r / 'runs.csv'} is damaged: row at line {ROWS + 1}" in err[-1]
     assert (r / "table1.csv").read_bytes() == before  # nothing published from it
     bench_run(SMALL, r, renders_dir, set_aside=True)
     assert cut in (r / "runs.damaged.csv").read_text()
