@@ -30,6 +30,7 @@ from bench.frontend.views import load_image_folder, load_views, source_key
 from bench.harness.grid import BenchConfig
 from bench.harness.select import SelectRequest, select_to_database
 from bench.report.transfer import transfer
+from bench.runs import read_runs
 from bench.unit.config import RunConfig
 from bench.vocabulary import KEY
 from tests.conftest import MEDIUM, bench_run
@@ -58,12 +59,20 @@ def test_export_has_the_colmap_layout_and_reads_back(dataset, medium_entry):
 
 
 def test_dataset_run_gives_the_metrics_and_the_ranking_of_the_rendered_path(
-    dataset, renders_dir, tmp_path
+    dataset, quick_results, renders_dir, tmp_path
 ):
+    # the rendered path: the small grid's rows of these units (run for the session in one
+    # process, at these settings), whole rows (their checksums hold) in a folder of their own
     run = RunConfig(render=MEDIUM)
-    rendered = bench_run(
-        BenchConfig(scenes=("table",), run=run, **GRID), tmp_path / "r", renders_dir, workers=1
-    )
+    (tmp_path / "r").mkdir()
+    for name in ("vocabulary.json", "config.json"):
+        shutil.copy(quick_results / name, tmp_path / "r" / name)
+    rows = pd.read_csv(quick_results / "runs.csv", dtype=str, keep_default_na=False)
+    keep = (rows["scene"] == "table") & rows["method"].isin(GRID["methods"])
+    rows[keep].to_csv(tmp_path / "r" / "runs.csv", index=False)
+    rendered = read_runs(tmp_path / "r" / "runs.csv")
+    settings = json.loads((tmp_path / "r" / "config.json").read_text())["settings"]
+    assert settings == json.loads(json.dumps(run.as_dict()))  # the settings the dataset runs
     data = bench_run(
         BenchConfig(scenes=(dataset.name,), run=run, datasets=(str(dataset),), **GRID),
         tmp_path / "d",
