@@ -210,11 +210,13 @@ def test_growing_a_results_folder_runs_only_the_new_rows(
     shutil.copytree(quick_results, tmp_path / "r")
     calls = []
     spy(monkeypatch, calls)
-    grown = dataclasses.replace(SMALL, scenes=("table",), budgets=(64, 32))
+    # a budgeted selection and peer, and the two methods of budget 0, which it leaves
+    some = ("texture", "colmap-b", "all", "colmap")
+    grown = dataclasses.replace(SMALL, scenes=("table",), methods=some, budgets=(64, 32))
     bench_run(grown, tmp_path / "r", renders_dir)
-    assert sorted(calls) == [(p, 32) for p in sorted(POLICIES[:6])]
+    assert sorted(calls) == [("colmap-b", 32), ("texture", 32)]
     runs = pd.read_csv(tmp_path / "r" / "runs.csv")
-    assert len(runs) == ROWS + 5 * 5 + 3  # the new budget's selections and its colmap-b
+    assert len(runs) == ROWS + 5 + 3  # the new budget's selection and its colmap-b
     other = dataclasses.replace(SMALL, run=RunConfig(render=dataclasses.replace(MEDIUM, spp=4)))
     with pytest.raises(BenchError, match=r"other settings \(render.spp: 16 there, 4 now\)"):
         bench_run(other, tmp_path / "r", renders_dir)
@@ -229,10 +231,14 @@ def test_rows_computed_by_other_code_are_computed_again(
     monkeypatch.setattr(keys, "code_hash", lambda modules: "another-code")
     calls = []
     spy(monkeypatch, calls)
-    bench_run(dataclasses.replace(SMALL, scenes=("table",)), tmp_path / "r", renders_dir)
-    assert len(calls) == 8  # every unit of the table scene, again
+    some = ("texture", "colmap-b")  # a selection and a peer
+    bench_run(
+        dataclasses.replace(SMALL, scenes=("table",), methods=some), tmp_path / "r", renders_dir
+    )
+    assert sorted(calls) == [("colmap-b", 64), ("texture", 64)]  # every unit, again
     runs = pd.read_csv(tmp_path / "r" / "runs.csv")
-    assert len(runs) == ROWS // 2  # one hash per method and task: their code and settings
+    assert len(runs) == 5 + 3  # one hash per method and task: their code and settings
+    assert set(runs["scene"]) == {"table"} and set(runs["method"]) == set(some)
     assert runs.groupby(["method", "task"])["prediction_hash"].nunique().max() == 1
 
 
