@@ -82,7 +82,9 @@ def test_a_unit_failing_on_a_worker_is_retried_once_then_recorded(
     assert (runs.loc[runs["method"] != "texture", "status"] == "ok").any()
 
 
-def test_a_raising_policy_on_workers_is_one_line_without_retry_or_traceback(tmp_path, capfd):
+def test_a_raising_policy_on_workers_is_one_line_without_retry_or_traceback(
+    renders_dir, tmp_path, capfd
+):
     module = tmp_path / "boom.py"
     calls = tmp_path / "calls.txt"
     module.write_text(
@@ -94,7 +96,8 @@ def test_a_raising_policy_on_workers_is_one_line_without_retry_or_traceback(tmp_
     )
     argv = ["run", "--quick", "--scenes", "table", "--methods", "boom", "--workers", "2"]
     argv += ["--policy-module", str(module), "--tasks", "tri", "--protocols", "multiview"]
-    assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 2
+    # the session's renders: the --quick table, which the signal tests below read too
+    assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(renders_dir)]) == 2
     err = capfd.readouterr().err
     assert "policy boom failed: ValueError: deterministic" in err and "Traceback" not in err
     assert len(calls.read_text().splitlines()) == 1  # the first view raised; no retry
