@@ -247,7 +247,8 @@ def test_a_method_that_crashes_never_ranks_on_the_runs_it_finished(renders_dir, 
     module = tmp_path / "crash.py"
     module.write_text(BOOM)
     argv = ["run", "--scenes", "table,facade", "--seeds", "0", "--budget", "128", "--workers", "1"]
-    argv += ["--width", "320", "--height", "240", "--spp", "4", "--max-depth", "2"]
+    # the small grid's renders (conftest.MEDIUM), which the session has
+    argv += ["--width", "320", "--height", "240", "--spp", "16", "--max-depth", "2"]
     argv += ["--methods", "texture,crash-late", "--tasks", "tri,pairs", "--protocols", "multiview"]
     argv += ["--policy-module", str(module), "--results", str(tmp_path / "r")]
     try:
