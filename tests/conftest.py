@@ -143,3 +143,19 @@ def quick_results(renders_dir, tmp_path_factory):
     results = tmp_path_factory.mktemp("results")
     bench_run(small_grid(), results, renders_dir)
     return results
+
+
+def rows_of(results: Path, folder: Path, keep) -> Path:
+    """`folder`: a results folder of the rows of `results` where `keep(rows)` holds (whole
+    rows, so their checksums hold) with its vocabulary and settings; a part of a grid run
+    for the session, for what reads a results folder, without running that part again."""
+    import shutil
+
+    import pandas as pd
+
+    folder.mkdir(parents=True)
+    for name in ("vocabulary.json", "config.json"):
+        shutil.copy(results / name, folder / name)
+    rows = pd.read_csv(results / "runs.csv", dtype=str, keep_default_na=False)
+    rows[keep(rows)].to_csv(folder / "runs.csv", index=False)
+    return folder

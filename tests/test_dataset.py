@@ -33,7 +33,7 @@ from bench.report.transfer import transfer
 from bench.runs import read_runs
 from bench.unit.config import RunConfig
 from bench.vocabulary import KEY
-from tests.conftest import MEDIUM, bench_run
+from tests.conftest import MEDIUM, bench_run, rows_of
 
 GRID = dict(
     seeds=(0,), methods=("texture", "grid", "adaptive", "oracle", "colmap-b"), budgets=(64,)
@@ -64,13 +64,11 @@ def test_dataset_run_gives_the_metrics_and_the_ranking_of_the_rendered_path(
     # the rendered path: the small grid's rows of these units (run for the session in one
     # process, at these settings), whole rows (their checksums hold) in a folder of their own
     run = RunConfig(render=MEDIUM)
-    (tmp_path / "r").mkdir()
-    for name in ("vocabulary.json", "config.json"):
-        shutil.copy(quick_results / name, tmp_path / "r" / name)
-    rows = pd.read_csv(quick_results / "runs.csv", dtype=str, keep_default_na=False)
-    keep = (rows["scene"] == "table") & rows["method"].isin(GRID["methods"])
-    rows[keep].to_csv(tmp_path / "r" / "runs.csv", index=False)
-    rendered = read_runs(tmp_path / "r" / "runs.csv")
+
+    def ours(rows):
+        return (rows["scene"] == "table") & rows["method"].isin(GRID["methods"])
+
+    rendered = read_runs(rows_of(quick_results, tmp_path / "r", ours) / "runs.csv")
     settings = json.loads((tmp_path / "r" / "config.json").read_text())["settings"]
     assert settings == json.loads(json.dumps(run.as_dict()))  # the settings the dataset runs
     data = bench_run(

@@ -15,14 +15,14 @@ from bench import BenchError
 from bench.binding import read_vocabulary
 from bench.cli import main
 from bench.evaluation.export import export_dataset
-from bench.harness.grid import BenchConfig, with_reference
+from bench.harness.grid import with_reference
 from bench.report.stats import paired_difference, stratified_interval
 from bench.report.tables import headline_frame, paired, paired_sfm, table1, with_shares
 from bench.results import VOCABULARY
 from bench.runs import ROW_CHECKSUM, append_runs, mark_reference, read_runs
 from bench.unit.config import RunConfig
 from bench.vocabulary import REFERENCE_MAPS, Vocabulary
-from tests.conftest import MEDIUM, bench_run
+from tests.conftest import MEDIUM, rows_of
 
 # --- intervals ---------------------------------------------------------------------
 
@@ -237,19 +237,24 @@ def test_a_grid_that_scores_sfm_runs_the_reference():
 
 
 def test_a_dataset_run_with_colmap_keeps_its_sfm_means_and_its_transfer_table(
-    medium_entry, renders_dir, tmp_path, monkeypatch, capsys
+    medium_entry, quick_results, renders_dir, tmp_path, monkeypatch, capsys
 ):
     """On a dataset the poses are the truth: nothing is excluded, even where stock COLMAP
     does not map it (adding colmap to the temple run made every sfm mean NaN and removed
     transfer.csv). The default --rendered is the package's snapshot from any folder."""
     ds = export_dataset(medium_entry("table"), tmp_path / "table-ds")
     rendered, out = tmp_path / "r", tmp_path / "d"
-    grid = dict(seeds=(0,), budgets=(64,), tasks=("sfm",), protocols=("multiview",))
     policies = ("random", "texture", "grid", "adaptive")  # three see their own image
     run = RunConfig(render=MEDIUM)
-    bench_run(
-        BenchConfig(scenes=("table",), methods=policies, run=run, **grid), rendered, renders_dir
-    )
+
+    def ours(rows):  # the rendered grid: the small grid's rows of it (seed 0, B = 64)
+        units = (rows["scene"] == "table") & rows["method"].isin(policies)
+        return units & (rows["task"] == "sfm") & (rows["protocol"] == "multiview")
+
+    rows_of(quick_results, rendered, ours)
+    assert len(read_runs(rendered / "runs.csv")) == len(policies)
+    settings = json.loads((rendered / "config.json").read_text())["settings"]
+    assert settings == json.loads(json.dumps(run.as_dict()))  # the settings it ran
     argv = ["run", "--dataset", str(ds), "--methods", ",".join([*policies, "colmap"])]
     argv += ["--budget", "64", "--tasks", "sfm", "--protocols", "multiview", "--workers", "1"]
     argv += ["--renders", str(renders_dir), "--results", str(out)]
