@@ -72,8 +72,9 @@ def test_a_unit_failing_on_a_worker_is_retried_once_then_recorded(
         return real(scene, unit, *a)
 
     monkeypatch.setattr(execute, "predict", flaky)
+    two = dataclasses.replace(PARALLEL, methods=("texture", "oracle"))  # a failing, a good one
     with LocalCluster(n_workers=1, processes=False, dashboard_address=None) as cluster:
-        bench_run(PARALLEL, tmp_path, renders_dir, scheduler=cluster.scheduler_address)
+        bench_run(two, tmp_path, renders_dir, scheduler=cluster.scheduler_address)
     assert calls.count("texture") == 2  # tried, then retried once
     runs = read_runs(tmp_path / "runs.csv")
     failed = runs[runs["method"] == "texture"]
