@@ -41,6 +41,14 @@ MEDIUM = RenderConfig(width=320, height=240, spp=16, max_depth=2)
 
 
 @pytest.fixture(scope="session")
+def frontend_cache(renders_dir) -> Path:
+    """The session's front-end cache, where `bench run` keeps it (`renders/frontend`): a
+    front end (candidates and signals of an entry, keyed by their settings and code) is
+    computed once a session, whichever test or grid asks for it first."""
+    return renders_dir / "frontend"
+
+
+@pytest.fixture(scope="session")
 def medium_entry(renders_dir):
     from bench.render.entry import render_scene
 

@@ -27,10 +27,9 @@ BUDGET = 64
 
 
 @pytest.fixture(scope="module")
-def fe(medium_entry, tmp_path_factory):
+def fe(medium_entry, frontend_cache):
     entry = medium_entry("table")
-    cache = tmp_path_factory.mktemp("fe")
-    return entry, front_end(entry, DetectorConfig(), SignalConfig(), cache, IMAGES)
+    return entry, front_end(entry, DetectorConfig(), SignalConfig(), frontend_cache, IMAGES)
 
 
 def test_the_count_is_the_peers_own_in_every_view(fe):

@@ -162,14 +162,14 @@ def test_the_task_is_declared_for_the_report():
 
 @pytest.mark.parametrize("method, budget", [("texture", 128), ("colmap-b", 128)])
 def test_one_unit_end_to_end_and_scored_again_from_its_prediction(
-    medium_entry, tmp_path, method, budget
+    medium_entry, frontend_cache, tmp_path, method, budget
 ):
     """A policy's and a peer's pairs rows: the relative poses are stored with the
     prediction (nothing is mapped or exported), and scoring them again from it alone gives
     the same row."""
     entry = medium_entry("table")
     cfg = RunConfig()
-    fe = front_end(entry, cfg.detector, cfg.signals, tmp_path / "fe", IMAGES)
+    fe = front_end(entry, cfg.detector, cfg.signals, frontend_cache, IMAGES)
     posed = [v.camera for v in load_views(entry)]  # the evaluation's: the rig's poses
     truth = SceneTruth.build(posed, read_layers(entry), fe.pools)
     scene, ws = LoadedScene(entry, {IMAGES: fe}, truth), Workspace(tmp_path / "r", tmp_path)

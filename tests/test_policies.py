@@ -29,10 +29,8 @@ BUDGET = 64
 
 
 @pytest.fixture(scope="module")
-def fe(medium_entry, tmp_path_factory):
-    return front_end(
-        medium_entry("table"), DetectorConfig(), SignalConfig(), tmp_path_factory.mktemp("fe")
-    )
+def fe(medium_entry, frontend_cache):
+    return front_end(medium_entry("table"), DetectorConfig(), SignalConfig(), frontend_cache)
 
 
 def _inputs(fe):

@@ -54,10 +54,10 @@ METRICS = [
 
 
 @pytest.fixture(scope="module")
-def table_run(medium_entry, tmp_path_factory):
+def table_run(medium_entry, frontend_cache, tmp_path_factory):
     entry = medium_entry("table")
     cfg = RunConfig()
-    fe = front_end(entry, cfg.detector, cfg.signals, tmp_path_factory.mktemp("fe"))
+    fe = front_end(entry, cfg.detector, cfg.signals, frontend_cache)
     truth = SceneTruth.build([v.camera for v in fe.views], read_layers(entry), fe.pools)
     out = tmp_path_factory.mktemp("models")
 
@@ -86,7 +86,9 @@ def test_one_run_gives_a_complete_row(table_run, policy):
     assert selected == (6 * 128 if policy == "adaptive" else table_run.pool_size)
 
 
-def test_the_order_of_a_policys_indices_does_not_change_any_metric(medium_entry, tmp_path):
+def test_the_order_of_a_policys_indices_does_not_change_any_metric(
+    medium_entry, frontend_cache, tmp_path
+):
     """A selection is a set: the same indices listed forwards and backwards give the same
     verified matches, points and poses (they did not: 348 against 350 verified matches)."""
     module = tmp_path / "orders.py"
@@ -105,8 +107,7 @@ def test_the_order_of_a_policys_indices_does_not_change_any_metric(medium_entry,
     entry = medium_entry("table")
     cfg = RunConfig(policy=dataclasses.replace(RunConfig().policy, modules=(str(module),)))
     fronts = {
-        g: front_end(entry, cfg.detector, cfg.signals, tmp_path / "fe", g)
-        for g in ("rig", "images")
+        g: front_end(entry, cfg.detector, cfg.signals, frontend_cache, g) for g in ("rig", "images")
     }
     truth = SceneTruth.build(
         [v.camera for v in fronts["rig"].views], read_layers(entry), fronts["rig"].pools
