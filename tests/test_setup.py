@@ -86,9 +86,14 @@ def test_a_hanging_test_fails_with_a_stack_dump(tmp_path, pytestconfig):
 # next one on that lock when collected there.
 FORCED_GC = """
 import gc, sys
+import distributed.comm
 from distributed import Client, LocalCluster
 from distributed.utils import LoopRunner
 from bench.cli import main
+
+# a refused port is tried again until the connect timeout (10 s): 1 s refuses it the same
+real_connect = distributed.comm.connect
+distributed.comm.connect = lambda address, timeout: real_connect(address, timeout="1s")
 
 start = LoopRunner._start_unlocked
 def collecting(self):
