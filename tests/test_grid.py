@@ -254,7 +254,7 @@ def test_rows_on_other_pixels_are_refused_and_rows_without_pixels_computed_again
     folder = tmp_path / "r"
     shutil.copytree(quick_results, folder)
     runs = pd.read_csv(folder / "runs.csv", dtype=str, keep_default_na=False)
-    mine, theirs = runs["pixels"].iloc[0], runs["pixels"].tolist()
+    mine, original = runs["pixels"].iloc[0], runs["pixels"].tolist()
     assert mine.startswith("px-") and runs.groupby("scene")["pixels"].nunique().max() == 1
 
     def rewrite(pixels):
@@ -276,13 +276,13 @@ def test_rows_on_other_pixels_are_refused_and_rows_without_pixels_computed_again
     with pytest.raises(BenchError, match="unrecorded"):
         read_runs(folder / "runs.csv")
     table = (runs["scene"] == "table").tolist()
-    rewrite(["" if t else px for t, px in zip(table, theirs)])  # one scene's rows name none
+    rewrite(["" if t else px for t, px in zip(table, original)])  # one scene's rows name none
     again = bench_run(SMALL, folder, renders_dir)
     assert len(calls) == 8 and (again["pixels"].str.startswith("px-")).all()
     assert "name no pixels" in capsys.readouterr().err
     facade = again["scene"] == "facade"  # the other scene's rows kept, not computed again
     assert len(again) == ROWS and facade.sum() == ROWS // 2
-    assert set(again.loc[facade, "pixels"]) == {px for t, px in zip(table, theirs) if not t}
+    assert set(again.loc[facade, "pixels"]) == {px for t, px in zip(table, original) if not t}
     assert set(again.loc[facade, "invocation"]) == set(
         runs["invocation"][runs["scene"] == "facade"]
     )
