@@ -536,7 +536,8 @@ def test_kendall_tau_and_its_interval_on_hand_made_rankings():
     assert -1 <= lo < kendall_tau(np.arange(6.0), np.array([0, 2, 1, 3, 5, 4.0])) < hi <= 1
 
 
-def test_a_budget_above_every_pool_is_refused_in_one_line(tmp_path, capsys):
+def test_a_budget_above_every_pool_is_refused_in_one_line(renders_dir, tmp_path, capsys):
+    # the tiny render of the raising-plugin tests (test_failures), kept in the session's renders
     tiny = ["--width", "64", "--height", "48", "--spp", "2", "--max-depth", "2"]
     argv = [
         "run",
@@ -550,13 +551,14 @@ def test_a_budget_above_every_pool_is_refused_in_one_line(tmp_path, capsys):
         "1",
         *tiny,
     ]
-    assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 2
+    assert main([*argv, "--results", str(tmp_path / "r"), "--renders", str(renders_dir)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert "budget 100000 exceeds every candidate pool of table seed 0" in err[-1]
     assert not (tmp_path / "r").exists()  # a refused run binds no folder to its settings
     other = ["--budget", "16", "--spp", "3", "--methods", "texture", "--tasks", "tri"]
     argv = [*argv[:5], *argv[7:], "--protocols", "multiview"]  # the same, less the budget
-    assert main([*argv, *other, "--results", str(tmp_path / "r"), "--renders", str(tmp_path)]) == 0
+    where = ["--results", str(tmp_path / "r"), "--renders", str(renders_dir)]
+    assert main([*argv, *other, *where]) == 0
     assert (
         json.loads((tmp_path / "r" / "config.json").read_text())["settings"]["render"]["spp"] == 3
     )
