@@ -1,8 +1,9 @@
 """A memo that changes no value: a pure function of large inputs, called with the same
 inputs by several units of one scene on one worker, computes once.
 
-`last_call(key, size)` keeps the last `size` calls' results under `key(*args)`; being one of the
-package's decorators, it enters no row's hash (`bench.codehash`): it decides no value.
+`last_call(key, size)` keeps the last `size` calls' results under `key(*args)`. It decides
+no value, yet, like every line of a module, a decorator added or removed changes the code
+key of what imports it (`bench.codehash`): the hash errs toward computing again.
 """
 
 from __future__ import annotations
