@@ -199,8 +199,8 @@ def tentative_matches(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float) -> n
     nn_ab, first, second = nearest_two(D)
     a = np.arange(len(desc_a))
     # mutual: row a is its nearest column's argmin, i.e. holds the column's minimum, the
-    # first row to hold it where several do (D.argmin(0) reads D strided, at 10-20 times
-    # the cost)
+    # first row to hold it where several do (D.argmin(0) reads D strided, at 5-10 times
+    # the cost: docs/speed.md)
     tie = first_of_tie[nn_ab]
     mutual = np.where(tie < 0, first == column_min[nn_ab], tie == a)
     keep = mutual & (first < ratio * second)
