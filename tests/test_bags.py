@@ -196,3 +196,31 @@ def test_forward_covisibility_tests_the_scale_change_both_ways():
     assert not _facing(narrow, wide, depth) and not _facing(wide, narrow, depth)
     near = cam([0.5, 0, depth / 4], 200.0)  # 4/3 nearer: within an octave
     assert _facing(narrow, near, depth)
+
+
+def test_a_bags_front_end_is_computed_once_and_read_back_as_computed(
+    dataset, tmp_path, monkeypatch
+):
+    from bench.frontend import stage
+    from bench.frontend.geometry import IMAGES
+    from bench.frontend.signals import SIGNALS
+    from bench.unit.config import RunConfig
+
+    cfg, bag = RunConfig(), (0, 3, 4)
+    det, sig = cfg.detector, cfg.signals
+    alone = stage.front_end(dataset, det, sig, tmp_path, IMAGES, bagged=True)
+    first = stage.bag_front_end(dataset, det, sig, tmp_path, IMAGES, alone, bag)
+    want = stage.subset(alone, bag, det, sig)
+    other = stage.bag_front_end(dataset, det, sig, tmp_path, IMAGES, alone, (0, 3, 5))
+    assert len(list(tmp_path.glob("*-bag-*.npz"))) == 2 and not other.cached
+    monkeypatch.setattr(stage, "subset", lambda *a: pytest.fail("the bag computed again"))
+    again = stage.bag_front_end(dataset, det, sig, tmp_path, IMAGES, alone, bag)
+    assert again.cached and not first.cached
+    assert [v.name for v in again.views] == [alone.views[i].name for i in bag]
+    assert again.seconds == first.seconds
+    for a, b in zip(want.pools, again.pools):
+        np.testing.assert_array_equal(a.xy, b.xy)
+        np.testing.assert_array_equal(a.descriptors, b.descriptors)
+    for a, b in zip(want.signals, again.signals):
+        for s in SIGNALS:
+            np.testing.assert_array_equal(getattr(a, s), getattr(b, s), err_msg=s)

@@ -67,6 +67,29 @@ def test_each_feature_on_hand_made_candidates():
     assert 0.9 < X["distinct"][1] <= 1.0 and 0.9 < X["distinct"][3] <= 1.0
 
 
+def test_twins_and_distinct_are_the_dense_definition_at_the_radius_and_across_blocks(
+    monkeypatch,
+):
+    import bench.frontend.matchability as m
+    from bench.frontend.features import descriptor_distances
+
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(0, 40, (300, 2)).astype(np.float32)
+    xy[1] = xy[0]  # a second orientation at one location
+    xy[3] = xy[2] + np.float32([2.0, 0.0])  # exactly at the radius: not a twin
+    xy[5] = xy[4] + np.float32([1.9999, 0.0])  # just inside it
+    desc = rng.integers(0, 255, (300, 16)).astype(np.float32)
+    near = np.linalg.norm(xy[:, None] - xy[None], axis=2) < m.TWIN_PX  # the definition
+    D = descriptor_distances(desc, desc)
+    D[near] = np.inf
+    D.sort(1)
+    monkeypatch.setattr(m, "ROWS", 64)  # several blocks
+    twins, distinct = m._own_neighbours(xy, desc)
+    assert twins.tolist() == near.sum(1).tolist() and twins[[0, 1, 2, 3, 5]].min() >= 1
+    assert twins[0] >= 2 and twins[4] >= 2 and not near[2, 3]
+    np.testing.assert_array_equal(distinct, D[:, 0] / D[:, 1])
+
+
 class _Fixed:
     def __init__(self, p):
         self.p = np.asarray(p, float)

@@ -181,11 +181,11 @@ def test_images_are_decoded_once_per_scene_and_not_on_a_cache_hit(
     real = views_module.read_image
     monkeypatch.setattr(views_module, "read_image", lambda p: decoded.append(p.name) or real(p))
     cfg = RunConfig()
-    fronts = execute._front_ends(entry, cfg, tmp_path, (IMAGES, RIG))  # computed
+    _, fronts = execute._front_ends(entry, cfg, tmp_path, (IMAGES, RIG))  # computed
     assert sorted(decoded) == [f"view_{v:02d}.png" for v in range(6)]
     assert not any(f.cached for f in fronts.values())
     decoded.clear()
-    fronts = execute._front_ends(entry, cfg, tmp_path, (IMAGES, RIG))  # read from the cache
+    _, fronts = execute._front_ends(entry, cfg, tmp_path, (IMAGES, RIG))  # read from the cache
     scene = execute._scene(entry, cfg, tmp_path, (IMAGES, RIG))
     assert all(f.cached for f in fronts.values()) and scene.truth.surface is not None
     assert decoded == []

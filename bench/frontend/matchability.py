@@ -19,6 +19,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 from bench import BenchError
 from bench.frontend.features import descriptor_distances, nearest_two
@@ -95,21 +96,34 @@ def features(inp: PolicyInput) -> np.ndarray:
 
 def _own_neighbours(xy: np.ndarray, desc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per candidate: the candidates at its location (itself included), and the ratio of its
-    nearest to second-nearest descriptor distance among those elsewhere (1 without two)."""
+    nearest to second-nearest descriptor distance among those elsewhere (1 without two;
+    1 for a whole block of `ROWS` where one of its candidates has fewer than two elsewhere)."""
     n = len(xy)
-    twins, ratio = np.zeros(n), np.ones(n)
+    a, b = _twin_pairs(xy)
+    twins = 1.0 + np.bincount(a, minlength=n) + np.bincount(b, minlength=n)
+    ratio = np.ones(n)
+    rows_of, cols_of = np.r_[a, b, np.arange(n)], np.r_[b, a, np.arange(n)]
     for lo in range(0, n, ROWS):
-        rows = slice(lo, min(lo + ROWS, n))
-        near = np.linalg.norm(xy[rows, None] - xy[None], axis=2) < TWIN_PX
-        twins[rows] = near.sum(1)
-        if n - near.sum(1).min() < 2:
+        hi = min(lo + ROWS, n)
+        if n - twins[lo:hi].min() < 2:
             continue
-        D = descriptor_distances(desc[rows], desc)
-        D[near] = np.inf
+        D = descriptor_distances(desc[lo:hi], desc)
+        mine = (rows_of >= lo) & (rows_of < hi)
+        D[rows_of[mine] - lo, cols_of[mine]] = np.inf
         _, first, second = nearest_two(D)
         ok = np.isfinite(second) & (second > 0)
-        ratio[rows] = np.where(ok, first / np.where(ok, second, 1), 1.0)
+        ratio[lo:hi] = np.where(ok, first / np.where(ok, second, 1), 1.0)
     return twins, ratio
+
+
+def _twin_pairs(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs (i < j) of candidates closer than `TWIN_PX`: found by a k-d tree within a
+    slightly larger radius, then kept by the distance in `xy`'s own precision, as the
+    definition computes it (`np.linalg.norm` of the difference)."""
+    pairs = cKDTree(xy).query_pairs(TWIN_PX * 1.001 + 1e-3, output_type="ndarray")
+    i, j = pairs[:, 0], pairs[:, 1]
+    near = np.linalg.norm(xy[i] - xy[j], axis=1) < TWIN_PX
+    return i[near], j[near]
 
 
 def _contrast(gray: np.ndarray, xy: np.ndarray) -> np.ndarray:

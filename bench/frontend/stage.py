@@ -9,7 +9,8 @@ length is a guess (photographs without EXIF) get the focal length estimated from
 images (`bench.frontend.geometry.estimate_focal`) before the signals read the geometry.
 `compute` is this stage for any views (`bench select` calls it on a folder of
 photographs, with the signals its policy reads); `front_end` caches it for a render
-entry or dataset; `subset` is the front end of some of its views alone (a dataset's bag).
+entry or dataset; `subset` is the front end of some of its views alone (a dataset's bag),
+cached beside it by `bag_front_end`.
 
 Cached (npz beside the render cache) by the render entry, the geometry granted, the
 detector and signal settings (and a learned detector's package versions) and the code
@@ -90,6 +91,39 @@ def front_end(
     views = load_views(entry) if views is None else views
     if grant == IMAGES:
         views = [v.without_pose() for v in views]
+    path = _path(entry, det, sig, cache_dir, grant, bagged)
+    cached = _read(path, views)
+    if cached is not None:
+        return cached
+    large = max((v.camera.width * v.camera.height for v in views), default=0) >= PROGRESS_PIXELS
+    with progress("features", 2 * len(views), "step", shown=large) as bar:
+        bar.set_postfix_str(f"{entry.name}, {grant}")
+        _, pools, sigs, seconds = (view_alone if bagged else compute)(
+            views, det, sig, step=bar.update
+        )
+    return _write(path, FrontEnd(views, pools, sigs, seconds, cached=False))
+
+
+def bag_front_end(
+    entry: Path,
+    det: DetectorConfig,
+    sig: SignalConfig,
+    cache_dir: Path,
+    grant: str,
+    full: FrontEnd,
+    keep: tuple[int, ...],
+) -> FrontEnd:
+    """`subset(full, keep, ...)` of `full`, the bagged `front_end` of `entry` under `grant`,
+    computed or read from the cache beside it: a bag's signals are computed once, not by
+    every worker that holds the bag."""
+    name = _path(entry, det, sig, cache_dir, grant, bagged=True).stem
+    path = Path(cache_dir) / f"{name}-bag-{content_key(list(keep))}.npz"
+    cached = _read(path, [full.views[i] for i in keep])
+    return cached if cached is not None else _write(path, subset(full, keep, det, sig))
+
+
+def _path(entry: Path, det: DetectorConfig, sig: SignalConfig, cache_dir, grant, bagged) -> Path:
+    """The cache file of `front_end`, named by what decides it (module docstring)."""
     key = content_key(
         {
             "entry": source_key(entry),
@@ -104,32 +138,36 @@ def front_end(
         | learned.versions(det.detector)
     )
     part = "-alone" if bagged else ""
-    path = Path(cache_dir) / f"{entry.name}-{det.detector}-{grant}{part}-{key}.npz"
-    if path.is_file():
-        try:
-            with np.load(path) as z:
-                pools = [Candidates(*(z[f"{f}_{v}"] for f in _CAND)) for v in range(len(views))]
-                sigs = [Signals(*(z[f"{s}_{v}"] for s in SIGNALS)) for v in range(len(views))]
-                seconds = {k: float(z[f"seconds_{k}"]) for k in ("detect", *TIMED)}
-            return FrontEnd(views, pools, sigs, seconds, cached=True)
-        except (OSError, ValueError, KeyError):
-            log(f"damaged front-end cache {path.name}; computing it again")
-    large = max((v.camera.width * v.camera.height for v in views), default=0) >= PROGRESS_PIXELS
-    with progress("features", 2 * len(views), "step", shown=large) as bar:
-        bar.set_postfix_str(f"{entry.name}, {grant}")
-        _, pools, sigs, seconds = (view_alone if bagged else compute)(
-            views, det, sig, step=bar.update
-        )
-    arrays = {f"{f}_{v}": getattr(c, f) for v, c in enumerate(pools) for f in _CAND}
-    arrays |= {f"{s}_{v}": getattr(g, s) for v, g in enumerate(sigs) for s in SIGNALS}
-    arrays |= {f"seconds_{k}": np.float64(s) for k, s in seconds.items()}
+    return Path(cache_dir) / f"{Path(entry).name}-{det.detector}-{grant}{part}-{key}.npz"
+
+
+def _read(path: Path, views: list[View]) -> FrontEnd | None:
+    """The front end of `views` cached at `path`; None where there is none (or it is damaged)."""
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path) as z:
+            pools = [Candidates(*(z[f"{f}_{v}"] for f in _CAND)) for v in range(len(views))]
+            sigs = [Signals(*(z[f"{s}_{v}"] for s in SIGNALS)) for v in range(len(views))]
+            seconds = {k[8:]: float(z[k]) for k in z.files if k.startswith("seconds_")}
+        return FrontEnd(views, pools, sigs, seconds, cached=True)
+    except (OSError, ValueError, KeyError):
+        log(f"damaged front-end cache {path.name}; computing it again")
+        return None
+
+
+def _write(path: Path, fe: FrontEnd) -> FrontEnd:
+    """Cache `fe` at `path` (written to a temporary name, then renamed); returns it."""
+    arrays = {f"{f}_{v}": getattr(c, f) for v, c in enumerate(fe.pools) for f in _CAND}
+    arrays |= {f"{s}_{v}": getattr(g, s) for v, g in enumerate(fe.signals) for s in SIGNALS}
+    arrays |= {f"seconds_{k}": np.float64(s) for k, s in fe.seconds.items()}
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:
             np.savez(tmp, **arrays)
     except OSError as e:
         raise BenchError(f"cannot write the front-end cache {path}: {e.strerror}") from e
-    return FrontEnd(views, pools, sigs, seconds, cached=False)
+    return fe
 
 
 def subset(full: FrontEnd, keep: tuple[int, ...], det: DetectorConfig, sig: SignalConfig):

@@ -44,7 +44,7 @@ from bench.failures import ERROR
 from bench.frontend import plugins
 from bench.frontend.geometry import RIG
 from bench.frontend.selection import check_budgets
-from bench.frontend.stage import FrontEnd, front_end
+from bench.frontend.stage import FrontEnd, bag_front_end, front_end
 from bench.frontend.views import load_views
 from bench.harness.keys import unit_keys
 from bench.results import Workspace
@@ -108,25 +108,25 @@ class Cluster:
 
 def _front_ends(
     entry: Path, cfg: RunConfig, renders: Path, grants, bag: str = ""
-) -> dict[str, FrontEnd]:
+) -> tuple[dict[str, FrontEnd], dict[str, FrontEnd]]:
     """The front end of an entry under each geometry granted, computed or read from its
-    cache; of a bag of some of its views, only what the bag's front end takes of it."""
+    cache, and the one its units read: of a bag of some of its views (`bench.unit.bags`),
+    the bag's views alone, from what the whole's front end takes of it, each cached."""
     views = load_views(entry)  # decoded once, when a front end is computed
-    bagged = 0 < len(bag.split()) < len(views)
-    return {
-        g: front_end(entry, cfg.detector, cfg.signals, renders / "frontend", g, views, bagged)
-        for g in grants
-    }
+    keep = bags.bag_views(views, bag)
+    det, sig, cache = cfg.detector, cfg.signals, renders / "frontend"
+    whole = {g: front_end(entry, det, sig, cache, g, views, bool(keep)) for g in grants}
+    if not keep:
+        return whole, whole
+    return whole, {g: bag_front_end(entry, det, sig, cache, g, fe, keep) for g, fe in whole.items()}
 
 
 def _scene(entry: Path, cfg: RunConfig, renders: Path, grants, bag: str = "") -> LoadedScene:
     key = (str(entry), repr(cfg), tuple(grants), bag)
     if _HELD.get("key") != key:
         _HELD.clear()  # let the previous scene go before loading the next
-        fronts = _front_ends(entry, cfg, renders, grants, bag)
-        if len(bag.split()) not in (0, len(next(iter(fronts.values())).views)):
-            # a bag's views alone (`bench.unit.bags`); a bag of every view is the entry
-            fronts = bags.bag_fronts(fronts, bag, cfg.detector, cfg.signals)
+        whole, fronts = _front_ends(entry, cfg, renders, grants, bag)
+        if fronts is not whole:  # a bag's views alone
             truth = bags.bag_truth(entry, fronts)
         else:  # the evaluation side may read the poses: the rig's front end holds them
             posed = fronts[RIG].views if RIG in fronts else load_views(entry)
@@ -138,12 +138,12 @@ def _scene(entry: Path, cfg: RunConfig, renders: Path, grants, bag: str = "") ->
 
 def scene_task(group: tuple, entry: Path, cfg: RunConfig, renders: Path, plan: Plan) -> dict:
     """The front ends of the render entry of `group` (scene, seed) under each geometry
-    granted, computed or read from their cache, checked against the budgets; returns their
-    seconds and the largest pool."""
+    granted (and of its bag), computed or read from their cache, checked against the
+    budgets; returns their seconds and the largest pool."""
     t = time.perf_counter()
     bag = next((u.bag for u in plan.work if u.group == group), "")
-    fronts = _front_ends(entry, cfg, renders, plan.grants, bag)
-    sizes = [len(p) for p in next(iter(fronts.values())).pools]
+    whole, _ = _front_ends(entry, cfg, renders, plan.grants, bag)
+    sizes = [len(p) for p in next(iter(whole.values())).pools]
     check_budgets(sizes, plan.budgets, f"{group[0]} seed {group[1]}")
     largest = max(sizes)
     return {"seconds": time.perf_counter() - t, "largest_pool": largest}

@@ -11,7 +11,7 @@ more images than the bag's size is one bag of all of them.
 
 A bag is a scene of its own to the units that read it: its views, their candidates (the
 dataset's, detected once per image and cached), the signals computed on the bag's views
-alone (`bag_fronts`: those that read other views see only the bag's), and the ground
+alone (`bench.frontend.stage.bag_front_end`: those that read other views see only the bag's), and the ground
 truth of its views (`bag_truth`). The bag is a field of its units (`Unit.bag`: its image
 names, space-separated), so of its rows' key (column `bench.vocabulary.BAG`, part of `KEY`; `views`: its size): a row of
 another bag is another row.
@@ -29,7 +29,7 @@ from bench.evaluation.relative import MIN_SHARED
 from bench.evaluation.truth import COVISIBLE_DEG, covisible_pairs, scene_truth
 from bench.frontend.colmap_model import points_seen, read_model
 from bench.frontend.geometry import RIG
-from bench.frontend.stage import FrontEnd, subset
+from bench.frontend.stage import FrontEnd
 from bench.frontend.views import Source, load_views
 
 REDRAWS = 100
@@ -81,12 +81,14 @@ def dataset_bags(folder: str, size: int, count: int) -> tuple[str, ...]:
     return tuple(" ".join(model[i][0] for i in bag) for bag in bags)
 
 
-def bag_fronts(fronts: dict[str, FrontEnd], bag: str, det, sig) -> dict[str, FrontEnd]:
-    """The front end of a bag's views alone under each geometry granted
-    (`bench.frontend.stage.subset`)."""
-    index = {v.name: i for i, v in enumerate(next(iter(fronts.values())).views)}
-    keep = tuple(index[n] for n in bag.split())
-    return {g: subset(fe, keep, det, sig) for g, fe in fronts.items()}
+def bag_views(views, bag: str) -> tuple[int, ...]:
+    """The indices in `views` of a bag's images (`Unit.bag`); none where the unit reads no
+    bag, or a bag of every view (which is the entry itself)."""
+    names = bag.split()
+    if not 0 < len(names) < len(views):
+        return ()
+    index = {v.name: i for i, v in enumerate(views)}
+    return tuple(index[n] for n in names)
 
 
 def bag_truth(entry: Path, fronts: dict[str, FrontEnd]):
