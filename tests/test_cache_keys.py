@@ -248,13 +248,17 @@ def test_library_versions_decide_the_rows_they_run(monkeypatch):
         return lambda name: "9.9" if name == lib else real(name)
 
     monkeypatch.setattr(codehash, "version", other("pycolmap"))
+    codehash._version.cache_clear()  # read once per process: here, the other version
     assert all(keys.prediction_hash(cfg, m, "sfm") != before[m] for m in methods)
     keys.evaluation_hash.cache_clear()
     assert keys.evaluation_hash() != scored
     monkeypatch.setattr(codehash, "version", other("torch"))
+    codehash._version.cache_clear()
     changed = {m for m in methods if keys.prediction_hash(cfg, m, "sfm") != before[m]}
     assert changed == {"aliked-b"}
     keys.evaluation_hash.cache_clear()
+    monkeypatch.undo()
+    codehash._version.cache_clear()
 
 
 def test_what_a_method_reads_decides_its_rows(monkeypatch):
