@@ -141,12 +141,17 @@ def holm(p) -> np.ndarray:
     return out
 
 
+PERMUTED = 13
+"""The most pairs for which `scipy.stats.wilcoxon` tests zero or tied differences by
+permutation (`method="auto"`)."""
+
+
 def paired_p(x: np.ndarray, y: np.ndarray) -> float:
     """Two-sided Wilcoxon signed-rank p-value of paired samples (1 where they never differ):
     `scipy.stats.wilcoxon`'s. Where it takes the exact permutation test (13 pairs or fewer,
     with zero or tied differences) its statistic is vectorised here, over all 2^n sign
-    flips at once: the same null distribution and p-value, 100 times faster (scipy calls
-    the statistic once per flip)."""
+    flips at once: the same null distribution and p-value (scipy calls the statistic once
+    per flip; 450 random cases took 199 s through scipy's path, 5.7 s here)."""
     d = x - y
     if not np.any(d):
         return 1.0
@@ -157,11 +162,6 @@ def paired_p(x: np.ndarray, y: np.ndarray) -> float:
         )
         return float(test.pvalue)
     return float(wilcoxon(x, y).pvalue)
-
-
-PERMUTED = 13
-"""The most pairs for which `scipy.stats.wilcoxon` tests zero or tied differences by
-permutation (`method="auto"`)."""
 
 
 def _positive_ranks(d: np.ndarray, axis: int = -1) -> np.ndarray:
