@@ -14,7 +14,7 @@ from bench.backend.matching import (
     expected_ransac_iterations,
     verify,
 )
-from bench.backend.reconstruction import mapping_task, triangulate
+from bench.backend.reconstruction import known_pose_task, mapping_task, triangulate
 from bench.evaluation.poses import pose_metrics, registered_poses
 from bench.frontend.features import descriptor_distances, nearest_two, tentative_matches
 from tests.conftest import synthetic_rig
@@ -42,7 +42,7 @@ def test_verification_removes_planted_outliers():
     assert len(kept & set(range(150, 190))) <= 4
 
 
-def _triangulate_exact(cams, X, noise_px, tmp_path):
+def _triangulate_exact(cams, X, noise_px):
     rng = np.random.default_rng(1)
     xy = [c.project(X)[0] + rng.normal(0, noise_px, (len(X), 2)) for c in cams]
     ids = np.arange(len(X))
@@ -52,9 +52,7 @@ def _triangulate_exact(cams, X, noise_px, tmp_path):
         for j in range(i + 1, 4)
     ]
     names = [f"view_{k:02d}.png" for k in range(4)]
-    for n in names:
-        cv2.imwrite(str(tmp_path / n), np.zeros((480, 640, 3), np.uint8))
-    model = triangulate(tmp_path, cams, names, xy, pairs, BackendConfig())
+    model = triangulate(cams, names, xy, pairs, BackendConfig())
     got = {}
     for p in model.points3D.values():
         obs = {el.image_id: el.point2D_idx for el in p.track.elements}
@@ -62,9 +60,9 @@ def _triangulate_exact(cams, X, noise_px, tmp_path):
     return got
 
 
-def test_triangulation_with_known_poses_recovers_exact_points(tmp_path):
+def test_triangulation_with_known_poses_recovers_exact_points():
     cams, X = synthetic_rig()
-    got = _triangulate_exact(cams, X, 0.0, tmp_path)
+    got = _triangulate_exact(cams, X, 0.0)
     assert len(got) == len(X)
     err = np.array([np.linalg.norm(got[k] - X[k]) for k in got])
     # COLMAP's database stores keypoints as float32 (~4e-5 px at x = 640), which alone
@@ -72,9 +70,9 @@ def test_triangulation_with_known_poses_recovers_exact_points(tmp_path):
     assert np.median(err) < 1e-6 and err.max() < 5e-6
 
 
-def test_triangulation_error_under_half_pixel_noise_is_within_its_bound(tmp_path):
+def test_triangulation_error_under_half_pixel_noise_is_within_its_bound():
     cams, X = synthetic_rig()
-    got = _triangulate_exact(cams, X, 0.5, tmp_path)
+    got = _triangulate_exact(cams, X, 0.5)
     assert len(got) >= 0.95 * len(X)
     err = np.array([np.linalg.norm(got[k] - X[k]) for k in got])
     # depth error of a stereo pair: z^2 * sigma / (f * b); 4 views, baseline up to 3 units
@@ -133,7 +131,7 @@ def test_expected_ransac_iterations():
     assert expected_ransac_iterations(1.0) == 100.0 and expected_ransac_iterations(0.0) == 10000.0
 
 
-def test_a_two_view_outlier_is_dropped_by_multiview_and_kept_by_twoview(tmp_path):
+def test_a_two_view_outlier_is_dropped_by_multiview_and_kept_by_twoview():
     """150 points seen by all four cameras, plus one wrong match seen by two: its second
     observation lies on the epipolar line of the first, at the image of a point 3 units
     deeper, so it triangulates cleanly (no reprojection error) far from any true point."""
@@ -152,11 +150,9 @@ def test_a_two_view_outlier_is_dropped_by_multiview_and_kept_by_twoview(tmp_path
                 m = np.vstack([m, [len(X), len(X)]])
             pairs.append(PairMatches(i, j, m, m, "CALIBRATED"))
     names = [f"view_{k:02d}.png" for k in range(4)]
-    for n in names:
-        cv2.imwrite(str(tmp_path / n), np.zeros((480, 640, 3), np.uint8))
     found = {}
     for protocol in ("multiview", "twoview"):
-        model = triangulate(tmp_path, cams, names, xy, pairs, BackendConfig(), protocol)
+        model = triangulate(cams, names, xy, pairs, BackendConfig(), protocol)
         P = np.array([p.xyz for p in model.points3D.values()])
         found[protocol] = (len(P), np.linalg.norm(P - wrong, axis=1).min())
     assert found["multiview"][0] == len(X) and found["multiview"][1] > 1.0
@@ -173,8 +169,8 @@ def _matched_rig(tmp_path, views):
         for i in range(len(cams))
         for j in range(i + 1, len(cams))
     ]
-    for n in _names(len(cams)):
-        cv2.imwrite(str(tmp_path / n), np.zeros((480, 640, 3), np.uint8))
+    for n in _names(len(cams)):  # grey views: a point coloured from them would be 200
+        cv2.imwrite(str(tmp_path / n), np.full((480, 640, 3), 200, np.uint8))
     return cams, xy, pairs
 
 
@@ -194,6 +190,17 @@ def test_a_hand_made_two_view_scene_is_registered_and_scored(tmp_path):
     rec = mapping_task(tmp_path, cams, _names(len(cams)), xy, pairs, BackendConfig())
     est = registered_poses(rec.model, {n: k for k, n in enumerate(_names(4))})
     assert pose_metrics(est, cams)[0]["maa"] == 1.0
+
+
+def test_neither_task_reads_the_images_to_colour_its_points(tmp_path):
+    """COLMAP colours the points from the views it is given (most of a call on large
+    photographs); no metric reads a colour, so the back end gives it none to read."""
+    cams, xy, pairs = _matched_rig(tmp_path, [0, 1, 2, 3])
+    mapped = mapping_task(tmp_path, cams, _names(4), xy, pairs, BackendConfig()).model
+    known = known_pose_task(cams, _names(4), xy, pairs, BackendConfig(), "multiview").model
+    for model in (mapped, known):
+        colours = np.array([p.color for p in model.points3D.values()])
+        assert len(colours) > 100 and not colours.any()
 
 
 def test_a_mapping_without_matches_is_a_recorded_failure(tmp_path):

@@ -89,7 +89,7 @@ def test_a_task_is_added_in_one_place(renders_dir, tmp_path):
     runner = tasks.TaskRunner(
         vocabulary.Task("count", "rig", needs=("observed_points",), metrics=("observed_points",)),
         reconstruct=lambda m, cfg, protocol: known_pose_task(
-            m.image_dir, m.cams, m.names, m.xy, m.pairs, cfg, protocol
+            m.cams, m.names, m.xy, m.pairs, cfg, protocol
         ),
         evaluate=count_points,
     )

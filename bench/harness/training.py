@@ -30,7 +30,6 @@ from bench.evaluation.truth import scene_truth
 from bench.files import write_text_atomic
 from bench.frontend.policies import ADAPTIVE_SIGNALS, Weights
 from bench.frontend.stage import front_end
-from bench.frontend.views import Source
 from bench.render.entry import render_scene
 from bench.unit.config import RunConfig
 
@@ -49,7 +48,7 @@ def labelled_candidates(entry: Path, cfg: RunConfig, renders: Path) -> tuple[np.
     pairs, _ = match_and_verify(
         cams, xy, [c.descriptors for c in fe.pools], cfg.backend, cfg.detector.detector
     )
-    model = triangulate(Source.of(entry).images, cams, names, xy, pairs, cfg.backend)
+    model = triangulate(cams, names, xy, pairs, cfg.backend)
     ids = list(model.points3D)
     X = np.array([model.points3D[i].xyz for i in ids]).reshape(-1, 3)
     accurate = dict(zip(ids, point_error(X, truth.surface) < LABEL_TAU))

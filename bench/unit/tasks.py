@@ -190,7 +190,7 @@ register(
             ),
         ),
         reconstruct=lambda m, cfg, protocol: known_pose_task(
-            m.image_dir, m.cams, m.names, m.xy, m.pairs, cfg, protocol
+            m.cams, m.names, m.xy, m.pairs, cfg, protocol
         ),
         evaluate=lambda truth, model, names, protocol, poses: evaluate_known_pose(
             truth, model, PROTOCOLS[protocol]
