@@ -7,6 +7,7 @@ tables' stratified 95 % interval (`bench.report.stats.paired_difference`) and wi
 
     .venv/bin/python benchmarks/matchable.py results/published results/published-dense \
         results/published-datasets
+    .venv/bin/python benchmarks/matchable.py results/published --peers ALIKED_FOLDER
 """
 
 from __future__ import annotations
@@ -62,9 +63,20 @@ def select_seconds(runs: pd.DataFrame) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("results", nargs="+", type=Path, help="results folders holding runs.csv")
+    ap.add_argument(
+        "--peers",
+        type=Path,
+        help="a results folder of the same scenes and seeds on another pool, whose rows join "
+        "each folder's (aliked-b runs on ALIKED's pool: bench run --detector aliked "
+        "--methods aliked-b)",
+    )
     args = ap.parse_args()
+    extra = read_runs(args.peers / "runs.csv") if args.peers else None
     for folder in args.results:
         runs = read_runs(folder / "runs.csv")
+        if extra is not None:
+            joins = extra["method"].isin(PEERS) & ~extra["method"].isin(runs["method"])
+            runs = pd.concat([runs, extra[joins]], ignore_index=True)
         print(f"{folder} ({runs['scene'].nunique()} scenes, {runs['seed'].nunique()} seeds)")
         print("\n".join(differences(runs)))
         print(f"  selection per view (median): {select_seconds(runs)}")

@@ -139,6 +139,33 @@ def test_table2_of_a_grid_without_the_tri_task():
     assert math.isnan(t2.loc["s", "oracle_acc_completeness_pct"])
 
 
+def test_table2_of_a_grid_of_one_peer():
+    """`bench run --detector aliked --methods aliked-b` crashed in Table 2 (KeyError
+    'scene') after its rows were written: no policy ran beside a peer, so nothing was
+    paired."""
+    from bench.report.tables import table2
+
+    rows = [
+        dict(
+            scene="s",
+            seed=seed,
+            budget=64,
+            task="pairs",
+            protocol="multiview",
+            method="aliked-b",
+            auc_10=0.4,
+            status="ok",
+        )
+        for seed in (0, 1)
+    ]
+    vocab = Vocabulary.current()
+    frame = headline_frame(pd.DataFrame(rows), vocab)
+    assert paired(frame, vocab).empty
+    t2 = table2(frame, paired(frame, vocab), vocab).set_index("scene")
+    assert math.isnan(t2.loc["all scenes", "diff_pairs_auc_10"])
+    assert t2.loc["s", "best_baseline_pairs_auc_10_policy"] == ""
+
+
 def test_the_headline_frame_adds_its_columns_without_a_performance_warning():
     """pandas' PerformanceWarning ("highly fragmented") was printed six times in nbv and
     dataset runs: every outer merge leaves a block per column, and the rule's columns were

@@ -353,6 +353,8 @@ def table2(rows: pd.DataFrame, pairs: pd.DataFrame, vocab: Vocabulary) -> pd.Dat
     `headline_frame`)."""
     out = []
     metrics, lower = vocab.headline_metrics(), vocab.lower_better()
+    if pairs.empty:  # no policy beside a baseline or peer (a grid of aliked-b alone)
+        pairs = pd.DataFrame(columns=["scene", "budget", "baseline", "metric"])
     for budget in sorted(b for b in pd.unique(rows["budget"]) if b > 0):
         for scope in [*pd.unique(rows["scene"]), "all scenes"]:
             part = rows[rows["budget"] == budget]
