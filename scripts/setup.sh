@@ -31,9 +31,9 @@ fi
 # installed again whenever pyproject.toml, the pinned versions (constraints.txt) or the extras change
 want=$(cat pyproject.toml constraints.txt | sha256sum)" $extras"
 if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
-    # measured: 6.6 GB in .venv with the learned extra (torch's CUDA build and its nvidia
-    # libraries 5.6), 1.0 GB without; what .venv holds already counts; refuse in one line
-    # rather than let pip fail midway
+    # measured: 6.6 GB in .venv with the learned extra (5.6 of it: torch's CUDA build, its
+    # nvidia libraries and triton), 1.0 GB without; what .venv holds already counts; refuse
+    # in one line rather than let pip fail midway
     need_mb=$(($([ "$extras" = test,learned ] && echo 7000 || echo 1500) - $(du -sm .venv | cut -f1)))
     free_mb=$(df -Pm .venv | awk 'NR == 2 {print $4}')
     if [ "$free_mb" -lt "$need_mb" ]; then
