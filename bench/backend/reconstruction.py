@@ -24,9 +24,9 @@ The rig's poses are never read for it. Where COLMAP's first-pair tests stop it (
 two views registered), the mapper starts once more from a forward-motion first pair
 (`FORWARD_START`): a capture that moves along its optical axis (a car, a survey drone, a
 corridor robot) gives first pairs of small angle whose motion lies along the axis, which
-COLMAP's defaults refuse (docs/datasets.md, "A forward-moving set"). The track protocol applies to its triangulation
-too: `multiview` is COLMAP's default mapper (two-view tracks ignored; so a scene seen by
-two views alone cannot be mapped), `twoview` keeps them.
+COLMAP's defaults refuse (docs/datasets.md, "A forward-moving set"). The track protocol
+applies to its triangulation too: `multiview` is COLMAP's default mapper (two-view tracks
+ignored; so a scene seen by two views alone cannot be mapped), `twoview` keeps them.
 
 The triangulator and the mapper are seeded and single-threaded, so a run is reproducible.
 Neither reads the images: COLMAP reads them only to colour the points, which no metric

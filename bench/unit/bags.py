@@ -12,9 +12,10 @@ more images than the bag's size is one bag of all of them.
 A bag is a scene of its own to the units that read it: its views, their candidates (the
 dataset's, detected once per image and cached), the signals computed on the bag's views
 alone (`bench.frontend.stage.bag_front_end`: those that read other views see only the
-bag's), and the ground truth of its views (`bag_truth`). The bag is a field of its units (`Unit.bag`: its image
-names, space-separated), so of its rows' key (column `bench.vocabulary.BAG`, part of `KEY`; `views`: its size): a row of
-another bag is another row.
+bag's), and the ground truth of its views (`bag_truth`). The bag is a field of its units
+(`Unit.bag`: its image names, space-separated), so of its rows' key (column
+`bench.vocabulary.BAG`, part of `KEY`; `views`: its size): a row of another bag is another
+row.
 """
 
 from __future__ import annotations
