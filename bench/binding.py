@@ -59,10 +59,11 @@ def read_settings(results: Path) -> dict:
     return json.loads((Path(results) / CONFIG).read_text())["settings"]
 
 
-def _flatten(d: dict, prefix: str = "") -> dict:
+def flatten(d: dict, prefix: str = "") -> dict:
+    """A nested dict's leaves by their dotted paths (`section.field`)."""
     out = {}
     for k, v in d.items():
-        out |= _flatten(v, f"{prefix}{k}.") if isinstance(v, dict) else {f"{prefix}{k}": v}
+        out |= flatten(v, f"{prefix}{k}.") if isinstance(v, dict) else {f"{prefix}{k}": v}
     return out
 
 
@@ -78,7 +79,7 @@ def _shared(settings: dict) -> dict:
 def _settings(path: Path, remedy: str) -> dict:
     """The flattened settings a `config.json` holds (unreadable: one line with `remedy`)."""
     try:
-        return _flatten(json.loads(path.read_text())["settings"])
+        return flatten(json.loads(path.read_text())["settings"])
     except (ValueError, KeyError, TypeError) as e:
         raise BenchError(f"{path} is unreadable ({type(e).__name__}); {remedy}") from e
 
@@ -92,7 +93,7 @@ def _differing(there: dict, here: dict, now: str = "now") -> list[str]:
 def _new_at_default(older: dict, newer: dict, defaults: dict | None) -> set[str]:
     """The flattened settings `newer` has and `older` lacks, at their value in `defaults`:
     settings added since `older` was written, whose default is the behaviour before them."""
-    default = _flatten(_shared(json.loads(json.dumps(defaults or {}))))
+    default = flatten(_shared(json.loads(json.dumps(defaults or {}))))
     return {k for k, v in newer.items() if k not in older and k in default and default[k] == v}
 
 
@@ -112,7 +113,7 @@ def check_results_dir(
     stored_path = results / CONFIG
     if stored_path.exists() and not overwrite:
         stored = _settings(stored_path, "use --overwrite to start again")
-        now = _flatten(_shared(settings))
+        now = flatten(_shared(settings))
         # a stored setting this code no longer has (one that moved to its method), or a
         # method's own setting, decides nothing here; nor does a setting added since the
         # folder was made, at its default (a new setting's default is the behaviour before it)

@@ -24,8 +24,10 @@ import ast
 import hashlib
 import importlib.util
 import json
+import subprocess
 import textwrap
 import time
+from collections.abc import Callable
 from functools import cache
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -79,11 +81,32 @@ def _file(module: str, package: str) -> Path | None:
     return Path(origin) if origin and origin.endswith(".py") else None
 
 
-def _imported(module: str, path: Path, root: str) -> set[str]:
+Source = Callable[[Path], str]
+"""Where a module's text is read from: the file as it is now (`Path.read_text`), or as a
+commit held it (`git_source`)."""
+
+
+def git_source(commit: str) -> Source:
+    """The text of a file of this repository as `commit` held it."""
+    root = Path(__file__).resolve().parent.parent
+
+    def read(path: Path) -> str:
+        rel = path.resolve().relative_to(root).as_posix()
+        done = subprocess.run(
+            ["git", "show", f"{commit}:{rel}"], cwd=root, capture_output=True, text=True
+        )
+        if done.returncode:
+            raise BenchError(f"cannot read {rel} at commit {commit}: {done.stderr.strip()}")
+        return done.stdout
+
+    return read
+
+
+def _imported(module: str, path: Path, root: str, source: Source = Path.read_text) -> set[str]:
     """The modules of package `root` that `module`'s source imports anywhere in it."""
     package = module if path.name == "__init__.py" else module.rpartition(".")[0]
     named = set()
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in ast.walk(ast.parse(source(path))):
         if isinstance(node, ast.Import):
             named |= {a.name for a in node.names}
         elif isinstance(node, ast.ImportFrom):
@@ -95,9 +118,12 @@ def _imported(module: str, path: Path, root: str) -> set[str]:
     return {m for m in named if _file(m, root) is not None}
 
 
-def closure(modules: tuple[str, ...], package: str = PACKAGE) -> dict[str, Path]:
+def closure(
+    modules: tuple[str, ...], package: str = PACKAGE, source: Source = Path.read_text
+) -> dict[str, Path]:
     """Every module of `package` that `modules` import, directly or not, with the
-    packages above each (whose `__init__` runs first): name -> source file."""
+    packages above each (whose `__init__` runs first): name -> source file (its text read
+    by `source`)."""
     out: dict[str, Path] = {}
     todo = list(modules)
     while todo:
@@ -110,7 +136,7 @@ def closure(modules: tuple[str, ...], package: str = PACKAGE) -> dict[str, Path]
         out[m] = path
         parts = m.split(".")
         todo += [".".join(parts[:i]) for i in range(1, len(parts))]
-        todo += sorted(_imported(m, path, package))
+        todo += sorted(_imported(m, path, package, source))
     return dict(sorted(out.items()))
 
 
@@ -124,8 +150,20 @@ def code_hash(modules: tuple[str, ...], package: str = PACKAGE) -> str:
     per process: `check_unchanged` guards the files it read)."""
     files = closure(modules, package)
     HASHED.update(files.values())
-    parts = {m: normal_form(p.read_text()) for m, p in files.items()}
+    return _hash({m: normal_form(p.read_text()) for m, p in files.items()})
+
+
+def _hash(parts: dict[str, str]) -> str:
     return hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()[:12]
+
+
+def code_record(modules: tuple[str, ...], source: Source = Path.read_text) -> dict:
+    """What `code_hash(modules)` hashes, kept to be compared later: the hash (`code`) and
+    each module's own (`modules`: module -> the hash of its normal form), read by `source`
+    (a commit's: `git_source`)."""
+    files = closure(modules, PACKAGE, source)
+    parts = {m: normal_form(source(p)) for m, p in files.items()}
+    return {"code": _hash(parts), "modules": {m: _hash({m: t}) for m, t in parts.items()}}
 
 
 def check_unchanged() -> None:

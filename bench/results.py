@@ -25,6 +25,11 @@ from bench.vocabulary import (
 RUNS = "runs.csv"
 DAMAGED = "runs.damaged.csv"
 """Damaged rows set aside (`set_aside_damaged`)."""
+STALE = "runs.stale.csv"
+"""Rows a run replaced or no longer counts as current (`keep_runs`): moved here, never
+deleted, in `runs.csv`'s own format (checksums kept)."""
+ORIGIN = "origin.json"
+"""A published snapshot's origin: what made its rows (`bench.harness.origin`)."""
 CONFIG = "config.json"
 """The settings the folder is bound to (`bind_results_dir`)."""
 VOCABULARY = "vocabulary.json"

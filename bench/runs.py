@@ -34,7 +34,7 @@ import pandas as pd
 from bench import BenchError
 from bench.binding import read_vocabulary
 from bench.files import content_key, write_text_atomic
-from bench.results import DAMAGED
+from bench.results import DAMAGED, STALE
 from bench.vocabulary import (
     BAG,
     HEADLINE,
@@ -366,22 +366,43 @@ def append_runs(path: Path, rows: list[dict], vocab: Vocabulary) -> None:
     write_text_atomic(path, csv_lines([header, *body]))
 
 
-def keep_runs(path: Path, keys: set[tuple]) -> None:
+def keep_runs(path: Path, keys: set[tuple]) -> int:
     """Keep the rows of `keys` alone in `runs.csv` (before a run appends the rows it
-    computes again); the file is rewritten only if it holds others."""
+    computes again): every other row is moved, as it was, to `runs.stale.csv` beside it
+    (a damaged one to `runs.damaged.csv`; appended, never deleted). How many were moved."""
     path = Path(path)
     if not path.is_file():
-        return
+        return 0
     header, good, bad = check_runs(path)
-    kept = [
-        line for _, line in good if _key_of(dict(zip(header, next(csv.reader([line]))))) in keys
-    ]
-    if len(kept) == len(good) + len(bad):
-        return
-    if kept:
-        write_text_atomic(path, "\n".join([",".join(header), *kept]) + "\n")
-    else:
-        path.unlink()
+    keyed = [(_key_of(dict(zip(header, next(csv.reader([line]))))), line) for _, line in good]
+    kept = [line for key, line in keyed if key in keys]
+    moved = [line for key, line in keyed if key not in keys]
+    for name, lines in ((STALE, moved), (DAMAGED, [line for _, line in bad])):
+        if lines:
+            _append_aside(path.with_name(name), header, lines)
+    if not moved and not bad:
+        return 0
+    write_text_atomic(path, "\n".join([",".join(header), *kept]) + "\n")
+    return len(moved) + len(bad)
+
+
+def _append_aside(aside: Path, header: list[str], lines: list[str]) -> None:
+    """`lines` of a `runs.csv` whose header is `header`, appended to the file `aside` as
+    they were (where its header differs, both parts under the union of the two, each row's
+    empty fields left out of its checksum as ever)."""
+    if aside.exists():
+        prior = list(csv.reader(aside.read_text().splitlines()))
+        if prior and prior[0] != header:
+            rows = [dict(zip(prior[0], f)) for f in prior[1:]]
+            rows += [dict(zip(header, f)) for f in csv.reader(lines)]
+            union = [k for k in dict.fromkeys([*prior[0], *header]) if k != ROW_CHECKSUM]
+            union.append(ROW_CHECKSUM)
+            write_text_atomic(
+                aside, csv_lines([union, *([r.get(k, "") for k in union] for r in rows)])
+            )
+            return
+    text = aside.read_text() if aside.exists() else ",".join(header) + "\n"
+    write_text_atomic(aside, text + "\n".join(lines) + "\n")
 
 
 def set_aside_damaged(path: Path, vocab: Vocabulary) -> int:

@@ -673,3 +673,37 @@ def test_a_file_that_cannot_be_written_is_one_line_and_the_rows_are_kept(
     (line,) = [x for x in err.splitlines() if x.startswith("bench: error:")]
     assert "README.md" in line and "already written is kept" in line
     assert (r / "runs.csv").read_bytes() == before
+
+
+def test_no_row_is_deleted_a_stale_one_is_moved_aside_and_said(
+    quick_results, renders_dir, tmp_path, capsys, monkeypatch
+):
+    """After an edit of the code (here: the rows' hashes made another code's), a narrower
+    grid computes its own rows again; the stale rows outside it are moved, as they were,
+    to runs.stale.csv, said in the log, and read there as runs."""
+    from bench.runs import ROW_CHECKSUM, read_runs, row_checksum
+    from tests.conftest import bench_run, rows_of
+
+    table_pairs = lambda r: (r["scene"] == "table") & (r["task"] == "pairs")  # noqa: E731
+    keep = lambda r: table_pairs(r) & r["method"].isin(["texture", "colmap-b"])  # noqa: E731
+    folder = rows_of(quick_results, tmp_path / "keep", keep)
+    rows = pd.read_csv(folder / "runs.csv", dtype=str, keep_default_na=False)
+    rows["prediction_hash"] = "0ther0c0de000"
+    rows[ROW_CHECKSUM] = [row_checksum(r) for r in rows.to_dict("records")]
+    rows.to_csv(folder / "runs.csv", index=False)
+    grid = dataclasses.replace(
+        small_grid_of(("table",), ("texture",)), tasks=("pairs",), protocols=("multiview",)
+    )
+    bench_run(grid, folder, renders_dir)
+    err = capsys.readouterr().err
+    assert "2 row(s) of " in err and "moved, as they were, to runs.stale.csv" in err
+    stale = read_runs(folder / "runs.stale.csv")
+    assert sorted(stale["method"]) == ["colmap-b", "texture"]
+    assert set(stale["prediction_hash"]) == {"0ther0c0de000"}
+    assert list(read_runs(folder / "runs.csv")["method"]) == ["texture"]
+
+
+def small_grid_of(scenes, methods):
+    from tests.conftest import small_grid
+
+    return dataclasses.replace(small_grid(), scenes=scenes, methods=methods)

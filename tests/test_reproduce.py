@@ -12,14 +12,14 @@ import pytest
 from bench import ROOT
 from bench.cli import main
 from bench.runs import ROW_CHECKSUM, row_checksum
-from tests.conftest import POLICIES, spy
+from tests.conftest import POLICIES, snapshot_of, spy
 
 
 def test_reproduce_says_identical_then_names_what_moved(
     quick_results, renders_dir, tmp_path, capsys
 ):
-    published, here = tmp_path / "published", tmp_path / "here"
-    shutil.copytree(quick_results, published)
+    published = snapshot_of(quick_results, tmp_path / "published")
+    here = tmp_path / "here"
     argv = ["reproduce", "--published", str(published), "--scenes", "table", "--budget", "64"]
     argv += ["--results", str(here), "--renders", str(renders_dir), "--workers", "1"]
     assert main(argv) == 0
@@ -36,36 +36,117 @@ def test_reproduce_says_identical_then_names_what_moved(
         main(argv)  # nothing computed again: the slice's rows are there
     assert stop.value.code == 1
     out = capsys.readouterr().out
-    assert "1 value(s) moved in 1 column(s):" in out and "coverage_pct: 1 value(s)" in out
+    assert "moved: 1 value(s) in 1 column(s):" in out and "coverage_pct: 1 value(s)" in out
 
 
 def test_reproduce_refuses_what_it_cannot_compare(quick_results, tmp_path, capsys):
     published = tmp_path / "published"
     shutil.copytree(quick_results, published)
-    argv = ["reproduce", "--published", str(published), "--scenes", "corridor"]
-    assert main(argv + ["--results", str(tmp_path / "x")]) == 2
-    assert "holds no rows of scenes corridor, seeds 0 at budget 256" in capsys.readouterr().err
+    argv = ["reproduce", "--published", str(published), "--results", str(tmp_path / "x")]
+    assert main([*argv, "--scenes", "corridor", "--budget", "64"]) == 2
+    assert "holds no rows of scenes corridor, seeds 0 at budget 64" in capsys.readouterr().err
+    for budget in ("300", "0"):  # before any work: no folder is made
+        assert main([*argv, "--budget", budget]) == 2
+        err = capsys.readouterr().err
+        assert f"--budget {budget}: " in err and "holds budgets 64" in err
+    assert not (tmp_path / "x").exists()
+
+
+def _frontier_snapshot(quick_results, renders_dir, root):
+    """The session's small grid published as a regime's snapshot is: with the frontier
+    peer `colmap-b` at a budget of its own (96), its origin recorded."""
+    import dataclasses
+
+    from tests.conftest import bench_run, small_grid
+
+    grown = root / "grown"
+    shutil.copytree(quick_results, grown)
+    grid = dataclasses.replace(small_grid(), methods=("colmap-b",), frontier=(96,))
+    bench_run(grid, grown, renders_dir)
+    return snapshot_of(grown, root / "results" / "published")
 
 
 def test_verdict_computes_the_modules_rows_alone_beside_the_snapshot(
     quick_results, renders_dir, tmp_path, capsys, monkeypatch
 ):
+    import json
+
     from bench.cli import verdict
 
     root = tmp_path / "root"
-    shutil.copytree(quick_results, root / "results" / "published")
+    published = _frontier_snapshot(quick_results, renders_dir, root)
+    before = {p.name: p.read_bytes() for p in published.iterdir() if p.is_file()}
     monkeypatch.setattr(verdict, "ROOT", root)
     calls = []
     spy(monkeypatch, calls)
     module = ROOT / "examples" / "my_policy.py"
     out = tmp_path / "v"
     argv = ["verdict", str(module), "--regimes", "sparse", "--results", str(out), "--workers", "1"]
-    assert main(argv + ["--renders", str(renders_dir)]) == 0
-    assert calls == [("center-texture", 64)] * 2  # its two cells, nothing else
+    argv += ["--renders", str(renders_dir)]
+    assert main(argv) == 0
+    assert calls == [("center-texture", 64)] * 2  # its two cells at the grid's budget alone
     rows = pd.read_csv(out / "sparse" / "runs.csv")
-    published = pd.read_csv(quick_results / "runs.csv")
-    assert len(rows) == len(published) + 2 * 5 and rows["pixels"].nunique() == 2  # 2 scenes
+    assert set(rows["method"]) == {"center-texture"} and len(rows) == 2 * 5
     said = capsys.readouterr().out
-    assert "`center-texture`" in said and "against the best own-image peer" in said
+    assert "commit test, 78 rows" in said and "the code is the snapshot's" in said
+    assert said.count("`center-texture` (") == 2  # sfm and pairs at 64: never at 96
+    assert "against the best own-image peer, `colmap-b`" in said and "B = 96" not in said
+    # the code differs from the snapshot's (as after an edit of a module in the key): the
+    # module is named, a cell of the peers computed again and compared, nothing published
+    # recomputed, copied or changed, and the verdict still printed
+    origin = json.loads((published / "origin.json").read_text())
+    origin["modules"]["bench.harness.execute"] = "edited"
+    (published / "origin.json").write_text(json.dumps(origin))
+    before["origin.json"] = (published / "origin.json").read_bytes()
+    calls.clear()
+    assert main(argv) == 0
+    said = capsys.readouterr().out
+    assert "differs from the snapshot's in 1 module(s): bench.harness.execute" in said
+    assert "its peers' cell facade seed 0 at 64 computed again:" in said
+    assert "identical: every metric value of every common row" in said
+    assert said.count("`center-texture` (") == 2
+    assert set(calls) == {("colmap-b", 64), ("colmap", 0)}  # the peers' cell, no policy row
+    assert before == {p.name: p.read_bytes() for p in published.iterdir() if p.is_file()}
     assert main(["verdict", str(tmp_path / "none.py")]) == 2
     assert "none.py is not a file" in capsys.readouterr().err
+
+
+def test_verdict_refuses_bad_input_before_any_work(tmp_path, capsys):
+    garbage = tmp_path / "garbage.py"
+    garbage.write_bytes(b"\xff\xfe\x00policy")
+    module = str(ROOT / "examples" / "my_policy.py")
+    cases = {
+        (str(garbage),): "garbage.py is not UTF-8 text",
+        (module, "--workers", "0"): "--workers must be at least 1, got 0",
+        (module, "--workers", "-1"): "--workers must be at least 1, got -1",
+        (module, "--dataset", str(tmp_path / "nonexistent")): "nonexistent",
+        (module, "--regimes", "sparse,wide"): "unknown regime 'wide'",
+    }
+    for args, line in cases.items():
+        out = tmp_path / "v"
+        assert main(["verdict", *args, "--results", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert line in err and len(err.strip().splitlines()) == 1, err
+        assert not out.exists()
+
+
+def test_verdict_without_any_verdict_says_why_and_fails(
+    quick_results, renders_dir, tmp_path, capsys, monkeypatch
+):
+    """A snapshot without the peers of the module's category: every line says why, and a
+    run that judged nothing exits 1."""
+    from bench.cli import verdict
+    from tests.conftest import rows_of
+
+    root = tmp_path / "root"
+    peerless = rows_of(quick_results, tmp_path / "p", lambda r: r["method"] != "colmap-b")
+    snapshot_of(peerless, root / "results" / "published")
+    monkeypatch.setattr(verdict, "ROOT", root)
+    module = str(ROOT / "examples" / "my_policy.py")
+    argv = ["verdict", module, "--regimes", "sparse", "--results", str(tmp_path / "v")]
+    with pytest.raises(SystemExit) as stop:
+        main([*argv, "--workers", "1", "--renders", str(renders_dir)])
+    assert stop.value.code == 1
+    said = capsys.readouterr().out
+    assert said.count("`center-texture` at B = 64 in `") == 2  # sfm and pairs, each with why
+    assert said.count("judged by no verdict: no peer of the category ran; add `colmap-b`") == 2

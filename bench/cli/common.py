@@ -8,6 +8,7 @@ import argparse
 import ast
 import dataclasses
 import inspect
+import json
 import typing
 from functools import cache
 from pathlib import Path
@@ -224,6 +225,28 @@ def apply_settings(config, assignments: list[str]):
         config = _assign_own(config, path.split("."), value, path) or _assign(
             config, path.split("."), value, path
         )
+    return config
+
+
+def settings_config(settings: dict):
+    """The `RunConfig` whose `as_dict` is `settings` (a results folder's `config.json`),
+    made as `--set` would make it; one line where no such configuration exists here."""
+    from bench.binding import OWN_SETTINGS, flatten
+    from bench.render.config import RenderConfig
+    from bench.unit.config import RunConfig
+
+    def text(v) -> str:
+        return "none" if v is None else ",".join(map(str, v)) if isinstance(v, list) else str(v)
+
+    config = RunConfig(render=None if settings.get("render") is None else RenderConfig())
+    own_of = settings.get(OWN_SETTINGS, {})  # a method declared since has its defaults
+    own = {f"{m}.{k}": v for m, d in own_of.items() for k, v in d.items()}
+    shared = {k: v for k, v in settings.items() if k != OWN_SETTINGS and v is not None}
+    config = apply_settings(config, [f"{k}={text(v)}" for k, v in (flatten(shared) | own).items()])
+    made = json.loads(json.dumps(config.as_dict()))
+    made[OWN_SETTINGS] = {m: v for m, v in made[OWN_SETTINGS].items() if m in own_of}
+    if made != settings:
+        raise BenchError("these settings are not this bench's: `bench upgrade` the folder first")
     return config
 
 

@@ -425,14 +425,12 @@ def bags_arg(args: argparse.Namespace, datasets: bool, tasks: tuple[str, ...]) -
     return size, (1 if size == 0 else count)
 
 
-def run(args: argparse.Namespace) -> None:
-    from bench.binding import read_vocabulary
-    from bench.failures import errors
+def grid_of(args: argparse.Namespace):
+    """The grid, results folder and options `bench run` would run with `args`:
+    (`BenchConfig`, the results folder, `RunOptions`, the rendered folders a dataset run
+    is compared with), nothing computed."""
     from bench.harness.execute import Cluster, default_workers
-    from bench.harness.grid import BenchConfig, RunOptions, in_grid, run_benchmark, with_reference
-    from bench.report.page import brief_table1
-    from bench.report.write import write_report
-    from bench.results import PAGE, Workspace
+    from bench.harness.grid import BenchConfig, RunOptions, with_reference
     from bench.scenes.spec import scene_names
     from bench.vocabulary import FRONTIER_BUDGETS, GROUND_TRUTH, HEADLINE, METHODS
 
@@ -497,6 +495,18 @@ def run(args: argparse.Namespace) -> None:
         reevaluate=args.reevaluate,
         cluster=Cluster(args.workers or default_workers(), args.scheduler),
     )
+    return cfg, results, options, rendered
+
+
+def run(args: argparse.Namespace) -> None:
+    from bench.binding import read_vocabulary
+    from bench.failures import errors
+    from bench.harness.grid import in_grid, run_benchmark
+    from bench.report.page import brief_table1
+    from bench.report.write import write_report
+    from bench.results import PAGE, Workspace
+
+    cfg, results, options, rendered = grid_of(args)
     written = []  # the Table 1 the report drew, to print
     report = partial(write_report, rendered=rendered or published_snapshots())
     run_report = lambda *a: written.append(report(*a))  # noqa: E731

@@ -48,7 +48,7 @@ from bench.render.entry import (
     render_scene,
     render_scenes,
 )
-from bench.results import DAMAGED, Workspace, holding
+from bench.results import DAMAGED, STALE, Workspace, holding
 from bench.runs import (
     NO_PIXELS,
     append_runs,
@@ -331,7 +331,8 @@ def _current_rows(
     )
     if stale.any():
         log(
-            f"{int(stale.sum())} row(s) were computed by other code or settings; computing them again"
+            f"{int(stale.sum())} row(s) were computed by other code or settings: those of this "
+            f"grid are computed again, and each is moved to {STALE} before the first new row"
         )
     for scene in set(df["scene"]) & {Path(d).name for d in cfg.datasets}:
         folder = cfg.dataset(scene)
@@ -465,7 +466,12 @@ def _run_in(
                 vocab = Vocabulary.current()
                 if not state["bound"]:  # the folder is bound by the first rows it gets
                     bind_results_dir(ws.results, cfg.run.as_dict(), vocab, options.overwrite)
-                    keep_runs(ws.runs_csv, done)  # the rows computed again go first
+                    moved = keep_runs(ws.runs_csv, done)  # the rows computed again go first
+                    if moved:
+                        log(
+                            f"{moved} row(s) of {ws.runs_csv} that this run replaces or no "
+                            f"longer counts as current moved, as they were, to {STALE}"
+                        )
                     state["bound"] = True
                 rows = [r | {"invocation": invocation["id"]} for r in new]
                 check_unchanged()  # the rows' hashes name the code that computed them

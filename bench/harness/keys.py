@@ -6,7 +6,7 @@ libraries its prediction reads) and its `evaluation_hash` (the scoring's). The u
 
 from __future__ import annotations
 
-from functools import cache, partial
+from functools import partial
 
 from bench.codehash import code_hash, library_versions
 from bench.files import content_key
@@ -25,32 +25,49 @@ glue between them and the scoring (an edit there predicts again: the key errs to
 computing, never toward reuse)."""
 
 
-def prediction_hash(cfg: RunConfig, method: str, task: str) -> str:
-    """The `prediction_hash` of a method's rows of a task: the settings the prediction
-    reads (`RunConfig.prediction`), the fields of the method and task that decide a row
-    (`bench.vocabulary.deciding`), the code (`PREDICTION_CODE`), the versions of the
-    libraries it runs (`bench.codehash.library_versions`: a learned pool's or matcher's
-    too, and the selection models'), the method's own settings and input files (the learned
-    weights), and for a method from a module (`--policy-module`, an entry point) its
-    module's content as well."""
+def _deciding(cfg: RunConfig, method: str, task: str) -> dict:
+    """What decides a method's predicted rows of a task but the code: the settings the
+    prediction reads (`RunConfig.prediction`), the fields of the method and task that
+    decide a row (`bench.vocabulary.deciding`), the versions of the libraries it runs
+    (`bench.codehash.library_versions`: a learned pool's or matcher's too, and the
+    selection models'), the method's own settings and input files (the learned weights),
+    and for a method from a module (`--policy-module`, an entry point) its module's
+    content (`origin`)."""
     own = cfg.policy_config(method)
     runner = TASK_RUNNERS[task]
     declared = METHODS[method]
-    base = content_key(
-        {
-            "settings": cfg.prediction(runner.settings),
-            "own": cfg.own(method),
-            "method": deciding(declared),
-            "task": {"name": task, "grant": runner.spec.grant, "maps": runner.maps},
-            "code": code_hash(PREDICTION_CODE),
-            "libraries": library_versions(
-                learned=declared.pool in LEARNED or bool(declared.matcher), models=True
-            ),
-            "inputs": plugins.files_hash(own.inputs()) if hasattr(own, "inputs") else "",
-        }
-    )
     origin = plugins.ORIGIN.get(method)
-    return content_key([base, plugins.files_hash([origin])]) if origin else base
+    return {
+        "settings": cfg.prediction(runner.settings),
+        "own": cfg.own(method),
+        "method": deciding(declared),
+        "task": {"name": task, "grant": runner.spec.grant, "maps": runner.maps},
+        "libraries": library_versions(
+            learned=declared.pool in LEARNED or bool(declared.matcher), models=True
+        ),
+        "inputs": plugins.files_hash(own.inputs()) if hasattr(own, "inputs") else "",
+        "origin": plugins.files_hash([origin]) if origin else "",
+    }
+
+
+def prediction_hash(cfg: RunConfig, method: str, task: str, code: str | None = None) -> str:
+    """The `prediction_hash` of a method's rows of a task: what decides them
+    (`_deciding`) and the code (`PREDICTION_CODE`'s hash, or `code`: a published
+    snapshot's, to check its rows against). Strict: it is how a working folder knows a
+    row is current."""
+    parts = _deciding(cfg, method, task)
+    origin = parts.pop("origin")
+    base = content_key(parts | {"code": code or code_hash(PREDICTION_CODE)})
+    return content_key([base, origin]) if origin else base
+
+
+def protocol_hash(cfg: RunConfig, method: str, task: str) -> str:
+    """What decides a method's rows of a task but the code (`_deciding`, and the
+    scoring's `_scoring_protocol`): two rows of the same protocol and pixels may be paired,
+    whatever code computed each (a published snapshot's against this code's: `bench
+    verdict`); whether the code still gives the same values is `bench reproduce`'s
+    question."""
+    return content_key([_deciding(cfg, method, task), _scoring_protocol()])
 
 
 SCORING_CODE = ("bench.unit.evaluate",)
@@ -59,16 +76,20 @@ keeps, the readers of a stored prediction and the making of a row (its import cl
 `bench.codehash.code_hash`)."""
 
 
-@cache
-def evaluation_hash() -> str:
-    """The `evaluation_hash` of every row: the scoring's code (`SCORING_CODE`), the
-    versions of the libraries it runs and the fields of the tasks and metrics that decide a
-    row's values (`bench.vocabulary.deciding`)."""
+def _scoring_protocol() -> list:
+    """What decides every row's scoring but the code: the versions of the libraries it
+    runs and the fields of the tasks and metrics that decide a row's values."""
     declared = {
         "tasks": {n: deciding(t) for n, t in sorted(TASKS.items())},
         "metrics": {n: deciding(m) for n, m in sorted(METRICS.items())},
     }
-    return content_key([code_hash(SCORING_CODE), library_versions(), declared])[:12]
+    return [library_versions(), declared]
+
+
+def evaluation_hash(code: str | None = None) -> str:
+    """The `evaluation_hash` of every row: the scoring's code (`SCORING_CODE`'s hash, or
+    `code`: a published snapshot's) and what else decides it (`_scoring_protocol`)."""
+    return content_key([code or code_hash(SCORING_CODE), *_scoring_protocol()])[:12]
 
 
 def unit_keys(cfg: RunConfig, method: str) -> Keys:

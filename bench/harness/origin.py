@@ -1,0 +1,149 @@
+"""A published snapshot's origin (`origin.json`): what made its rows, kept beside them so
+that the snapshot stays a baseline whatever the code does after it.
+
+Two questions, two answers (docs/results.md, "Baselines"). "Is this row stale?" is the
+row key's (`bench.harness.keys.prediction_hash`: protocol and code, strict, for resuming
+a working folder). "May this row be compared with mine?" is the origin's: a snapshot's
+rows pair with rows of today's code where the protocol of each (method, task) is the same
+(`bench.harness.keys.protocol_hash`: settings, the method's and task's deciding fields,
+libraries, a module's own file) and the pixels are the same (the rows' `pixels`). Whether
+today's code still computes the snapshot's values is `bench reproduce`'s question; the
+modules that differ since the snapshot are named (`changed_modules`).
+
+The origin is written once, when the snapshot is published (`bench publish`) or brought
+up to date (`bench upgrade`), and only after every row's `prediction_hash` and
+`evaluation_hash` are checked to be those of the commit it names (`snapshot_origin`):
+nothing in it is taken on trust.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+
+from bench import ROOT, BenchError, __version__
+from bench.codehash import code_record, git_source, library_versions
+from bench.files import write_text_atomic
+from bench.frontend.learned import LEARNED
+from bench.harness.keys import (
+    PREDICTION_CODE,
+    SCORING_CODE,
+    evaluation_hash,
+    prediction_hash,
+    protocol_hash,
+)
+from bench.render.reference import MANIFEST as REFERENCE_MANIFEST
+from bench.render.reference import sha256
+from bench.results import ORIGIN, RUNS
+from bench.runs import read_runs
+from bench.unit.config import RunConfig
+from bench.vocabulary import METHODS
+
+
+def _pair(method: str, task: str) -> str:
+    return f"{method} {task}"
+
+
+def reference_hash() -> str:
+    """The SHA-256 of the reference renders' manifest (`reference/renders.json`), which
+    names every shipped image by its hash."""
+    path = ROOT / "reference" / REFERENCE_MANIFEST
+    return sha256(path) if path.is_file() else "absent"
+
+
+def snapshot_origin(rows: pd.DataFrame, cfg: RunConfig, commit: str, source=None) -> dict:
+    """The origin of a snapshot's `rows`, computed under `cfg` by the code of `commit` (a
+    commit of this repository, read with git; or the files as `source` reads them):
+    refused in one line unless every row's `prediction_hash` and `evaluation_hash` are
+    that code's."""
+    source = source or git_source(commit)
+    code = {"prediction": code_record(PREDICTION_CODE, source)}
+    code["scoring"] = code_record(SCORING_CODE, source)
+    protocols = {}
+    for method, task in sorted(set(zip(rows["method"], rows["task"]))):
+        if method not in METHODS:
+            raise BenchError(f"the snapshot's method {method!r} is not declared here")
+        want = prediction_hash(cfg, method, task, code["prediction"]["code"])
+        found = set(rows["prediction_hash"][(rows["method"] == method) & (rows["task"] == task)])
+        if found != {want}:
+            raise BenchError(
+                f"{method}'s {task} rows were not computed by the code of "
+                f"{commit} under the snapshot's settings (their "
+                f"prediction_hash {', '.join(sorted(found))}, that code's {want}): publish "
+                "a fresh run of that code"
+            )
+        protocols[_pair(method, task)] = protocol_hash(cfg, method, task)
+    scored = evaluation_hash(code["scoring"]["code"])
+    if set(rows["evaluation_hash"]) != {scored}:
+        raise BenchError(
+            f"the snapshot's rows were not scored by the code of {commit} "
+            f"(evaluation_hash {', '.join(sorted(set(rows['evaluation_hash'])))}, its {scored})"
+        )
+    learned = any(METHODS[m].pool in LEARNED or METHODS[m].matcher for m in set(rows["method"]))
+    return {
+        "version": __version__,
+        "commit": commit,
+        "rows": len(rows),
+        "reference": reference_hash(),
+        "libraries": library_versions(learned=learned, models=True),
+        "code": {k: v["code"] for k, v in code.items()},
+        "modules": code["prediction"]["modules"] | code["scoring"]["modules"],
+        "protocols": protocols,
+    }
+
+
+def write_origin(folder: Path, cfg: RunConfig, commit: str, source=None) -> dict:
+    """`snapshot_origin` of the snapshot in `folder`, written to its `origin.json`."""
+    origin = snapshot_origin(read_runs(Path(folder) / RUNS), cfg, commit, source)
+    write_text_atomic(Path(folder) / ORIGIN, json.dumps(origin, indent=1) + "\n")
+    return origin
+
+
+def read_origin(folder: Path) -> dict:
+    """A snapshot's origin, or one line saying how to record it."""
+    path = Path(folder) / ORIGIN
+    try:
+        origin = json.loads(path.read_text())
+        origin["protocols"], origin["modules"], origin["commit"]  # noqa: B018 (its fields)
+        return origin
+    except FileNotFoundError:
+        raise BenchError(
+            f"{path} not found: the snapshot records no origin; `bench upgrade --results "
+            f"{folder}` records it (checked against the commit its manifest names)"
+        ) from None
+    except (ValueError, KeyError, TypeError) as e:
+        raise BenchError(f"{path} is unreadable ({type(e).__name__}); restore it from git") from e
+
+
+def header(origin: dict) -> str:
+    """The line that names the baseline a comparison is made against."""
+    return (
+        f"bench {origin['version']}, commit {origin['commit'][:12]}, {origin['rows']} rows, "
+        f"reference renders {origin['reference'][:12]}"
+    )
+
+
+def changed_modules(origin: dict) -> list[str]:
+    """The modules of the rows' code that differ from the snapshot's (edited, added or
+    gone), by name."""
+    now = code_record(PREDICTION_CODE)["modules"] | code_record(SCORING_CODE)["modules"]
+    then = origin["modules"]
+    return sorted(m for m in set(now) | set(then) if now.get(m) != then.get(m))
+
+
+def protocol_changes(origin: dict, cfg: RunConfig, pairs) -> dict[tuple[str, str], str]:
+    """For each (method, task) of `pairs` whose protocol under `cfg` is not the snapshot's
+    (or which the snapshot lacks), why its rows cannot be paired with today's."""
+    out = {}
+    for method, task in sorted(set(pairs)):
+        then = origin["protocols"].get(_pair(method, task))
+        if then is None:
+            out[method, task] = f"the snapshot records no protocol of {method}'s {task} rows"
+        elif method not in METHODS or then != protocol_hash(cfg, method, task):
+            out[method, task] = (
+                f"{method}'s {task} rows were computed under another protocol (settings, "
+                "libraries or the fields that decide a row) than this checkout's"
+            )
+    return out
