@@ -1,8 +1,9 @@
 """Rendered-scene benchmark of keypoint selection policies for 3D reconstruction.
 
-The subpackages are the stages of the data flow, in order (`STAGES`); a stage imports
-only the stages before it and the shared modules of this package (`camera`, `files`,
-`console`, `vocabulary`, `results`, ...; `tests/test_layout.py` checks it).
+The subpackages are the stages of the data flow, in the order below; a stage imports only
+the stages before it and the shared modules of this package (`camera`, `files`, `console`,
+`vocabulary`, `results`, ...; `tests/test_layout.py` holds the order, `STAGES`, and checks
+it: not here, where every code key, the render key's too, would take it).
 
 `scenes` describes scenes, `render` path-traces them into cached render entries,
 `frontend` detects candidates, computes their signals and selects features (policies),
@@ -17,19 +18,6 @@ command line.
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-STAGES = (
-    "scenes",
-    "render",
-    "frontend",
-    "backend",
-    "acquisition",
-    "evaluation",
-    "unit",
-    "harness",
-    "report",
-    "cli",
-)
-"""The subpackages in data-flow order; the modules directly in `bench/` are shared."""
 ROOT = Path(__file__).resolve().parent.parent
 """Repository root: holds `scenes/`, the default `renders/` and the published results."""
 

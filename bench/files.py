@@ -213,3 +213,11 @@ def image_pixels_key(image: np.ndarray) -> str:
 def images_pixels_key(keys: list[str]) -> str:
     """The `pixels` of a set of views: their `image_pixels_key`s, in view order."""
     return "px-" + hashlib.sha256("\n".join(keys).encode()).hexdigest()[:12]
+
+
+def views_pixels(images: list[Path]) -> str:
+    """The `pixels` of a set of views from their image files, in view order (a render
+    entry's, where its meta does not record them)."""
+    import cv2
+
+    return images_pixels_key([image_pixels_key(cv2.imread(str(p))) for p in images])

@@ -49,10 +49,10 @@ FIGURE_SCENE = "table"
 PAIRED_PEERS = ("colmap-b", "aliked-b", "disk-b")
 """The peers held to the same budget that `paired_sfm.csv` compares with, where they ran:
 stock COLMAP's, and a learned detector's own top-B with LightGlue (on its pool)."""
-# The peers held to the same budget that each category of `sees` is judged against, where
-# they ran (`bench.report.categories`, `paired_sfm.csv`): `PAIRED_PEERS`, which see their
-# own image, and stock COLMAP choosing from its own first pass, which sees other views.
 CATEGORY_PEERS = (*PAIRED_PEERS, "colmap-tracks-b")
+"""The peers held to the same budget that each category of `sees` is judged against, where
+they ran (`bench.report.categories`, `paired_sfm.csv`): `PAIRED_PEERS`, which see their own
+image, and stock COLMAP choosing from its own first pass, which sees other views."""
 FRONTIER_PEERS = ("colmap-b", "colmap-tracks-b")
 """Each category's stock-COLMAP peer (its own image; other views) whose curve over the
 budgets is a frontier of `figure_cost.png` (`bench.report.cost`)."""
@@ -88,16 +88,14 @@ def equal_parts(name: str) -> tuple[str, str]:
     return policy, peer
 
 
-# The kind of `colmap-tracks-b`: stock COLMAP choosing each view's keypoints by the views
-# its own verified tracks span (`bench.backend.peers` declares it; see `KIND_SEES`).
 TRACKS_PEER = "peer-tracks"
-# Its first pass, keypoints per view as a multiple of B: `track-first`'s (its default
-# `first_pass`, tests/test_tracks_peer.py), so that the two have seen as much.
+"""The kind of `colmap-tracks-b`: stock COLMAP choosing each view's keypoints by the views
+its own verified tracks span (`bench.backend.peers` declares it; see `KIND_SEES`)."""
 TRACKS_FIRST_PASS = 4
+"""Its first pass, keypoints per view as a multiple of B: `track-first`'s (its default
+`first_pass`, tests/test_tracks_peer.py), so that the two have seen as much."""
 
 
-# What the budget column (B) of a method's rows means, by its kind (`budget_means`): named
-# once here, where the kinds are; a plugin's kind adds its entry (`declare_kind`).
 WHOLE_POOL_BUDGET = (
     "0: no budget; the whole pool (all) or COLMAP's own count (colmap), run once per scene and seed"
 )
@@ -107,6 +105,8 @@ KIND_BUDGET: dict[str, str] = {
     GROUND_TRUTH: "the keypoints each view keeps: at most B, chosen with the ground truth",
     OWN_PIPELINE: "the keypoints each view keeps of COLMAP's extraction, held to B",
 }
+"""What the budget column (B) of a method's rows means, by its kind (`budget_means`): named
+once here, where the kinds are; a plugin's kind adds its entry (`declare_kind`)."""
 KINDS: dict[str, str] = {
     PER_VIEW: "selects from each view's candidate pool alone (`@policy`)",
     MULTI_VIEW: "selects from every view's pool at once, may match its own selections "
@@ -118,10 +118,6 @@ KINDS: dict[str, str] = {
 """How a method works, which decides how its units are run (`bench.unit.methods`: one
 runner per kind) and whether `bench select` can run it; a plugin declares a new kind with
 `declare_kind` and its runner with `bench.unit.methods.register_kind`."""
-# What a method's selection sees (`sees`), derived from its kind (`KIND_SEES`) and the
-# signals it reads (`VIEW_SIGNALS`), never declared apart: each category is judged against
-# a peer that sees what it sees. (Comments, not attribute docstrings, here and below: a
-# bare string in this module enters every row's code hash.)
 IMAGE, VIEWS, TRUTH = "image", "views", "truth"
 SEES = {
     IMAGE: "its own view's image (and the intrinsics): the field's rule, one keypoint list "
@@ -130,11 +126,12 @@ SEES = {
     "before it chose",
     TRUTH: "the ground truth: a reference of the evaluation side, never a policy",
 }
-# The signals that read other views: their candidates and the geometry between views, from
-# the rig's poses or a first pass of matches (`bench.frontend.signals.GEOMETRIC`).
+"""What a method's selection sees (`sees`), derived from its kind (`KIND_SEES`) and the
+signals it reads (`VIEW_SIGNALS`), never declared apart: each category is judged against a
+peer that sees what it sees."""
 VIEW_SIGNALS = ("ambiguity", "parallax", "epipolar")
-# What the methods of each kind see at least (`sees`); a kind without an entry (the view
-# choosers) selects no keypoints and sees nothing here. A plugin's kind adds its entry.
+"""The signals that read other views: their candidates and the geometry between views, from
+the rig's poses or a first pass of matches (`bench.frontend.signals.GEOMETRIC`)."""
 KIND_SEES: dict[str, str] = {
     PER_VIEW: IMAGE,
     MULTI_VIEW: VIEWS,
@@ -143,6 +140,8 @@ KIND_SEES: dict[str, str] = {
     EQUAL_COUNT: IMAGE,
     TRACKS_PEER: VIEWS,
 }
+"""What the methods of each kind see at least (`sees`); a kind without an entry (the view
+choosers) selects no keypoints and sees nothing here. A plugin's kind adds its entry."""
 PERCENT, FRACTION, DEGREES, AT_LEAST_0 = (0.0, 100.0), (0.0, 1.0), (0.0, 180.0), (0.0, None)
 GRANTS = ("rig", "images")
 """What a task's selection may see of the views' geometry: the rig's poses, or the images

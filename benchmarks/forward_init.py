@@ -80,27 +80,27 @@ INIT_INLIERS, INIT_FORWARD, INIT_ANGLE = 100, 0.95, 16.0
 _captured: list[dict] = []
 
 
-def _map_once(database, image_dir, cfg, protocol, angle, forward) -> recon.Reconstruction:
+def _map_once(database, cfg, protocol, angle, forward) -> recon.Reconstruction:
     """The mapper from one first-pair setting alone (`map_database` without its second
     start), as `map_database` scores it."""
     opts = recon.fixed_intrinsics_options(cfg, protocol)
     opts.mapper.init_min_tri_angle = angle
     opts.mapper.init_max_forward_motion = forward
     t = time.perf_counter()
-    best = recon._incremental(database, image_dir, opts)
+    best = recon._incremental(database, opts)
     if isinstance(best, str):
         return recon.Reconstruction(None, best, time.perf_counter() - t)
     recon.drop_short_tracks(best, recon.PROTOCOLS[protocol])
     return recon.Reconstruction(best, None, time.perf_counter() - t)
 
 
-def _map_all_settings(database, image_dir, cfg, protocol):
+def _map_all_settings(database, cfg, protocol):
     """In place of `run_peer`'s `map_database`: the mapper under every setting (captured),
     the default's result returned."""
     out = {}
     for name, (angle, forward) in SETTINGS.items():
         t = time.perf_counter()
-        rec = _map_once(database, image_dir, cfg, protocol, angle, forward)
+        rec = _map_once(database, cfg, protocol, angle, forward)
         out[name] = (rec, time.perf_counter() - t)
     _captured.append(out)
     return out[DEFAULT][0]
@@ -214,7 +214,7 @@ def main() -> None:
             cams = [cam_of[n] for n in names]
             t = time.perf_counter()
             extracted = peers.peer_extraction(src.images, names, cams, REFERENCE_PEER, 0, a.cache)
-            run = peers.run_peer(src.images, names, cams, extracted, cfg, [a.protocol])
+            run = peers.run_peer(names, cams, extracted, cfg, [a.protocol])
             res = _captured.pop()
             scores = {s: score(r, names, cams, len(names)) for s, (r, _) in res.items()}
             for s in SETTINGS:

@@ -178,8 +178,8 @@ def test_a_hand_made_two_view_scene_is_registered_and_scored(tmp_path):
     cams, xy, pairs = _matched_rig(tmp_path, [0, 3])
     # COLMAP's default mapper ignores two-view tracks, so only the twoview protocol can map
     # a scene seen by two views
-    assert mapping_task(tmp_path, cams, _names(len(cams)), xy, pairs, BackendConfig()).model is None
-    rec = mapping_task(tmp_path, cams, _names(len(cams)), xy, pairs, BackendConfig(), "twoview")
+    assert mapping_task(cams, _names(len(cams)), xy, pairs, BackendConfig()).model is None
+    rec = mapping_task(cams, _names(len(cams)), xy, pairs, BackendConfig(), "twoview")
     assert rec.failure is None and rec.model.num_reg_images() == 2
     est = registered_poses(rec.model, {n: k for k, n in enumerate(_names(2))})
     row, _ = pose_metrics(est, cams)
@@ -187,7 +187,7 @@ def test_a_hand_made_two_view_scene_is_registered_and_scored(tmp_path):
     assert row["median_pose_err_deg"] < 0.01
     # with four views, COLMAP's default mapper (multiview) registers them all
     cams, xy, pairs = _matched_rig(tmp_path, [0, 1, 2, 3])
-    rec = mapping_task(tmp_path, cams, _names(len(cams)), xy, pairs, BackendConfig())
+    rec = mapping_task(cams, _names(len(cams)), xy, pairs, BackendConfig())
     est = registered_poses(rec.model, {n: k for k, n in enumerate(_names(4))})
     assert pose_metrics(est, cams)[0]["maa"] == 1.0
 
@@ -196,7 +196,7 @@ def test_neither_task_reads_the_images_to_colour_its_points(tmp_path):
     """COLMAP colours the points from the views it is given (most of a call on large
     photographs); no metric reads a colour, so the back end gives it none to read."""
     cams, xy, pairs = _matched_rig(tmp_path, [0, 1, 2, 3])
-    mapped = mapping_task(tmp_path, cams, _names(4), xy, pairs, BackendConfig()).model
+    mapped = mapping_task(cams, _names(4), xy, pairs, BackendConfig()).model
     known = known_pose_task(cams, _names(4), xy, pairs, BackendConfig(), "multiview").model
     for model in (mapped, known):
         colours = np.array([p.color for p in model.points3D.values()])
@@ -206,7 +206,7 @@ def test_neither_task_reads_the_images_to_colour_its_points(tmp_path):
 def test_a_mapping_without_matches_is_a_recorded_failure(tmp_path):
     cams, xy, pairs = _matched_rig(tmp_path, [0, 1, 2])
     empty = [PairMatches(p.i, p.j, p.tentative[:0], p.verified[:0], "UNDEFINED") for p in pairs]
-    rec = mapping_task(tmp_path, cams, _names(len(cams)), xy, empty, BackendConfig())
+    rec = mapping_task(cams, _names(len(cams)), xy, empty, BackendConfig())
     assert rec.model is None and "no pair of views has verified matches" in rec.failure
     row, _ = pose_metrics(registered_poses(rec.model, {}), cams)
     assert row["maa"] == 0.0
@@ -246,7 +246,7 @@ def test_a_forward_drive_is_mapped_from_a_forward_first_pair_only(tmp_path, monk
     ]
     for n in _names(6):
         cv2.imwrite(str(tmp_path / n), np.zeros((480, 640, 3), np.uint8))
-    rec = mapping_task(tmp_path, cams, _names(6), xy, pairs, BackendConfig())
+    rec = mapping_task(cams, _names(6), xy, pairs, BackendConfig())
     est = registered_poses(rec.model, {n: k for k, n in enumerate(_names(6))})
     row, _ = pose_metrics(est, cams)
     assert row["registered_views"] == 6 and row["maa"] > 0.9
@@ -256,7 +256,7 @@ def test_a_forward_drive_is_mapped_from_a_forward_first_pair_only(tmp_path, monk
         "FORWARD_START",
         {"init_min_tri_angle": 16.0, "init_max_forward_motion": 0.95},
     )
-    rec = mapping_task(tmp_path, cams, _names(6), xy, pairs, BackendConfig())
+    rec = mapping_task(cams, _names(6), xy, pairs, BackendConfig())
     assert rec.model is None and "the mapper registered" in rec.failure
 
 

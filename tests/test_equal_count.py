@@ -39,14 +39,13 @@ def test_the_count_is_the_peers_own_in_every_view(fe):
     images = Source.of(entry).images
     counts = peer_counts(images, names, cams, "colmap-soft-b", BUDGET)
     soft = peer_extraction(images, names, cams, "colmap-soft-b", BUDGET)
-    run = run_peer(images, names, cams, soft, BackendConfig(), [])
+    run = run_peer(names, cams, soft, BackendConfig(), [])
     assert counts == [len(k) for k in run.keypoints]
     assert any(c != BUDGET for c in counts)
     hard = peer_counts(images, names, cams, "colmap-b", BUDGET)
     every = peer_extraction(images, names, cams, "colmap", 0)
     assert hard == [
-        min(BUDGET, len(k))
-        for k in run_peer(images, names, cams, every, BackendConfig(), []).keypoints
+        min(BUDGET, len(k)) for k in run_peer(names, cams, every, BackendConfig(), []).keypoints
     ]
 
 

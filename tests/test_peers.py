@@ -1,4 +1,4 @@
-"""Stock COLMAP's extraction done once per image (`bench.backend.peers.extract`): every
+"""Stock COLMAP's extraction done once per image (`bench.backend.extraction.extract`): every
 peer database built from it is the one COLMAP's own extractor builds."""
 
 from __future__ import annotations
@@ -10,9 +10,10 @@ import numpy as np
 import pycolmap
 import pytest
 
-from bench.backend import peers
-from bench.backend.peers import extract, write_extracted
-from bench.backend.reconstruction import quiet_colmap, write_images
+from bench.backend import extraction
+from bench.backend.database import quiet_colmap, write_images
+from bench.backend.extraction import extract
+from bench.backend.peers import write_extracted
 from bench.frontend.views import Source, load_views
 
 
@@ -62,11 +63,11 @@ def test_the_extraction_cache_is_keyed_by_the_limit_and_the_code(
     full = extract(images, names, cams, 0, cache)[0]
     capped = extract(images, names, cams, 64, cache)[0]
     assert len(capped.keypoints) < len(full.keypoints)  # 64 locations, some two orientations
-    calls, real = [], peers._extract_now
-    monkeypatch.setattr(peers, "_extract_now", lambda *a: calls.append(a[3]) or real(*a))
+    calls, real = [], extraction._extract_now
+    monkeypatch.setattr(extraction, "_extract_now", lambda *a: calls.append(a[3]) or real(*a))
     extract(images, names, cams, 64, cache)
     assert calls == []  # the same limit and code: read back
-    monkeypatch.setattr(peers, "code_hash", lambda modules: "edited")
+    monkeypatch.setattr(extraction, "code_hash", lambda modules: "edited")
     extract(images, names, cams, 64, cache)
     assert calls == [64]
 
@@ -93,7 +94,7 @@ def test_a_database_built_from_the_cached_extraction_is_colmaps_own(
     def never(*args):
         raise AssertionError("extracted again")
 
-    monkeypatch.setattr(peers, "_extract_now", never)  # a bag of some images: all cached
+    monkeypatch.setattr(extraction, "_extract_now", never)  # a bag of some images: all cached
     bag = [2, 0, 3]
     again = extract(images, [names[k] for k in bag], [cams[k] for k in bag], max_features, cache)
     for e, k in zip(again, bag):

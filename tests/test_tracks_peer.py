@@ -28,7 +28,7 @@ def _run(folder, budget=BUDGET, peer=PEER, protocols=()):
     images = folder / "images" if (folder / "images").is_dir() else folder
     extracted = peer_extraction(images, names, cams, peer, budget)
     keep = budget if CAPS[peer] == TRACKS else 0
-    return run_peer(images, names, cams, extracted, BackendConfig(), list(protocols), keep)
+    return run_peer(names, cams, extracted, BackendConfig(), list(protocols), keep)
 
 
 def test_its_first_pass_is_track_firsts():

@@ -32,8 +32,8 @@ The triangulator and the mapper are seeded and single-threaded, so a run is repr
 Neither reads the images: COLMAP reads them only to colour the points, which no metric
 reads, and that was most of a call (a Herz-Jesu bag's mapping, 6-megapixel views: 0.74 s
 with the colours, 0.10 s without; every pose and point the same). The mapper is told not
-to (`extract_colors`); the triangulator, which colours whatever it is told, is given an
-empty folder.
+to (`extract_colors`), and both are given an empty folder for the images (the
+triangulator colours whatever it is told).
 """
 
 from __future__ import annotations
@@ -41,52 +41,16 @@ from __future__ import annotations
 import shutil
 import tempfile
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pycolmap
 
+from bench.backend.database import camera_ids, colmap_cameras, quiet_colmap, write_images
 from bench.backend.matching import BackendConfig, PairMatches
 from bench.camera import Camera
-from bench.twoview import colmap_camera
 from bench.vocabulary import PROTOCOLS
-
-
-@contextmanager
-def quiet_colmap():
-    """COLMAP's log silenced while the back end calls it (its failures become recorded
-    reasons), and the caller's level restored afterwards."""
-    level = pycolmap.logging.minloglevel
-    pycolmap.logging.minloglevel = 3
-    try:
-        yield
-    finally:
-        pycolmap.logging.minloglevel = level
-
-
-def camera_ids(cams: list[Camera]) -> list[int]:
-    """COLMAP camera id of each view: views with the same intrinsics share one camera."""
-    seen: dict[tuple, int] = {}
-    return [
-        seen.setdefault((c.width, c.height, c.fx, c.fy, c.cx, c.cy), len(seen) + 1) for c in cams
-    ]
-
-
-def _colmap_cameras(cams: list[Camera]) -> dict[int, pycolmap.Camera]:
-    out = {}
-    for cid, cam in zip(camera_ids(cams), cams):
-        out.setdefault(cid, colmap_camera(cam, cid))
-    return out
-
-
-def write_images(db: pycolmap.Database, cams: list[Camera], names: list[str]) -> None:
-    """The cameras (shared where the intrinsics are) and images (ids 1..n) of a database."""
-    for cam in _colmap_cameras(cams).values():
-        db.write_camera(cam, use_camera_id=True)
-    for k, (cid, name) in enumerate(zip(camera_ids(cams), names)):
-        db.write_image(pycolmap.Image(name=name, camera_id=cid, image_id=k + 1), use_image_id=True)
 
 
 @dataclass
@@ -146,7 +110,7 @@ def known_pose_model(
     """A COLMAP model with the rig's intrinsics and poses, each image holding its selected
     keypoints (all of them, so the export is a complete record of the selection)."""
     rec = pycolmap.Reconstruction()
-    for cam in _colmap_cameras(cams).values():
+    for cam in colmap_cameras(cams).values():
         rec.add_camera_with_trivial_rig(cam)
     for k, (cam, cid, name) in enumerate(zip(cams, camera_ids(cams), names)):
         image = pycolmap.Image(
@@ -247,33 +211,35 @@ def fixed_intrinsics_options(
     return opts
 
 
-def _incremental(database: Path, image_dir: Path, opts) -> pycolmap.Reconstruction | str:
+def _incremental(database: Path, opts) -> pycolmap.Reconstruction | str:
     """COLMAP's incremental mapper once: the model with the most registered views (two at
     least), or why there is none."""
-    out = Path(tempfile.mkdtemp(prefix="bench-map-"))
+    work = Path(tempfile.mkdtemp(prefix="bench-map-"))
     try:
+        (work / "out").mkdir()
+        (work / "no-images").mkdir()  # the points' colours only (module docstring)
         with quiet_colmap():
-            models = pycolmap.incremental_mapping(database, image_dir, out, options=opts)
+            models = pycolmap.incremental_mapping(
+                database, work / "no-images", work / "out", options=opts
+            )
     except Exception as e:  # COLMAP failures become a recorded reason
         return f"mapping failed: {type(e).__name__}: {e}"
     finally:
-        shutil.rmtree(out, ignore_errors=True)
+        shutil.rmtree(work, ignore_errors=True)
     best = max(models.values(), key=lambda m: m.num_reg_images(), default=None)
     if best is None or best.num_reg_images() < 2:
         return f"the mapper registered {0 if best is None else best.num_reg_images()} view(s)"
     return best
 
 
-def map_database(
-    database: Path, image_dir: Path, cfg: BackendConfig, protocol: str
-) -> Reconstruction:
+def map_database(database: Path, cfg: BackendConfig, protocol: str) -> Reconstruction:
     """Incremental mapping of a COLMAP database under a track protocol, from COLMAP's first
     pair, else from a forward-motion one (`FORWARD_START`); the largest model (points of
     shorter tracks than the protocol allows removed), or why there is none."""
     t = time.perf_counter()
-    best = _incremental(database, image_dir, fixed_intrinsics_options(cfg, protocol))
+    best = _incremental(database, fixed_intrinsics_options(cfg, protocol))
     if isinstance(best, str):
-        forward = _incremental(database, image_dir, fixed_intrinsics_options(cfg, protocol, True))
+        forward = _incremental(database, fixed_intrinsics_options(cfg, protocol, True))
         best = best if isinstance(forward, str) else forward  # the first start's reason
     if isinstance(best, str):
         return Reconstruction(None, best, time.perf_counter() - t)
@@ -282,7 +248,6 @@ def map_database(
 
 
 def mapping_task(
-    image_dir: Path,
     cams: list[Camera],
     names: list[str],
     xy: list[np.ndarray],
@@ -297,6 +262,6 @@ def mapping_task(
     work = Path(tempfile.mkdtemp(prefix="bench-sfm-"))
     try:
         write_database(work / "database.db", cams, names, xy, pairs)
-        return map_database(work / "database.db", image_dir, cfg, protocol)
+        return map_database(work / "database.db", cfg, protocol)
     finally:
         shutil.rmtree(work, ignore_errors=True)

@@ -38,9 +38,8 @@ from bench.files import (
     checksum,
     content_key,
     entry_problem,
-    image_pixels_key,
-    images_pixels_key,
     read_meta,
+    views_pixels,
 )
 from bench.frontend.colmap_model import check_images, find_model, read_model
 
@@ -168,11 +167,7 @@ def pixels_key(path: Path) -> str:
     contents). Two rows with the same `pixels` read the same images, on any machine."""
     path = Path(path)
     if Source.kind(path) == "render":
-        meta = read_meta(path)
-        if "pixels" in meta:
-            return meta["pixels"]
-        views = sorted(p for p in path.glob("view_*.png"))
-        return images_pixels_key([image_pixels_key(cv2.imread(str(v))) for v in views])
+        return read_meta(path).get("pixels") or views_pixels(sorted(path.glob("view_*.png")))
     return source_key(path)
 
 

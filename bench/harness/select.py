@@ -24,7 +24,8 @@ import numpy as np
 import pycolmap
 
 from bench import BenchError
-from bench.backend.reconstruction import camera_ids, write_database
+from bench.backend.database import camera_ids
+from bench.backend.reconstruction import write_database
 from bench.console import log
 from bench.files import atomic_path
 from bench.frontend import plugins

@@ -186,9 +186,8 @@ def known_pixels(name: str, seed: int, cfg: RenderConfig, renders_dir: Path) -> 
 
 
 def _pixels(entry: Path, views: int) -> str:
-    """The `pixels` of an entry's views (`bench.files.images_pixels_key`)."""
-    keys = [files.image_pixels_key(cv2.imread(str(entry / image_name(v)))) for v in range(views)]
-    return files.images_pixels_key(keys)
+    """The `pixels` of an entry's views (`bench.files.views_pixels`)."""
+    return files.views_pixels([entry / image_name(v) for v in range(views)])
 
 
 def render_scene(

@@ -205,8 +205,7 @@ def _state(ctx: Context, views: tuple, grant: str):
 def _matched(ctx: Context, views: tuple, grant: str) -> Matched:
     vs, pools, _, sel, pairs = _state(ctx, views, grant)
     xy = [c.xy[s] for c, s in zip(pools, sel)]
-    images = Source.of(ctx.scene.entry).images
-    return Matched(images, [v.camera for v in vs], [v.name for v in vs], xy, pairs)
+    return Matched([v.camera for v in vs], [v.name for v in vs], xy, pairs)
 
 
 def reconstruction(ctx: Context, views: tuple, grant: str, protocol: str):

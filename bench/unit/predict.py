@@ -207,9 +207,7 @@ def _store_selection(scene, unit, jobs, cfg, ws, record, select) -> None:
         arrays |= pose_arrays(pairs)
         with atomic_path(folder / f"{PREDICTION}-{grant}.npz") as tmp:
             np.savez(tmp, **arrays)
-        m = Matched(
-            Source.of(scene.entry).images, [v.camera for v in fe.views], record["names"], xy, pairs
-        )
+        m = Matched([v.camera for v in fe.views], record["names"], xy, pairs)
         grant_jobs = [j for j in jobs if TASK_RUNNERS[j.task].spec.grant == grant]
         for job in grant_jobs:
             runner = TASK_RUNNERS[job.task]
@@ -240,7 +238,7 @@ def store_own_pipeline(scene, unit, jobs, cfg, ws, record) -> None:
     sift = ws.renders / COLMAP_SIFT
     extracted = peer_extraction(image_dir, names, cams, unit.method, unit.budget, sift)
     keep_tracks = unit.budget if CAPS[unit.method] == TRACKS else 0
-    run = run_peer(image_dir, names, cams, extracted, cfg.backend, mapped, keep_tracks)
+    run = run_peer(names, cams, extracted, cfg.backend, mapped, keep_tracks)
     record["names"] = names
     record["peer"] = {
         "tentative": run.tentative,
@@ -251,7 +249,7 @@ def store_own_pipeline(scene, unit, jobs, cfg, ws, record) -> None:
     arrays = {f"keypoints_{v}": k for v, k in enumerate(run.keypoints)} | pose_arrays(run.pairs)
     with atomic_path(ws.unit_dir(unit) / f"{PREDICTION}-peer.npz") as tmp:
         np.savez(tmp, **arrays)
-    matched = Matched(image_dir, cams, names, run.keypoints, run.pairs)
+    matched = Matched(cams, names, run.keypoints, run.pairs)
     for job in jobs:
         runner = TASK_RUNNERS[job.task]
         if runner.maps:

@@ -54,7 +54,6 @@ if TYPE_CHECKING:  # (RunConfig imports the declaring modules, this one among th
 class Matched:
     """What a task reconstructs from: the views and the selection's verified matches."""
 
-    image_dir: Path
     cams: list[Camera]
     names: list[str]
     xy: list[np.ndarray]
@@ -214,7 +213,7 @@ register(
             exclusion_reference=True,
         ),
         reconstruct=lambda m, cfg, protocol: mapping_task(
-            m.image_dir, m.cams, m.names, m.xy, m.pairs, cfg, protocol
+            m.cams, m.names, m.xy, m.pairs, cfg, protocol
         ),
         evaluate=lambda truth, model, names, protocol, poses: evaluate_mapping(
             truth, model, view_of_name(names)
