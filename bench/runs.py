@@ -369,21 +369,20 @@ def append_runs(path: Path, rows: list[dict], vocab: Vocabulary) -> None:
 def keep_runs(path: Path, keys: set[tuple]) -> int:
     """Keep the rows of `keys` alone in `runs.csv` (before a run appends the rows it
     computes again): every other row is moved, as it was, to `runs.stale.csv` beside it
-    (a damaged one to `runs.damaged.csv`; appended, never deleted). How many were moved."""
+    (appended, never deleted; an altered one, which the run scores again, too). How many
+    were moved."""
     path = Path(path)
     if not path.is_file():
         return 0
     header, good, bad = check_runs(path)
     keyed = [(_key_of(dict(zip(header, next(csv.reader([line]))))), line) for _, line in good]
     kept = [line for key, line in keyed if key in keys]
-    moved = [line for key, line in keyed if key not in keys]
-    for name, lines in ((STALE, moved), (DAMAGED, [line for _, line in bad])):
-        if lines:
-            _append_aside(path.with_name(name), header, lines)
-    if not moved and not bad:
+    moved = [line for key, line in keyed if key not in keys] + [b[1] for b in bad]
+    if not moved:
         return 0
+    _append_aside(path.with_name(STALE), header, moved)
     write_text_atomic(path, "\n".join([",".join(header), *kept]) + "\n")
-    return len(moved) + len(bad)
+    return len(moved)
 
 
 def _append_aside(aside: Path, header: list[str], lines: list[str]) -> None:

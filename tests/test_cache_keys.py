@@ -232,6 +232,18 @@ def test_the_prediction_code_holds_the_glue_the_peers_and_the_bags():
     } <= modules
     assert not any(m.startswith(("bench.report", "bench.cli")) for m in modules)
     assert "bench.evaluation.metrics" in set(closure(SCORING_CODE))
+    assert "bench.backend.extraction" in modules
+
+
+def test_colmaps_extraction_is_keyed_by_its_own_code_alone():
+    """How the back end matches, verifies or maps never extracts an image again: the
+    extraction's key holds the database's first rows and nothing else of the back end."""
+    from bench.backend.extraction import EXTRACTION_CODE
+
+    modules = set(closure(EXTRACTION_CODE))
+    assert {"bench.backend.extraction", "bench.backend.database"} <= modules
+    assert not modules & {"bench.backend.reconstruction", "bench.backend.matching"}
+    assert not modules & {"bench.backend.peers", "bench.vocabulary", "bench.frontend"}
 
 
 def test_library_versions_decide_the_rows_they_run(monkeypatch):
@@ -241,6 +253,7 @@ def test_library_versions_decide_the_rows_they_run(monkeypatch):
 
     cfg, methods = RunConfig(), ("scale", "colmap-b", "aliked-b")
     before = {m: keys.prediction_hash(cfg, m, "sfm") for m in methods}
+    protocol = {m: keys.protocol_hash(cfg, m, "sfm") for m in methods}
     scored = keys.evaluation_hash()
     real = codehash.version
 
@@ -250,15 +263,38 @@ def test_library_versions_decide_the_rows_they_run(monkeypatch):
     monkeypatch.setattr(codehash, "version", other("pycolmap"))
     codehash._version.cache_clear()  # read once per process: here, the other version
     assert all(keys.prediction_hash(cfg, m, "sfm") != before[m] for m in methods)
-    keys.evaluation_hash.cache_clear()
+    assert all(keys.protocol_hash(cfg, m, "sfm") != protocol[m] for m in methods)
     assert keys.evaluation_hash() != scored
     monkeypatch.setattr(codehash, "version", other("torch"))
     codehash._version.cache_clear()
     changed = {m for m in methods if keys.prediction_hash(cfg, m, "sfm") != before[m]}
     assert changed == {"aliked-b"}
-    keys.evaluation_hash.cache_clear()
     monkeypatch.undo()
     codehash._version.cache_clear()
+
+
+def test_the_protocol_is_the_key_but_its_code(monkeypatch):
+    """Two parts: the code moves a row's prediction and evaluation hashes, never its
+    protocol hash; a setting moves both; a published snapshot's code given back gives back
+    its hashes."""
+    from bench.harness import keys
+    from bench.unit.config import RunConfig
+
+    cfg = RunConfig()
+    hashes = lambda c: (  # noqa: E731
+        keys.prediction_hash(c, "texture", "sfm"),
+        keys.evaluation_hash(),
+        keys.protocol_hash(c, "texture", "sfm"),
+    )
+    before = hashes(cfg)
+    code = keys.code_hash(keys.PREDICTION_CODE), keys.code_hash(keys.SCORING_CODE)
+    monkeypatch.setattr(keys, "code_hash", lambda modules: "0ther0c0de000")
+    edited = hashes(cfg)
+    assert edited[0] != before[0] and edited[1] != before[1] and edited[2] == before[2]
+    assert keys.prediction_hash(cfg, "texture", "sfm", code[0]) == before[0]
+    assert keys.evaluation_hash(code[1]) == before[1]
+    other = dataclasses.replace(cfg, backend=dataclasses.replace(cfg.backend, ratio=0.7))
+    assert hashes(other)[2] != before[2]
 
 
 def test_what_a_method_reads_decides_its_rows(monkeypatch):

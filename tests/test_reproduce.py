@@ -150,3 +150,38 @@ def test_verdict_without_any_verdict_says_why_and_fails(
     said = capsys.readouterr().out
     assert said.count("`center-texture` at B = 64 in `") == 2  # sfm and pairs, each with why
     assert said.count("judged by no verdict: no peer of the category ran; add `colmap-b`") == 2
+
+
+def _rows(**metrics) -> pd.DataFrame:
+    """Two hand-made rows of a snapshot, keyed as `runs.csv`'s, with `metrics`' values."""
+    key = {"scene": ["facade"] * 2, "seed": [0, 0], "method": ["colmap-b"] * 2}
+    key |= {"budget": [256, 256], "bag": ["", ""], "task": ["sfm", "tri"]}
+    key |= {"protocol": ["multiview"] * 2, "pixels": ["px-a"] * 2}
+    return pd.DataFrame(key | {k: list(v) for k, v in metrics.items()})
+
+
+def test_reproduce_classes_last_bits_of_a_residual_apart_from_a_moved_score():
+    """Bundle adjustment's residuals may move in their last bits between CPU families
+    (equal but for last bits); a score moved by one ulp has moved."""
+    import numpy as np
+
+    from bench.report.compare import compare_rows
+
+    published = _rows(maa=[0.5, np.nan], rmse=[0.123456789, 0.2], points=[100, 200])
+    same = compare_rows(published, published.copy())
+    assert not same.moved and not same.last_bits
+    assert same.lines()[-1] == "identical: every metric value of every common row"
+    bits = published.copy()
+    bits.loc[0, "rmse"] = 0.123456789 + 1.06e-9  # as measured on an AMD EPYC
+    close = compare_rows(published, bits)
+    assert not close.moved and close.last_bits["rmse"][0] == 1
+    said = "\n".join(close.lines())
+    assert "equal but for floating-point last bits: 1 value(s) of rmse" in said
+    assert "('facade', 0, 'colmap-b', 256, '', 'sfm', 'multiview')" in said  # plain keys
+    ulp = published.copy()
+    ulp.loc[0, "maa"] = np.nextafter(0.5, 1.0)
+    moved = compare_rows(published, ulp)
+    assert list(moved.moved) == ["maa"] and not moved.last_bits
+    far = published.copy()
+    far.loc[1, "rmse"] = 0.2001  # a residual beyond the tolerance has moved
+    assert list(compare_rows(published, far).moved) == ["rmse"]

@@ -233,6 +233,7 @@ def settings_config(settings: dict):
     made as `--set` would make it; one line where no such configuration exists here."""
     from bench.binding import OWN_SETTINGS, flatten
     from bench.render.config import RenderConfig
+    from bench.unit import declared  # noqa: F401 (every method's own settings, first)
     from bench.unit.config import RunConfig
 
     def text(v) -> str:

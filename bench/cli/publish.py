@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 from bench.cli.common import (
@@ -32,7 +33,10 @@ DESCRIPTION = (
     "--regime, or into the regime's snapshot (no --to), RESULTS must hold the regime's "
     "grid: every scene, its seeds and views, the default render size. A snapshot of other "
     "settings (config.json) or another grid (scenes, seeds, methods, budgets, tasks, "
-    "protocols) is replaced only with --replace. A refused publish creates nothing."
+    "protocols) is replaced only with --replace. A refused publish creates nothing. Its "
+    "origin.json records what made the rows (commit, code and module hashes, each (method, "
+    "task)'s protocol, the reference renders: what `bench verdict` judges by), written "
+    "only where every row was computed by this checkout's code (else it says why not)."
 )
 
 
@@ -113,12 +117,35 @@ def readme_section(base: Path = PUBLISHED) -> str:
     return results_section(snapshots, regime_folder(base, PHOTOS), regime_folder(base, NBV))
 
 
+def _origin(results: Path) -> tuple[dict | None, str]:
+    """The origin of the snapshot `results` makes, its rows checked against this
+    checkout's code (`bench.harness.origin`); or None and why there is none."""
+    from bench import BenchError
+
+    try:
+        from bench.binding import read_settings
+        from bench.cli.common import settings_config
+        from bench.harness.manifest import git_commit
+        from bench.harness.origin import snapshot_origin
+        from bench.results import RUNS
+        from bench.runs import read_runs
+
+        cfg = settings_config(read_settings(results))
+        rows = read_runs(results / RUNS)
+        return snapshot_origin(rows, cfg, git_commit(), Path.read_text), ""
+    except ImportError as e:  # the report's commands run without the pipeline's libraries
+        return None, f"{e.name} is not installed"
+    except BenchError as e:
+        return None, str(e)
+
+
 def run(args: argparse.Namespace) -> None:
     from bench import BenchError
     from bench.binding import snapshot_differences
     from bench.console import log
+    from bench.files import write_text_atomic
     from bench.report.publish import check_publishable, publish
-    from bench.results import RUNS, holding
+    from bench.results import ORIGIN, RUNS, holding
     from bench.runs import runs_file
 
     if args.readme:
@@ -143,7 +170,16 @@ def run(args: argparse.Namespace) -> None:
                 f"{args.to} holds a snapshot of other settings or another grid "
                 f"({'; '.join(differ)}); --replace replaces it"
             )
+        origin, why = _origin(args.results)
         n = publish(args.results, args.to)
+        if origin is not None:
+            write_text_atomic(args.to / ORIGIN, json.dumps(origin, indent=1) + "\n")
+        else:
+            (args.to / ORIGIN).unlink(missing_ok=True)
+            log(
+                f"no {ORIGIN} recorded ({why}): `bench verdict` judges only against a "
+                "snapshot whose rows this checkout's code computed"
+            )
     if grid is None:  # a snapshot of its own, said (its grid may be a --quick run's)
         log(
             f"published as a snapshot of its own: {args.results}'s grid is checked against "

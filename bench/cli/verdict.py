@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+from dataclasses import dataclass
 from pathlib import Path
 
 from bench import ROOT, BenchError
@@ -103,12 +104,24 @@ def run(args: argparse.Namespace) -> None:
     base = args.results or Path(f"results/verdict-{module.stem}")
     judged = 0
     for name, where in snapshots:
-        judged += _judge(args, module, methods, name, where, folders[name], origins[name], base)
+        snapshot = Snapshot(name, folders[name], origins[name], where)
+        judged += _judge(args, module, methods, snapshot, base)
     if not judged:
         raise SystemExit(1)
 
 
-def _judge(args, module, methods, name, where, snapshot, origin, base) -> int:
+@dataclass(frozen=True)
+class Snapshot:
+    """A published snapshot judged against: its name, folder, origin and the `bench run`
+    options that name its photo sets (none for a rendered one)."""
+
+    name: str
+    folder: Path
+    origin: dict
+    where: list[str]
+
+
+def _judge(args, module: Path, methods: list[str], snap: Snapshot, base: Path) -> int:
     """Compute the module's rows beside one snapshot and print their verdicts; how many."""
     from bench.binding import read_settings
     from bench.harness.grid import run_benchmark
@@ -116,12 +129,12 @@ def _judge(args, module, methods, name, where, snapshot, origin, base) -> int:
     from bench.results import RUNS, Workspace
     from bench.runs import read_runs
 
+    name, snapshot, origin = snap.name, snap.folder, snap.origin
     print(f"\n{name}: judged against {snapshot}: {header(origin)}")
     published = read_runs(snapshot / RUNS)
     budgets = grid_budgets(published)
-    cfg, options, out = _module_grid(
-        args, module, methods, where, snapshot, published, budgets, base / name
-    )
+    argv = _module_argv(args, module, methods, snap, published, budgets, base / name)
+    cfg, options, out = _module_grid(argv, module, snapshot, methods)
     peers = _peer_pairs(published, cfg.tasks)
     refused = protocol_changes(origin, cfg.run, peers)
     for line in refused.values():
@@ -159,19 +172,24 @@ def _peer_pairs(published, tasks) -> list[tuple[str, str]]:
     return sorted({(m, t) for m, t in zip(peers["method"], peers["task"]) if t in tasks})
 
 
-def _module_grid(args, module, methods, where, snapshot, published, budgets, out):
-    """The grid of the module's rows beside a snapshot: its cells, tasks and protocols at
-    its grid budgets, under its own settings (`config.json`), the module's methods alone."""
+def _module_argv(args, module, methods, snap: Snapshot, published, budgets, out) -> list[str]:
+    """`bench run`'s options for the module's rows beside a snapshot: its cells, tasks and
+    protocols at its grid budgets, the module's methods alone."""
+    argv = ["run", *snap.where, "--results", str(out), "--renders", str(args.renders)]
+    argv += ["--policy-module", str(module), "--methods", ",".join(methods), "--frontier", "none"]
+    argv += snapshot_grid(snap.folder, published)
+    argv[argv.index("--budget") + 1] = ",".join(map(str, budgets))
+    return argv + (["--workers", str(args.workers)] if args.workers else [])
+
+
+def _module_grid(argv: list[str], module: Path, snapshot: Path, methods: list[str]):
+    """The grid of `argv` under the snapshot's own settings (`config.json`), the module's
+    methods alone: (`BenchConfig`, `RunOptions`, the results folder)."""
     from bench.binding import read_settings
     from bench.cli import build_parser
     from bench.cli.common import settings_config
     from bench.cli.run import grid_of
 
-    argv = ["run", *where, "--results", str(out), "--renders", str(args.renders)]
-    argv += ["--policy-module", str(module), "--methods", ",".join(methods), "--frontier", "none"]
-    argv += snapshot_grid(snapshot, published)
-    argv[argv.index("--budget") + 1] = ",".join(map(str, budgets))
-    argv += ["--workers", str(args.workers)] if args.workers else []
     print("  bench " + " ".join(argv))
     cfg, results, options, _ = grid_of(build_parser(only="run").parse_args(argv))
     own = settings_config(read_settings(snapshot))

@@ -18,6 +18,7 @@ nothing in it is taken on trust.
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
@@ -34,8 +35,7 @@ from bench.harness.keys import (
     prediction_hash,
     protocol_hash,
 )
-from bench.render.reference import MANIFEST as REFERENCE_MANIFEST
-from bench.render.reference import sha256
+from bench.render.reference import read_manifest
 from bench.results import ORIGIN, RUNS
 from bench.runs import read_runs
 from bench.unit.config import RunConfig
@@ -47,10 +47,13 @@ def _pair(method: str, task: str) -> str:
 
 
 def reference_hash() -> str:
-    """The SHA-256 of the reference renders' manifest (`reference/renders.json`), which
-    names every shipped image by its hash."""
-    path = ROOT / "reference" / REFERENCE_MANIFEST
-    return sha256(path) if path.is_file() else "absent"
+    """The reference renders' content: the SHA-256 of their manifest's images (each file's
+    SHA-256 and decoded pixels), not of the render keys it files them under (which a
+    change of the render code's key moves while no image changes)."""
+    manifest = read_manifest(ROOT / "reference")
+    if manifest is None:
+        return "absent"
+    return hashlib.sha256(json.dumps(manifest["images"], sort_keys=True).encode()).hexdigest()
 
 
 def snapshot_origin(rows: pd.DataFrame, cfg: RunConfig, commit: str, source=None) -> dict:
