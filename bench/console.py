@@ -25,9 +25,9 @@ def log(msg: str) -> None:
 class LogProgress:
     """Progress as log lines (`progress` in a log): tqdm's interface, the lines it prints."""
 
-    def __init__(self, stage: str, total: int, unit: str):
-        self.stage, self.total, self.unit = stage, total, unit
-        self.n, self.step, self.start, self.postfix = 0, 0, time.perf_counter(), ""
+    def __init__(self, stage: str, total: int, unit: str, initial: int = 0):
+        self.stage, self.total, self.unit, self.initial = stage, total, unit, initial
+        self.n, self.step, self.start, self.postfix = initial, 0, time.perf_counter(), ""
 
     def __enter__(self) -> LogProgress:
         return self
@@ -40,7 +40,7 @@ class LogProgress:
 
     def reset(self, total: int | None = None) -> None:
         """Start again from 0 (tqdm's `reset`): the rate and time left count from now."""
-        self.n, self.step, self.start = 0, 0, time.perf_counter()
+        self.n, self.step, self.start, self.initial = 0, 0, time.perf_counter(), 0
         self.total = self.total if total is None else total
 
     def update(self, n: int = 1) -> None:
@@ -49,7 +49,7 @@ class LogProgress:
         if pct // LOG_STEP_PCT > self.step or self.n >= self.total:
             self.step = pct // LOG_STEP_PCT
             elapsed = time.perf_counter() - self.start
-            rate = self.n / elapsed if elapsed > 0 else 0.0
+            rate = (self.n - self.initial) / elapsed if elapsed > 0 else 0.0
             left = (self.total - self.n) / rate if rate else 0.0
             log(
                 f"{self.stage}: {self.n}/{self.total} {self.unit} ({pct} %), "
@@ -65,15 +65,18 @@ class NoProgress(LogProgress):
         self.n += n
 
 
-def progress(stage: str, total: int, unit: str = "unit", shown: bool = True):
+def progress(stage: str, total: int, unit: str = "unit", shown: bool = True, initial: int = 0):
     """The progress of one stage: a bar on a terminal, else log lines (module docstring);
-    nothing where not `shown`."""
+    nothing where not `shown`. `initial`: the work found done before the stage began
+    (cached), counted as done and never in the rate, which is the stage's own work over
+    the time it took."""
     if not shown:
-        return NoProgress(stage, total, unit)
+        return NoProgress(stage, total, unit, initial)
     if not sys.stderr.isatty():
-        return LogProgress(stage, total, unit)
+        return LogProgress(stage, total, unit, initial)
     return tqdm(
         total=total,
+        initial=initial,
         desc=f"{stage:>8}",
         unit=unit,
         file=sys.stderr,

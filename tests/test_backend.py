@@ -6,6 +6,7 @@ import math
 
 import cv2
 import numpy as np
+import pycolmap
 import pytest
 
 from bench.backend.matching import (
@@ -201,6 +202,23 @@ def test_neither_task_reads_the_images_to_colour_its_points(tmp_path):
     for model in (mapped, known):
         colours = np.array([p.color for p in model.points3D.values()])
         assert len(colours) > 100 and not colours.any()
+
+
+def test_a_rig_the_defaults_map_is_mapped_once_without_the_forward_start(tmp_path, monkeypatch):
+    """The forward start (`FORWARD_START`) is a second try, never taken where COLMAP's
+    defaults register the views."""
+    from bench.backend import reconstruction
+
+    cams, xy, pairs = _matched_rig(tmp_path, [0, 1, 2, 3])
+    calls, real = [], reconstruction._incremental
+    monkeypatch.setattr(
+        reconstruction,
+        "_incremental",
+        lambda db, opts: calls.append(opts.mapper.init_min_tri_angle) or real(db, opts),
+    )
+    rec = mapping_task(cams, _names(4), xy, pairs, BackendConfig())
+    assert rec.model is not None and rec.model.num_reg_images() == 4
+    assert calls == [pycolmap.IncrementalMapperOptions().init_min_tri_angle]
 
 
 def test_a_mapping_without_matches_is_a_recorded_failure(tmp_path):

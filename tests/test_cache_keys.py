@@ -78,6 +78,9 @@ if TYPE_CHECKING:
 @policy("a", memo=1)
 def policy_a(x: int, cfg: Settings) -> int:
     return x * 2 + cfg.shift
+
+
+policy("b", memo=3)(abs)
 ''',
     "glue": '''
 from ckpkg import backend, policies  # noqa: F401 (importing it registers the policies)
@@ -161,6 +164,7 @@ def pkg(tmp_path, monkeypatch):
         ("cycle_b", "ping(x - 2)", "ping(x - 1)"),  # a member of an import cycle
         ("cycle_a", "if x > 0 else 0", "if x > 1 else 0"),  # its partner
         ("backend", "def match(x, offset=1):", "def match(x, offset=1, unused=0):"),
+        ("policies", 'policy("b", memo=3)(abs)', 'policy("b", memo=4)(abs)'),  # a call statement
     ],
 )
 def test_every_edit_that_can_change_a_value_changes_the_hash(pkg, module, old, new):
@@ -269,6 +273,9 @@ def test_library_versions_decide_the_rows_they_run(monkeypatch):
     codehash._version.cache_clear()
     changed = {m for m in methods if keys.prediction_hash(cfg, m, "sfm") != before[m]}
     assert changed == {"aliked-b"}
+    monkeypatch.setattr(codehash, "version", other("scikit-learn"))  # a fitted model's
+    codehash._version.cache_clear()
+    assert all(keys.prediction_hash(cfg, m, "sfm") != before[m] for m in methods)
     monkeypatch.undo()
     codehash._version.cache_clear()
 

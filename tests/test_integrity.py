@@ -707,3 +707,20 @@ def small_grid_of(scenes, methods):
     from tests.conftest import small_grid
 
     return dataclasses.replace(small_grid(), scenes=scenes, methods=methods)
+
+
+def test_a_closed_pipe_ends_a_listing_quietly(tmp_path):
+    """`bench scenes | head`: the reader stopped; nothing is wrong, nothing is said."""
+    err = tmp_path / "err"
+    cmd = f'"{sys.executable}" -m bench scenes 2>"{err}" | head -c 10 >/dev/null'
+    subprocess.run(["bash", "-c", cmd], cwd=ROOT, check=True, timeout=120)
+    assert err.read_text() == ""
+
+
+def test_every_help_text_reads_as_it_is_meant():
+    """No `%%` (argparse doubles only what it formats), every command."""
+    from bench.cli import COMMANDS
+
+    for command in COMMANDS:
+        text = build_parser(command).format_help()
+        assert "%%" not in text, command

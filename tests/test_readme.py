@@ -67,3 +67,8 @@ def test_the_next_views_gains_come_from_the_published_next_views_table(tmp_path)
     assert "| maa | 1 | -0.020 [+0.010, +0.120] 12/3/5 | +0.064 [+0.010, +0.120] 12/3/5 |" in said
     assert "paired over the 20 rendered paths at 256" in said
     assert "Next views" not in results_section({"sparse": sparse}, None, tmp_path / "none")
+
+
+def test_the_readme_is_read_whole():
+    """A newcomer reads it from top to bottom: at most 300 lines (docs/ holds the rest)."""
+    assert len((ROOT / "README.md").read_text().splitlines()) <= 300

@@ -71,6 +71,31 @@ def test_a_missing_or_altered_reference_file_is_named_and_refused(shipped):
     )
 
 
+def test_every_shipped_view_is_checked_also_behind_a_filled_cache(shipped):
+    """Each view in turn, view 0 included, altered after the cache was filled: the cached
+    copy is not used silently (`bench run` takes it through `cached_entry`)."""
+    root, _, renders = shipped
+    render.render_scene("table", 0, TINY, renders)  # the cache filled
+    for image in sorted((root / "images").rglob("*.webp")):
+        good = image.read_bytes()
+        image.write_bytes(good[:-5] + bytes([good[-5] ^ 0xFF]) + good[-4:])
+        for made in (render.render_scene, render.cached_entry):
+            with pytest.raises(BenchError, match=rf"{image.name} is altered \(SHA-256"):
+                made("table", 0, TINY, renders)
+        image.write_bytes(good)
+    assert render.cached_entry("table", 0, TINY, renders) is not None
+
+
+def test_a_view_that_does_not_decode_to_its_manifests_pixels_is_refused(shipped):
+    root, _, renders = shipped
+    manifest = json.loads((root / reference.MANIFEST).read_text())
+    name = sorted(manifest["images"])[0]
+    manifest["images"][name]["pixels"] = "0" * 64  # its SHA-256 kept
+    (root / reference.MANIFEST).write_text(json.dumps(manifest))
+    with pytest.raises(BenchError, match="does not decode to its manifest's pixels"):
+        render.render_scene("table", 0, TINY, renders)
+
+
 def test_other_settings_code_or_a_named_variant_render_anew(shipped, monkeypatch):
     """The set is read only for the rig it holds, under the render key of today's scene
     code and settings; otherwise (or with a variant named) the scene is rendered."""

@@ -25,6 +25,25 @@ def fake_render(scene: str, seed: int) -> Path:
 SCENES = [("table", 0), ("facade", 1), ("corridor", 0)]
 
 
+def dying_render(scene: str, seed: int) -> Path:
+    """A render whose process is killed in the middle of the facade (as the kernel's OOM
+    killer would), the others quick."""
+    if scene == "facade":
+        os.kill(os.getpid(), signal.SIGKILL)
+    return Path(f"{scene}-s{seed}")
+
+
+def test_a_rendering_process_that_dies_is_one_error_never_a_hang():
+    """Each process has a pipe of its own (no lock shared with a process that can die, as
+    `multiprocessing.Pool`'s queues were): a killed one is one line, the others stopped."""
+    from bench import BenchError
+
+    t = time.monotonic()
+    with pytest.raises(BenchError, match=r"a rendering process died \(exit code -9\)"):
+        list(render_scenes(SCENES, dying_render, 2))
+    assert time.monotonic() - t < 30
+
+
 def test_one_process_renders_in_order_in_this_one():
     out = list(render_scenes(SCENES, fake_render, 1))
     assert [s for s, _, _ in out] == SCENES

@@ -37,6 +37,14 @@ def test_reproduce_says_identical_then_names_what_moved(
     assert stop.value.code == 1
     out = capsys.readouterr().out
     assert "moved: 1 value(s) in 1 column(s):" in out and "coverage_pct: 1 value(s)" in out
+    rows = pd.read_csv(published / "runs.csv", dtype=str, keep_default_na=False)
+    rows["pixels"] = "px-0ther0pixels"  # a snapshot of other renders, every value the same
+    rows[ROW_CHECKSUM] = [row_checksum(r) for r in rows.to_dict("records")]
+    rows.to_csv(published / "runs.csv", index=False)
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    assert stop.value.code == 1
+    assert "the rows read other pixels: px-0ther0pixels and px-" in capsys.readouterr().out
 
 
 def test_reproduce_refuses_what_it_cannot_compare(quick_results, tmp_path, capsys):
@@ -177,7 +185,8 @@ def test_reproduce_classes_last_bits_of_a_residual_apart_from_a_moved_score():
     assert not close.moved and close.last_bits["rmse"][0] == 1
     said = "\n".join(close.lines())
     assert "equal but for floating-point last bits: 1 value(s) of rmse" in said
-    assert "('facade', 0, 'colmap-b', 256, '', 'sfm', 'multiview')" in said  # plain keys
+    assert "('facade', 0, 'colmap-b', 256, '', 'sfm', 'multiview'): 0.123456789 -> 0.12345" in said
+    assert "np." not in said  # plain keys and values
     ulp = published.copy()
     ulp.loc[0, "maa"] = np.nextafter(0.5, 1.0)
     moved = compare_rows(published, ulp)

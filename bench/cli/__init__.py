@@ -11,6 +11,7 @@ plot` and `bench publish` never load COLMAP, OpenCV or Mitsuba.
 from __future__ import annotations
 
 import importlib
+import os
 import signal
 import sys
 
@@ -104,6 +105,9 @@ def main(argv: list[str] | None = None) -> int:
     except BenchError as e:
         print(f"bench: error: {e}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # the reader of a listing stopped (`bench scenes | head`)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nothing more to say
+        return 141  # as a shell's tools end on a closed pipe (128 + SIGPIPE)
     except OSError as e:  # a file that cannot be written or read: what was written is kept
         where = e.filename2 or e.filename or "a file"  # a rename: its target
         print(

@@ -18,7 +18,9 @@ from bench.cli.common import (
 HELP = "rebuild the tables and figures from runs.csv (no rendering, no reconstruction)"
 DESCRIPTION = (
     "Rewrite table1.csv, table1_twoview.csv, table2.csv, paired.csv, paired_sfm.csv, "
-    "table_scenes.csv, frontend_cost.csv, figure3.png/.pdf and figure_budget.png from "
+    "table_scenes.csv, frontend_cost.csv, verdicts.csv, table_cost.csv, figure_cost.png, "
+    "figure3.png/.pdf, figure_budget.png (where the grid has several budgets), and the "
+    "results page README.md from "
     "RESULTS/runs.csv and RESULTS/vocabulary.json alone, and figure2.png from them plus an "
     "exported model and its cached render. A results folder of datasets also gets "
     "transfer.csv, transfer_ranks.csv and figure_transfer.png (its ranking against a rendered "

@@ -43,8 +43,10 @@ DESCRIPTION = (
     "selections see the images and the intrinsics only (the geometry their signals need is "
     "estimated from the images); the tri task's see the rig's poses. Then table1.csv, "
     "table1_twoview.csv, table2.csv, paired.csv, paired_sfm.csv, table_scenes.csv, "
-    "frontend_cost.csv, figure2.png, figure3.png/.pdf, figure_budget.png, config.json, "
-    "vocabulary.json and manifest.json; with --dataset also transfer.csv, "
+    "frontend_cost.csv, verdicts.csv, table_cost.csv, figure_cost.png, figure2.png, "
+    "figure3.png/.pdf, figure_budget.png (with several budgets), the results page "
+    "README.md, config.json, vocabulary.json and manifest.json (rows a run replaces go to "
+    "runs.stale.csv, never deleted); with --dataset also transfer.csv, "
     "transfer_ranks.csv and figure_transfer.png (the datasets' ranking against the rendered "
     "one, --rendered) and, with several datasets, table1-<dataset>.csv."
 )

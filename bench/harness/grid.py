@@ -32,7 +32,6 @@ from bench.binding import bind_results_dir, check_results_dir, models_replaced
 from bench.codehash import check_unchanged, code_hash
 from bench.console import log, progress
 from bench.failures import ERROR, exclusions, failures, outcomes
-from bench.files import entry_problem
 from bench.frontend import plugins
 from bench.frontend.matchability import read_models
 from bench.frontend.policies import check_methods, learned_weights
@@ -42,7 +41,7 @@ from bench.harness.keys import PREDICTION_CODE, evaluation_hash, prediction_hash
 from bench.harness.manifest import git_commit, write_manifest
 from bench.render.config import RenderConfig
 from bench.render.entry import (
-    entry_name,
+    cached_entry,
     entry_names,
     known_pixels,
     render_scene,
@@ -536,15 +535,14 @@ def _rendered(
     t = time.perf_counter()
     entries = {g: cfg.dataset(g[0]) for g in groups if cfg.dataset(g[0])}
     for g in groups:
-        entry = ws.renders / entry_name(*g, cfg.render(), ws.renders) if g not in entries else None
-        if entry is not None and entry.is_dir() and entry_problem(entry) is None:
+        entry = cached_entry(*g, cfg.render(), ws.renders) if g not in entries else None
+        if entry is not None:
             entries[g] = entry
     stage_s["render"] += time.perf_counter() - t
     scenes = [g for g in groups if g not in entries]
     side_by_side = cluster.workers if cluster.scheduler is None else 1
     render = partial(render_scene, cfg=cfg.render(), renders_dir=ws.renders)
-    with progress("render", len(groups), "scene", shown=bool(scenes)) as bar:
-        bar.update(len(entries))
+    with progress("render", len(groups), "scene", shown=bool(scenes), initial=len(entries)) as bar:
         for (sc, sd), entry, seconds in render_scenes(scenes, render, side_by_side):
             entries[sc, sd] = entry
             stage_s["render"] += seconds

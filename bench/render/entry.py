@@ -14,7 +14,6 @@ import signal
 import time
 from collections.abc import Callable, Iterator
 from fractions import Fraction
-from functools import partial
 from importlib.metadata import version
 from pathlib import Path
 
@@ -173,6 +172,19 @@ def entry_name(name: str, seed: int, cfg: RenderConfig, renders_dir: Path) -> st
     return _resolved(name, seed, cfg, renders_dir)[2]
 
 
+def cached_entry(name: str, seed: int, cfg: RenderConfig, renders_dir: Path) -> Path | None:
+    """The whole cache entry of (scene, seed, settings) where one is made (every file's
+    checksum verified), None where not; a copy of the reference set's has its shipped
+    source checked too (`bench.render.reference.checked_files`)."""
+    _, _, entry, rig = _resolved(name, seed, cfg, renders_dir)
+    entry = Path(renders_dir) / entry
+    if not entry.is_dir() or files.entry_problem(entry) is not None:
+        return None
+    if rig is not None:
+        reference.checked_files(rig)
+    return entry
+
+
 def known_pixels(name: str, seed: int, cfg: RenderConfig, renders_dir: Path) -> str | None:
     """The `pixels` the entry of (scene, seed, settings) has, where known without making
     it: the reference set's, or those of an entry already made here (None otherwise)."""
@@ -204,6 +216,8 @@ def render_scene(
     with files.locked(entry):
         problem = files.entry_problem(entry) if entry.exists() else None
         if entry.exists() and problem is None and not force:
+            if rig is not None:  # the cached copy of the shipped data: its source still sound
+                reference.checked_files(rig)
             return entry
         if problem:
             log(f"damaged cache entry {entry.name} ({problem}); making it again")
@@ -370,24 +384,83 @@ def render_scenes(
         lock, so the entries are the same files. The variant a process announces
     (`_announced`) is not announced again by the rendering processes. One process renders
     in this one, as before.
-        On an interrupt, or an error, the rendering processes are stopped at once: an entry,
-        and each view's, is complete or absent (`bench.files.atomic_dir`)."""
+        On an interrupt, or an error, the rendering processes are stopped at once
+        (`_stop_workers`): an entry, and each view's, is complete or absent
+        (`bench.files.atomic_dir`)."""
     if processes <= 1 or len(scenes) <= 1:
         yield from (_timed(render, s) for s in scenes)
         return
     import multiprocessing
+    from multiprocessing.connection import wait
 
     spawn = multiprocessing.get_context("spawn")  # no copy of this process's state
-    pool = spawn.Pool(
-        min(processes, len(scenes)), initializer=_render_process, initargs=(set(_announced),)
-    )
+    workers = []  # each with a pipe of its own: no lock shared with a process that may die
+    for _ in range(min(processes, len(scenes))):
+        here, there = spawn.Pipe()
+        worker = spawn.Process(target=_render_worker, args=(there, render, set(_announced)))
+        worker.start()
+        there.close()
+        workers.append((worker, here))
+    todo, busy, done = list(scenes), {}, False
     try:
-        yield from pool.imap_unordered(partial(_timed, render), scenes)
-    except BaseException:  # an interrupt, an error, or the caller stopped early
-        pool.terminate()  # SIGTERM: each process cleans up and leaves
-        raise
-    else:
-        pool.close()
+        for worker, conn in workers:  # as many as there are scenes
+            conn.send(todo.pop(0))
+            busy[conn] = worker
+        while busy:
+            for conn in wait(list(busy)):
+                worker = busy.pop(conn)
+                try:
+                    ok, value = conn.recv()
+                except EOFError:
+                    worker.join()
+                    code = worker.exitcode
+                    raise BenchError(f"a rendering process died (exit code {code})") from None
+                if not ok:
+                    raise value
+                if todo:
+                    conn.send(todo.pop(0))
+                    busy[conn] = worker
+                yield value
+        done = True
     finally:
-        pool.join()
-        del pool  # collected now, not at exit (which would warn of its semaphores)
+        _stop_workers(workers, at_once=not done)
+
+
+STOP_S = 8.0
+"""How long a rendering process told to stop may take to finish the view under way
+(`_stop`) before it is killed: a 640x480 view takes 5-9 s on 2 cores."""
+
+
+def _render_worker(conn, render: Callable[[str, int], Path], told: set[str]) -> None:
+    """A rendering process: (scene, seed) pairs from `conn`, each rendered (`_timed`) and
+    its result or error sent back, until None."""
+    _render_process(told)
+    try:
+        while (scene := conn.recv()) is not None:
+            try:
+                result = (True, _timed(render, scene))
+            except Exception as e:  # the caller raises it
+                result = (False, e)
+            conn.send(result)
+    except EOFError:  # the calling process is gone
+        pass
+
+
+def _stop_workers(workers: list, at_once: bool) -> None:
+    """End the rendering processes: each is told there is nothing more; `at_once` (an
+    interrupt, an error) also SIGTERM, so that one rendering finishes its view and leaves
+    (`_stop`), killed after `STOP_S`. Nothing here waits on a lock a process may hold."""
+    for worker, conn in workers:
+        try:
+            conn.send(None)
+        except OSError:  # it is gone
+            pass
+        if at_once and worker.is_alive():
+            worker.terminate()
+    deadline = time.monotonic() + STOP_S
+    for worker, conn in workers:
+        worker.join(max(0.0, deadline - time.monotonic()))
+        if worker.is_alive():
+            worker.kill()
+            worker.join()
+        conn.close()

@@ -86,9 +86,11 @@ def reference_variant(root: Path | None = None) -> str | None:
     return manifest["made_by"]["variant"] if manifest else None
 
 
-def checked_images(rig: dict, root: Path | None = None) -> list[np.ndarray]:
-    """A rig's shipped views, decoded, each file checked against the manifest's SHA-256
-    and pixel hash: a missing or altered file is one `BenchError` naming it."""
+def checked_files(rig: dict, root: Path | None = None) -> list[tuple[Path, dict]]:
+    """A rig's shipped files, each checked against the manifest's SHA-256 (a missing or
+    altered one is one `BenchError` naming it and the remedy), with what the manifest says
+    of it. Cheap: every use of a reference entry's cached copy checks its source this way,
+    so the repository's own data cannot rot unseen behind a cache."""
     root = Path(root or REFERENCE)
     manifest, out = read_manifest(root), []
     for name in rig["images"]:
@@ -103,6 +105,15 @@ def checked_images(rig: dict, root: Path | None = None) -> list[np.ndarray]:
                 f"reference render {path} is altered (SHA-256 {got[:12]}, the manifest says "
                 f"{want['sha256'][:12]}); restore it with `git checkout -- {path}`"
             )
+        out.append((path, want))
+    return out
+
+
+def checked_images(rig: dict, root: Path | None = None) -> list[np.ndarray]:
+    """A rig's shipped views, decoded, each file checked against the manifest's SHA-256
+    (`checked_files`) and pixel hash: a missing or altered file is one `BenchError`."""
+    out = []
+    for path, want in checked_files(rig, root):
         image = cv2.imread(str(path), cv2.IMREAD_COLOR)
         if image is None or files.image_pixels_key(image) != want["pixels"]:
             raise BenchError(f"reference render {path} does not decode to its manifest's pixels")

@@ -92,9 +92,10 @@ def _columns(found: dict[str, tuple[int, float, str]]) -> list[str]:
     return out
 
 
-def _plain(key) -> tuple:
-    """A row's key as plain values (`('facade', 0, ...)`, not numpy's scalars)."""
-    return tuple(k.item() if isinstance(k, np.generic) else k for k in key)
+def _plain(values) -> tuple:
+    """A row's key, or two values, as plain values (`('facade', 0, ...)`, `0.25`: not
+    numpy's scalars)."""
+    return tuple(k.item() if isinstance(k, np.generic) else k for k in values)
 
 
 def compare_rows(a: pd.DataFrame, b: pd.DataFrame) -> Comparison:
@@ -125,7 +126,8 @@ def compare_rows(a: pd.DataFrame, b: pd.DataFrame) -> Comparison:
             close = same
         if not same.all():
             k = int(np.flatnonzero(~same)[0])
-            example = f"{_plain(common[k])}: {x.iloc[k]!r} -> {y.iloc[k]!r}"
+            was, now = _plain((x.iloc[k], y.iloc[k]))
+            example = f"{_plain(common[k])}: {was!r} -> {now!r}"
             found = out.last_bits if c in LAST_BITS and close.all() else out.moved
             found[c] = (int((~same).sum()), diff, example)
     return out
