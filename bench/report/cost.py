@@ -39,7 +39,7 @@ import numpy as np
 import pandas as pd
 
 from bench.report.categories import peer_metrics
-from bench.report.figures import method_colours, plt, save
+from bench.report.figures import method_styles, plt, save
 from bench.report.tables import solvable
 from bench.vocabulary import (
     FRONTIER_PEERS,
@@ -116,8 +116,7 @@ def figure_cost(cost: pd.DataFrame, vocab: Vocabulary, out: Path) -> bool:
     if not metrics or not (cost["ms_per_view"] > 0).any():
         return False
     fig, axes = plt.subplots(1, len(metrics), figsize=(7 * len(metrics), 5.5), squeeze=False)
-    markers = {"image": "o", "views": "s"}
-    colours = method_colours(cost["method"], vocab)
+    styles = method_styles(cost["method"], vocab)
     for ax, metric in zip(axes[0], metrics):
         for method, g in cost[cost[metric].notna()].groupby("method", sort=False):
             g = g.sort_values("budget")
@@ -137,14 +136,21 @@ def figure_cost(cost: pd.DataFrame, vocab: Vocabulary, out: Path) -> bool:
                 for _, r in g.iterrows():
                     ax.annotate(f"{int(r['budget'])}", (r["ms_per_view"], r[metric]), fontsize=7)
                 continue
-            marker = markers.get(vocab.sees(method), "^")
             ax.plot(
                 g["ms_per_view"],
                 g[metric],
-                marker=marker,
-                linestyle=":",
-                color=colours[method],
+                **styles[method],
+                markersize=5,
                 label=f"{method} ({vocab.sees(method)})",
+            )
+            last = g.iloc[-1]  # a direct label at its largest budget
+            ax.annotate(
+                method,
+                (last["ms_per_view"], last[metric]),
+                xytext=(3, 2),
+                textcoords="offset points",
+                fontsize=6,
+                color=styles[method]["color"],
             )
         ax.set_xscale("log")
         ax.set_xlabel("front end + matching ms per view (log)")

@@ -59,6 +59,24 @@ def method_colours(methods, vocab: Vocabulary) -> dict:
     return out
 
 
+MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*", "<", ">", "h", "p", "d", "8")
+DASHES = (":", "--", "-.", (0, (1, 3)), (0, (5, 2, 1, 2)), (0, (3, 1, 1, 1, 1, 1)))
+
+
+def method_styles(methods, vocab: Vocabulary) -> dict[str, dict]:
+    """Per method, a colour (`method_colours`), a marker and a line style, each pair of
+    marker and line style its own within its category: a method's mark is found without
+    telling shades apart."""
+    colours = method_colours(methods, vocab)
+    seen: dict[str, int] = {}
+    out = {}
+    for m in dict.fromkeys(methods):
+        k = seen[sees] = seen.get(sees := vocab.sees(m) if m in vocab.methods else "", -1) + 1
+        marker, dash = MARKERS[k % len(MARKERS)], DASHES[(k // len(MARKERS)) % len(DASHES)]
+        out[m] = {"color": colours[m], "marker": marker, "linestyle": dash}
+    return out
+
+
 def headline_budget(t1: pd.DataFrame) -> int:
     """256 when the table has it, else its middle budget (0 when it has whole-pool methods
     only)."""
