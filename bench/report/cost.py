@@ -133,8 +133,9 @@ def figure_cost(cost: pd.DataFrame, vocab: Vocabulary, out: Path) -> bool:
                     lw=2,
                     label=label,
                 )
-                for _, r in g.iterrows():
-                    ax.annotate(f"{int(r['budget'])}", (r["ms_per_view"], r[metric]), fontsize=7)
+                for k, (_, r) in enumerate(g.iterrows()):  # its name beside its largest
+                    text = f"{int(r['budget'])}" + (f" {method}" if k == len(g) - 1 else "")
+                    ax.annotate(text, (r["ms_per_view"], r[metric]), fontsize=7)
                 continue
             ax.plot(
                 g["ms_per_view"],
