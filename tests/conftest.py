@@ -172,13 +172,11 @@ def rows_of(results: Path, folder: Path, keep) -> Path:
 def snapshot_of(results: Path, folder: Path) -> Path:
     """`folder`: a copy of `results` published as a snapshot, with its origin (computed by
     this checkout's files, every row checked against them)."""
-    import json
     import shutil
 
-    from bench.cli.common import settings_config
+    from bench.cli.common import folder_origin
     from bench.harness.origin import write_origin
 
     shutil.copytree(results, folder)
-    settings = json.loads((folder / "config.json").read_text())["settings"]
-    write_origin(folder, settings_config(settings), "test", Path.read_text)
+    write_origin(folder, folder_origin(folder, "test", Path.read_text))
     return folder

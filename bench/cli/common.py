@@ -228,6 +228,19 @@ def apply_settings(config, assignments: list[str]):
     return config
 
 
+def folder_origin(results: Path, commit: str, source=None) -> dict:
+    """The origin of the rows of a results folder (`bench.harness.origin.snapshot_origin`),
+    under the settings it is bound to, checked against the code of `commit` (read with git,
+    or by `source`)."""
+    from bench.binding import read_settings
+    from bench.harness.origin import snapshot_origin
+    from bench.results import RUNS
+    from bench.runs import read_runs
+
+    cfg = settings_config(read_settings(results))
+    return snapshot_origin(read_runs(Path(results) / RUNS), cfg, commit, source)
+
+
 def settings_config(settings: dict):
     """The `RunConfig` whose `as_dict` is `settings` (a results folder's `config.json`),
     made as `--set` would make it; one line where no such configuration exists here."""

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from bench.cli.common import (
@@ -123,16 +122,10 @@ def _origin(results: Path) -> tuple[dict | None, str]:
     from bench import BenchError
 
     try:
-        from bench.binding import read_settings
-        from bench.cli.common import settings_config
+        from bench.cli.common import folder_origin
         from bench.harness.manifest import git_commit
-        from bench.harness.origin import snapshot_origin
-        from bench.results import RUNS
-        from bench.runs import read_runs
 
-        cfg = settings_config(read_settings(results))
-        rows = read_runs(results / RUNS)
-        return snapshot_origin(rows, cfg, git_commit(), Path.read_text), ""
+        return folder_origin(results, git_commit(), Path.read_text), ""
     except ImportError as e:  # the report's commands run without the pipeline's libraries
         return None, f"{e.name} is not installed"
     except BenchError as e:
@@ -143,7 +136,6 @@ def run(args: argparse.Namespace) -> None:
     from bench import BenchError
     from bench.binding import snapshot_differences
     from bench.console import log
-    from bench.files import write_text_atomic
     from bench.report.publish import check_publishable, publish
     from bench.results import ORIGIN, RUNS, holding
     from bench.runs import runs_file
@@ -172,8 +164,10 @@ def run(args: argparse.Namespace) -> None:
             )
         origin, why = _origin(args.results)
         n = publish(args.results, args.to)
-        if origin is not None:
-            write_text_atomic(args.to / ORIGIN, json.dumps(origin, indent=1) + "\n")
+        if origin is not None:  # the pipeline's libraries are there: its module imports
+            from bench.harness.origin import write_origin
+
+            write_origin(args.to, origin)
         else:
             (args.to / ORIGIN).unlink(missing_ok=True)
             log(

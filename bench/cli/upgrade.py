@@ -49,8 +49,7 @@ def _origin(results) -> tuple[str, str]:
     import json
 
     from bench import BenchError
-    from bench.binding import read_settings
-    from bench.cli.common import settings_config
+    from bench.cli.common import folder_origin
     from bench.harness.origin import write_origin
     from bench.results import MANIFEST, ORIGIN
 
@@ -61,7 +60,8 @@ def _origin(results) -> tuple[str, str]:
         return "", f"no {ORIGIN}: its rows were computed at {len(commits)} commits, not one"
     commit = commits[0].removesuffix("-dirty")  # the rows' hashes say whether it is the code
     try:
-        origin = write_origin(results, settings_config(read_settings(results)), commit)
+        origin = folder_origin(results, commit)
     except BenchError as e:
         return "", f"no {ORIGIN}: {e}"
+    write_origin(results, origin)
     return f"{ORIGIN}: recorded, every row checked against commit {origin['commit'][:12]}", ""

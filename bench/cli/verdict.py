@@ -145,7 +145,8 @@ def _judge(args, module: Path, methods: list[str], snap: Snapshot, base: Path) -
             f"  the code differs from the snapshot's in {len(changed)} module(s): {', '.join(changed)}"
         )
         if read_settings(snapshot)["render"] is not None:
-            _reproduce_peers(args, snapshot, published, peers, base / f"reproduce-{name}")
+            again = base / f"reproduce-{name}"
+            _reproduce_peers(args, snapshot, published, peers, budgets, again)
         else:
             print("  (its peers are not computed again on photographs: `bench reproduce` a regime)")
     else:
@@ -197,12 +198,11 @@ def _module_grid(argv: list[str], module: Path, snapshot: Path, methods: list[st
     return dataclasses.replace(cfg, methods=tuple(methods), run=run), options, results
 
 
-def _reproduce_peers(args, snapshot, published, peers, out) -> None:
+def _reproduce_peers(args, snapshot, published, peers, budgets, out) -> None:
     """One cell of the snapshot's peers computed again and compared (`bench reproduce`)."""
     from bench.cli.reproduce import reproduce_slice
 
     scenes, seeds = sorted(set(published["scene"])), sorted(set(published["seed"]))
-    budgets = grid_budgets(published)
     scene, seed, budget = REPRODUCED
     scene = scene if scene in scenes else scenes[0]
     seed = seed if seed in seeds else seeds[0]

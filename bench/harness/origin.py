@@ -36,8 +36,7 @@ from bench.harness.keys import (
     protocol_hash,
 )
 from bench.render.reference import read_manifest
-from bench.results import ORIGIN, RUNS
-from bench.runs import read_runs
+from bench.results import ORIGIN
 from bench.unit.config import RunConfig
 from bench.vocabulary import METHODS
 
@@ -97,11 +96,9 @@ def snapshot_origin(rows: pd.DataFrame, cfg: RunConfig, commit: str, source=None
     }
 
 
-def write_origin(folder: Path, cfg: RunConfig, commit: str, source=None) -> dict:
-    """`snapshot_origin` of the snapshot in `folder`, written to its `origin.json`."""
-    origin = snapshot_origin(read_runs(Path(folder) / RUNS), cfg, commit, source)
+def write_origin(folder: Path, origin: dict) -> None:
+    """A snapshot's `origin.json` (`snapshot_origin`)."""
     write_text_atomic(Path(folder) / ORIGIN, json.dumps(origin, indent=1) + "\n")
-    return origin
 
 
 def read_origin(folder: Path) -> dict:
