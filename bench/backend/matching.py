@@ -2,9 +2,9 @@
 
 1. Tentative matches (`BackendConfig.matcher`): `ratio`, mutual nearest neighbours in
    descriptor space that also pass Lowe's ratio test (d1 < ratio * d2), on the GPU where
-   one is present, with exactly the CPU's matches (`bench.backend.gpu`); or `lightglue`,
-   LightGlue with the weights of the pool's detector (ALIKED and DISK pools only:
-   `bench.frontend.learned`).
+   one is present, with exactly the CPU's matches (`bench.backend.gpu`); or the pool's
+   learned matcher (`bench.frontend.pools`: LightGlue for ALIKED and DISK, LighterGlue for
+   XFeat).
 2. Verification per pair with COLMAP's calibrated two-view geometry (RANSAC on the
    essential matrix, homography checks) using the known intrinsics; inliers are kept,
    with the relative pose COLMAP estimates from them (the `pairs` task's prediction).
@@ -24,12 +24,10 @@ import numpy as np
 from bench import BenchError
 from bench.backend import gpu
 from bench.camera import Camera
-from bench.frontend import features, learned
+from bench.frontend import features
 from bench.frontend.features import Candidates
+from bench.frontend.pools import POOLS, RATIO
 from bench.twoview import configuration, two_view_geometry, verification_options
-
-MATCHERS = ("ratio", "lightglue")
-
 
 @dataclass(frozen=True)
 class BackendConfig:
@@ -38,8 +36,8 @@ class BackendConfig:
     ratio: float = 0.8
     """Lowe ratio test threshold for tentative matches (with mutual nearest neighbours)."""
     matcher: str = "ratio"
-    """Tentative matches: ratio (mutual nearest neighbours passing the ratio test) or
-    lightglue (LightGlue with the weights of the detector: aliked and disk pools only)."""
+    """Tentative matches: ratio (mutual nearest neighbours passing the ratio test) or the
+    pool's learned matcher (lightglue for aliked and disk, lighterglue for xfeat)."""
     ransac_max_error: float = 4.0
     """RANSAC inlier threshold of the two-view verification, in pixels (COLMAP's default)."""
     min_tri_angle: float = 1.5
@@ -48,10 +46,6 @@ class BackendConfig:
     """Seed of COLMAP's RANSAC, triangulator and mapper."""
 
     def validate(self) -> BackendConfig:
-        if self.matcher not in MATCHERS:
-            raise BenchError(
-                f"unknown backend.matcher {self.matcher!r}; valid: {', '.join(MATCHERS)}"
-            )
         if not 0 < self.ratio <= 1:
             raise BenchError(f"backend.ratio must lie in (0, 1], got {self.ratio}")
         if self.ransac_max_error <= 0 or self.min_tri_angle < 0:
@@ -110,11 +104,12 @@ def tentative_matches(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float) -> n
 
 
 def check_matcher(cfg: BackendConfig, detector: str) -> None:
-    """Refuse, in one line, LightGlue on a pool without LightGlue weights."""
-    if cfg.matcher == "lightglue" and detector not in learned.LEARNED:
+    """Refuse, in one line, a matcher the pool cannot be matched with."""
+    pool = POOLS[detector]
+    if cfg.matcher not in pool.matchers:
         raise BenchError(
-            f"backend.matcher=lightglue needs a pool with LightGlue weights "
-            f"({', '.join(learned.LEARNED)}), not {detector}"
+            f"backend.matcher={cfg.matcher}: the {detector} pool is matched with "
+            f"{' or '.join(pool.matchers)}"
         )
 
 
@@ -127,10 +122,10 @@ def tentative(
 ) -> Callable[[int, int], np.ndarray]:
     """The tentative matches (M, 2) of views i and j under `cfg.matcher`, as a function."""
     check_matcher(cfg, detector)
-    if cfg.matcher == "ratio":
+    if cfg.matcher == RATIO:
         return lambda i, j: tentative_matches(desc[i], desc[j], cfg.ratio)
     sides = [(x, d, (c.width, c.height)) for c, x, d in zip(cams, xy, desc)]
-    return lambda i, j: learned.lightglue_matches(detector, sides[i], sides[j])
+    return lambda i, j: POOLS[detector].match(sides[i], sides[j])
 
 
 def match_and_verify(

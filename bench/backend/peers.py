@@ -18,11 +18,8 @@ a selection policy, on the same images, scored the same way.
   verified again by COLMAP, and mapped, like `colmap-b`'s. Its rows' `select_ms` is the
   first pass's matching and the choice.
 
-The modern peers, `aliked-b` and `disk-b`: the learned detector's own B highest-scoring
-keypoints (the pool's strongest B: what a user of hloc keeps at a budget), matched with
-LightGlue (`backend.matcher` whatever its setting), verified, triangulated and mapped by
-the policies' back end. They run like a policy, on their detector's pool (`bench run
---detector aliked`; a grid on another pool leaves them out).
+The modern peers, `aliked-b`, `disk-b` and `xfeat-b`, each pool's own top-B, are declared
+with the pools (`bench.unit.pooled`).
 
 For the `pairs` task of the COLMAP peers, each pair's relative pose is estimated from the pair's verified
 matches (COLMAP's own verification, read back from its database) by the policies'
@@ -54,8 +51,7 @@ from bench.backend.extraction import Extracted, extract
 from bench.backend.matching import BackendConfig, PairMatches, verify
 from bench.backend.reconstruction import Reconstruction, map_database
 from bench.camera import Camera
-from bench.frontend.features import strongest_first
-from bench.frontend.policies import register_policy, response_policy
+from bench.frontend.pools import strongest_first
 from bench.frontend.tracks import track_views
 from bench.vocabulary import (
     OWN_PIPELINE,
@@ -295,16 +291,3 @@ for m in (  # peer rows: `colmap` (budget 0: COLMAP's default), the others one p
     ),
 ):
     declare_method(m)
-
-
-for _name, _detector in (("aliked-b", "ALIKED"), ("disk-b", "DISK")):
-    register_policy(  # the learned detector's own top-B (`response`), matched with LightGlue
-        Method(
-            _name,
-            f"{_detector} top-B + LightGlue (peer)",
-            "peer",
-            pool=_detector.lower(),
-            matcher="lightglue",
-        ),
-        response_policy,
-    )

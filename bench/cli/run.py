@@ -53,28 +53,31 @@ DESCRIPTION = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The grid's lists and the settings, then `_input_arguments` and `_folder_arguments`."""
-    from bench.frontend.policies import PolicyConfig, Weights, own_fields
-    from bench.harness.grid import default_methods
-    from bench.scenes.spec import scene_names
-    from bench.unit.config import RunConfig
-    from bench.unit.tasks import TASK_RUNNERS
-    from bench.vocabulary import (
-        FRONTIER_BUDGETS,
-        FRONTIER_PEERS,
-        PROTOCOLS,
-        SETTINGS,
-        WHOLE_POOL_BUDGET,
+    """The grid's lists (`_grid_arguments`), the settings (`_settings_arguments`), what
+    the grid runs on (`_input_arguments`) and where (`_folder_arguments`)."""
+    _grid_arguments(parser)
+    _settings_arguments(parser)
+    _input_arguments(parser)
+    _folder_arguments(parser)
+
+
+def _list_arg(parser, name: str, default: str | None, metavar: str, what: str) -> None:
+    parser.add_argument(
+        f"--{name}",
+        default=default,
+        metavar=metavar,
+        help=f"{what}; {LIST_FORM}" + (f" (default: {default})" if default is not None else ""),
     )
 
-    def list_arg(name: str, default: str | None, metavar: str, what: str) -> None:
-        parser.add_argument(
-            f"--{name}",
-            default=default,
-            metavar=metavar,
-            help=f"{what}; {LIST_FORM}" + (f" (default: {default})" if default is not None else ""),
-        )
 
+def _grid_arguments(parser: argparse.ArgumentParser) -> None:
+    """The grid's dimensions: scenes, methods, pools, budgets, tasks, protocols, seeds."""
+    from bench.harness.grid import default_methods
+    from bench.scenes.spec import scene_names
+    from bench.unit.tasks import TASK_RUNNERS
+    from bench.vocabulary import FRONTIER_BUDGETS, FRONTIER_PEERS, PROTOCOLS, WHOLE_POOL_BUDGET
+
+    list_arg = partial(_list_arg, parser)
     list_arg("scenes", None, "S1,S2", f"scene types (default: {','.join(scene_names())})")
     list_arg(
         "methods",
@@ -84,6 +87,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "`method` column of runs.csv); with the sfm task on rendered scenes, stock COLMAP with all its features "
         "(colmap) is added if missing: the sfm means leave out the (scene, seed) cells it "
         "does not map",
+    )
+    list_arg(
+        "pools",
+        None,
+        "P1,P2",
+        "the candidate pools the methods run on, each a detector with the matcher its "
+        "selections are matched with: sift, aliked, disk, xfeat (their standard matchers: "
+        "ratio test, LightGlue, LightGlue, LighterGlue), a learned one with the ratio test as "
+        "aliked+ratio, or a --pool-module's; on a pool other than the run's own (--detector) "
+        "a method's rows are named <method>:<pool>, and each pool's own top-B peer "
+        "(aliked-b, ...) runs too; default: the --detector's pool alone",
     )
     list_arg(
         "budget",
@@ -125,7 +139,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "N1,N2",
         "scene seeds, e.g. 0,1,2 or 0-9 (default: the regime's, 0-4 or 0,1; 0 with --quick)",
     )
-    list_arg(
+
+
+def _settings_arguments(parser: argparse.ArgumentParser) -> None:
+    """The adaptive policy's weights and every other setting (`--set`)."""
+    from bench.frontend.policies import PolicyConfig, Weights, own_fields
+    from bench.unit.config import RunConfig
+    from bench.vocabulary import SETTINGS
+
+    _list_arg(
+        parser,
         "weights",
         ",".join(str(w) for w in dataclasses.astuple(Weights())),
         "W1,...,W5",
@@ -140,14 +163,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         + "; each method's own (decide its rows alone): "
         + ", ".join(f"{m}.{k}" for m, cls in SETTINGS.items() for k in own_fields(cls)),
     )
-    _input_arguments(parser)
-    _folder_arguments(parser)
 
 
 def _input_arguments(parser: argparse.ArgumentParser) -> None:
-    """What the grid runs on: the smoke preset, a dataset, outside policies, the detector,
-    the render settings."""
-    from bench.frontend.features import DETECTORS
+    """What the grid runs on: the smoke preset, a dataset, outside policies and pools, the
+    detector, the render settings."""
+    from bench.frontend.pools import POOLS
 
     parser.add_argument(
         "--quick",
@@ -211,12 +232,23 @@ def _input_arguments(parser: argparse.ArgumentParser) -> None:
         help="a Python file whose @policy functions are registered (repeatable); see "
         "examples/my_policy.py and 'Writing a policy' below",
     )
+    parser.add_argument(
+        "--pool-module",
+        action="append",
+        default=[],
+        dest="policy_module",
+        metavar="FILE",
+        help="a Python file that registers a candidate pool of your own detector with "
+        "bench.frontend.pools.register_pool (repeatable); name it in --pools or --detector; "
+        "see docs/extending.md",
+    )
     parser.epilog = policy_guide()
     parser.add_argument(
         "--detector",
         default="sift",
-        choices=DETECTORS,
-        help="candidate detector (default: %(default)s)",
+        metavar="POOL",
+        help=f"the run's own candidate pool: {', '.join(POOLS)} or a --pool-module's "
+        "(default: %(default)s)",
     )
     add_config_args(parser, RenderConfig, quick=QUICK_RENDER, choices={"variant": VARIANTS})
 
@@ -483,6 +515,7 @@ def grid_of(args: argparse.Namespace):
         datasets=tuple(map(str, datasets)),
         bag_size=bag_size,
         frontier=() if frontier == "none" else parse_list("--frontier", frontier, int, "1024,2048"),
+        pools=parse_list("--pools", args.pools, str, "sift,aliked") if args.pools else (),
     )
     results = args.results or (
         LATEST.with_name(f"dataset-{datasets[0].name}" if len(datasets) == 1 else "datasets")

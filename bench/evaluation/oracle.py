@@ -38,7 +38,8 @@ from scipy.sparse.csgraph import connected_components
 
 from bench.backend.matching import tentative_matches
 from bench.evaluation.truth import SceneTruth
-from bench.frontend.features import Candidates, strongest_first
+from bench.frontend.features import Candidates
+from bench.frontend.pools import strongest_first
 from bench.memo import digest, last_call
 from bench.vocabulary import GROUND_TRUTH, ORACLE, Method, declare_method
 

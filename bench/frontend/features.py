@@ -1,7 +1,7 @@
-"""The candidate pool: one set of keypoints and descriptors per view, shared by all policies.
+"""The candidate pool: one set of keypoints and descriptors per view, shared by all
+policies, detected by the pool's detector (`bench.frontend.pools`).
 
-Keypoints are stored in COLMAP's pixel convention (pixel (0, 0)'s centre at (0.5, 0.5));
-OpenCV's keypoints have it at (0, 0), so 0.5 is added once, here.
+Keypoints are stored in COLMAP's pixel convention (pixel (0, 0)'s centre at (0.5, 0.5)).
 """
 
 from __future__ import annotations
@@ -13,10 +13,8 @@ import cv2
 import numpy as np
 
 from bench import BenchError
-from bench.frontend import learned
+from bench.frontend.pools import POOLS, aliked, get_pool, strongest_first
 from bench.frontend.views import View
-
-DETECTORS = ("sift", "orb", "akaze", *learned.LEARNED)
 
 
 @dataclass(frozen=True)
@@ -24,8 +22,8 @@ class DetectorConfig:
     """The detector that builds every view's candidate pool."""
 
     detector: str = "sift"
-    """Keypoint detector and descriptor: sift, orb, akaze, or the learned aliked or disk
-    (the `learned` extra; `bench.frontend.learned`)."""
+    """The pool's detector and descriptor (`bench.frontend.pools`): sift, orb, akaze, or
+    the learned aliked, disk or xfeat (the `learned` extra), or one of a pool module's."""
     sift_contrast: float = 0.005
     """SIFT contrast threshold (OpenCV's default is 0.04; low, so that the pool is several
     times the budget even on the weakly textured corridor)."""
@@ -44,10 +42,11 @@ class DetectorConfig:
     """ALIKED's network: aliked-n16, aliked-n16rot, aliked-n32 or aliked-t16 (LightGlue's
     ALIKED weights were trained on aliked-n16's descriptors)."""
     learned_max_edge: int = 1024
-    """ALIKED and DISK: longest side, px, of the downscaled copy the network detects on
-    (their LightGlue's training size); keypoints are returned in full-resolution pixels."""
+    """The learned pools (ALIKED, DISK, XFeat): longest side, px, of the downscaled copy
+    the network detects on (LightGlue's training size); keypoints are returned in
+    full-resolution pixels."""
     learned_keypoints: int = 4096
-    """ALIKED and DISK: most keypoints per view, the highest-scoring (the pool; above the
+    """The learned pools: most keypoints per view, the highest-scoring (the pool; above the
     largest budget; max_features bounds the OpenCV detectors')."""
     aliked_threshold: float = 0.01
     """ALIKED's detection score threshold (LightGlue's default is 0.2; low, so that the
@@ -55,38 +54,27 @@ class DetectorConfig:
     view of the table at 320x240, SIFT's 330-390)."""
 
     def validate(self) -> DetectorConfig:
-        if self.detector not in DETECTORS:
-            raise BenchError(f"unknown detector {self.detector!r}; valid: {', '.join(DETECTORS)}")
+        if self.detector not in POOLS:
+            raise BenchError(f"unknown detector {self.detector!r}; valid: {', '.join(POOLS)}")
         if self.max_image_size < 64 or self.max_features < 1:
             raise BenchError("detector.max_image_size must be >= 64 and max_features >= 1")
-        if self.learned_variant not in learned.ALIKED_VARIANTS:
+        if self.learned_variant not in aliked.VARIANTS:
             raise BenchError(
                 f"unknown detector.learned_variant {self.learned_variant!r}; valid: "
-                + ", ".join(learned.ALIKED_VARIANTS)
+                + ", ".join(aliked.VARIANTS)
             )
         if self.learned_max_edge < 64 or self.learned_keypoints < 1 or self.aliked_threshold <= 0:
             raise BenchError(
                 "detector.learned_max_edge must be >= 64, learned_keypoints >= 1 and "
                 "aliked_threshold > 0"
             )
-        if self.detector in learned.LEARNED:
-            learned.require()
+        POOLS[self.detector].require()
         return self
-
-    def create(self):
-        if self.detector == "sift":
-            return cv2.SIFT_create(contrastThreshold=self.sift_contrast)
-        if self.detector == "orb":
-            return cv2.ORB_create(nfeatures=self.orb_features)
-        akaze = (
-            getattr(cv2, "AKAZE_create", None) or cv2.xfeatures2d.AKAZE_create
-        )  # OpenCV 5: contrib
-        return akaze(threshold=self.akaze_threshold)
 
     @property
     def binary(self) -> bool:
         """Whether descriptors are binary strings (Hamming distance)."""
-        return self.detector in ("orb", "akaze")
+        return POOLS[self.detector].binary
 
 
 @dataclass
@@ -116,12 +104,6 @@ class Candidates:
         return replace(self, xy=self.xy * [sx, sy], size=self.size * math.sqrt(sx * sy))
 
 
-def strongest_first(values: np.ndarray) -> np.ndarray:
-    """Indices by descending value (a response, a score); ties by index, so selection is
-    deterministic."""
-    return np.lexsort((np.arange(len(values)), -np.asarray(values)))
-
-
 def tile_of(xy: np.ndarray, width: int, height: int, tiles: tuple[int, int]) -> np.ndarray:
     """Index of the tile (row-major, tiles = columns x rows) holding each point."""
     cx = np.clip((xy[:, 0] / width * tiles[0]).astype(int), 0, tiles[0] - 1)
@@ -129,41 +111,15 @@ def tile_of(xy: np.ndarray, width: int, height: int, tiles: tuple[int, int]) -> 
     return cy * tiles[0] + cx
 
 
-def keypoint_arrays(kps) -> tuple[np.ndarray, ...]:
-    xy = np.array([k.pt for k in kps], float).reshape(-1, 2) + 0.5
-    return (
-        xy,
-        np.array([k.size for k in kps], float),
-        np.array([k.angle for k in kps], float),
-        np.array([k.response for k in kps], float),
-    )
-
-
 def detect(view: View, cfg: DetectorConfig) -> Candidates:
-    """Detect and describe one view's candidates (the `max_features` strongest, in the
-    detector's order; a learned detector's: `bench.frontend.learned.detect`)."""
-    if cfg.detector in learned.LEARNED:
-        return Candidates(*learned.detect(view.image, cfg))
-    kps, desc = cfg.create().detectAndCompute(view.gray, None)
-    if len(kps) > cfg.max_features:
-        order = strongest_first([k.response for k in kps])
-        keep = np.sort(order[: cfg.max_features])
-        kps, desc = [kps[k] for k in keep], desc[keep]
-    xy, size, angle, response = keypoint_arrays(kps)
-    if desc is None:
-        desc = np.zeros((0, 32 if cfg.binary else 128), np.uint8 if cfg.binary else np.float32)
-    if not cfg.binary:
-        desc = desc / np.maximum(np.linalg.norm(desc, axis=1, keepdims=True), 1e-12)
-    return Candidates(
-        xy, size, angle, response, desc.astype(np.uint8 if cfg.binary else np.float32)
-    )
+    """Detect and describe one view's candidates with its pool's detector
+    (`bench.frontend.pools`)."""
+    return Candidates(*get_pool(cfg.detector).detect(view.image, cfg))
 
 
 def detect_points(gray: np.ndarray, cfg: DetectorConfig) -> np.ndarray:
     """Keypoint locations only (COLMAP convention), for re-detection under perturbations."""
-    if cfg.detector in learned.LEARNED:
-        return learned.run_network(gray, cfg)[0]
-    return keypoint_arrays(cfg.create().detect(gray, None))[0]
+    return get_pool(cfg.detector).points(gray, cfg)
 
 
 def descriptor_distances(a: np.ndarray, b: np.ndarray, squared: bool = False) -> np.ndarray:

@@ -34,7 +34,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from bench import BenchError
-from bench.frontend.features import strongest_first, tile_of
+from bench.frontend.features import tile_of
+from bench.frontend.pools import strongest_first
 from bench.frontend.policies import (
     ADAPTIVE_SIGNALS,
     PolicyConfig,

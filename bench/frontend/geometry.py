@@ -22,12 +22,8 @@ import pycolmap
 
 from bench.camera import Camera
 from bench.console import log
-from bench.frontend.features import (
-    Candidates,
-    descriptor_distances,
-    strongest_first,
-    tentative_matches,
-)
+from bench.frontend.features import Candidates, descriptor_distances, tentative_matches
+from bench.frontend.pools import strongest_first
 from bench.frontend.views import View
 from bench.twoview import two_view_geometry, verification_options
 

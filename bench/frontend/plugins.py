@@ -1,6 +1,7 @@
-"""Policies from outside the package: a Python file (`bench run --policy-module FILE`) or
-an installed package's `bench.policies` entry point, registered with
-`bench.frontend.policies.policy` like the package's own.
+"""Policies and pools from outside the package: a Python file (`bench run --policy-module
+FILE`, `--pool-module FILE`) or an installed package's `bench.policies` entry point,
+registered with `bench.frontend.policies.policy` (a pool: `bench.frontend.pools.register_pool`)
+like the package's own.
 
 The contract's last rule, no ground truth, is checked twice. It guards against accidents
 and slips, not against code written to get around it.
@@ -40,6 +41,8 @@ from pathlib import Path
 
 from bench import BenchError
 from bench.files import checksum, content_key
+from bench.frontend.pools import ORIGIN as POOL_ORIGIN
+from bench.frontend.pools import POOLS
 from bench.vocabulary import METHODS
 
 FORBIDDEN_IMPORTS = ("bench.scenes", "bench.render", "bench.evaluation", "bench.harness")
@@ -190,7 +193,7 @@ def load_module(path: str) -> tuple[str, ...]:
     if not file.is_file():
         raise BenchError(f"policy module {path} does not exist")
     _check(file.read_text(), path)
-    before = set(METHODS)
+    before, pools = set(METHODS), set(POOLS)
     name = f"bench_policy_module_{content_key(str(file.resolve()), 8)}"
     spec = importlib.util.spec_from_file_location(name, file)
     module = importlib.util.module_from_spec(spec)
@@ -205,12 +208,15 @@ def load_module(path: str) -> tuple[str, ...]:
     except (Exception, SystemExit) as e:
         raise BenchError(f"policy module {path} failed to import: {type(e).__name__}: {e}") from e
     added = tuple(p for p in METHODS if p not in before)
-    if not added:
+    new_pools = [p for p in POOLS if p not in pools]
+    if not added and not new_pools:
         raise BenchError(
-            f"policy module {path} registers no new policy (decorate a function with "
-            "@bench.frontend.policies.policy('name'))"
+            f"policy module {path} registers no new policy or pool (decorate a function with "
+            "@bench.frontend.policies.policy('name'), or call "
+            "bench.frontend.pools.register_pool)"
         )
     ORIGIN.update(dict.fromkeys(added, str(file.resolve())))
+    POOL_ORIGIN.update(dict.fromkeys(new_pools, str(file.resolve())))
     return added
 
 

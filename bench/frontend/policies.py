@@ -27,7 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from bench import BenchError, MethodFailed
-from bench.frontend.features import Candidates, strongest_first, tile_of
+from bench.frontend.features import Candidates, tile_of
+from bench.frontend.pools import strongest_first
 from bench.frontend.signals import SIGNALS, Signals
 from bench.frontend.views import View
 from bench.vocabulary import METHODS, MULTI_VIEW, PER_VIEW, SETTINGS, Method, declare_method

@@ -38,10 +38,10 @@ equals its definition above (tests/test_signals_scale.py): distinctiveness and a
 read the descriptor distances in blocks of BLOCK_ROWS rows; epipolar reads only the pairs
 within the band around each epipolar line (`epipolar_pairs`) and their descriptor distances.
 
-Every signal is defined on every pool. On a learned pool (ALIKED, DISK:
+Every signal is defined on every pool. On a learned pool (ALIKED, DISK, XFeat:
 `bench.frontend.learned`) the response is the detection score, the scale s a nominal size
 (neither detector has one), re-detection runs the same network (on the perturbed grey
-image, as three equal channels), and tau is set per detector (`DUPLICATE_DISTANCE`).
+image, as three equal channels), and tau is set per pool (`Pool.duplicate_distance`).
 
 Overlap, nearest views, working distances, epipolar lines and the cameras that parallax
 looks at come from the views' geometry (`bench.frontend.geometry`): the rig's poses when
@@ -58,6 +58,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from bench.frontend.features import Candidates, DetectorConfig, descriptor_distances, detect_points
+from bench.frontend.pools import POOLS
 from bench.frontend.geometry import (
     EPIPOLAR_PX,
     EPIPOLAR_RATIO,
@@ -66,10 +67,6 @@ from bench.frontend.geometry import (
 )
 from bench.frontend.views import View
 
-DUPLICATE_DISTANCE = {"sift": 0.3, "orb": 0.2, "akaze": 0.2, "aliked": 0.3, "disk": 0.65}
-"""tau per detector. ALIKED's and DISK's put about the share of a view's candidates within
-tau of another candidate that SIFT's does (measured on a corridor and a facade pair of
-views at 640x480: ALIKED 0.23-0.32, DISK 0.64-0.69; DISK's descriptors lie farther apart)."""
 SAME_POINT_PX = 8.0
 
 
@@ -410,7 +407,7 @@ def compute_signals(
     that selects with one policy asks for what it reads. `step()`, if given, is called as
     each view's own signals are done (progress)."""
     n, clock = len(views), _Clock()
-    tau2 = DUPLICATE_DISTANCE[det.detector] ** 2
+    tau2 = POOLS[det.detector].duplicate_distance**2
     values: list[dict[str, np.ndarray]] = [{} for _ in range(n)]
     near_dupes = [np.zeros(len(c)) for c in pools]
     epi_views = [np.zeros(len(c)) for c in pools]

@@ -13,7 +13,7 @@ entry or dataset; `subset` is the front end of some of its views alone (a datase
 cached beside it by `bag_front_end`.
 
 Cached (npz beside the render cache) by the render entry, the geometry granted, the
-detector and signal settings (and a learned detector's package versions) and the code
+detector and signal settings (and a pool's packages' versions, `Pool.identity`) and the code
 that computes them (`compute` and what it reaches, `bench.codehash`; not this caching
 around it); the seconds measured when it was computed are stored with
 it, so reported front-end times do not depend on whether the cache was warm. A front end
@@ -33,8 +33,9 @@ from bench import BenchError
 from bench.codehash import code_hash, library_versions
 from bench.console import log, progress
 from bench.files import atomic_path, content_key
-from bench.frontend import features, learned
+from bench.frontend import features
 from bench.frontend.features import Candidates, DetectorConfig
+from bench.frontend.pools import POOLS
 from bench.frontend.geometry import IMAGES, RIG, SignalConfig, estimate_focal, focal_camera
 from bench.frontend.signals import (
     SIGNALS,
@@ -135,7 +136,7 @@ def _path(entry: Path, det: DetectorConfig, sig: SignalConfig, cache_dir, grant,
             "code": code_hash(FRONTEND_CODE),
             "alone": bagged,
         }
-        | learned.versions(det.detector)
+        | POOLS[det.detector].identity()
     )
     part = "-alone" if bagged else ""
     return Path(cache_dir) / f"{Path(entry).name}-{det.detector}-{grant}{part}-{key}.npz"

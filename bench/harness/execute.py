@@ -35,13 +35,14 @@ import signal
 import sys
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from bench import BenchError, MethodFailed
 from bench.evaluation.truth import scene_truth
 from bench.failures import ERROR
 from bench.frontend import plugins
+from bench.frontend.features import DetectorConfig
 from bench.frontend.geometry import RIG
 from bench.frontend.selection import check_budgets
 from bench.frontend.stage import FrontEnd, bag_front_end, front_end
@@ -52,6 +53,7 @@ from bench.unit import bags
 from bench.unit.config import RunConfig
 from bench.unit.evaluate import identities
 from bench.unit.methods import runner
+from bench.unit.pooled import known
 from bench.unit.predict import Keys, LoadedScene, has_prediction, predict
 from bench.unit.tasks import TASK_RUNNERS
 from bench.vocabulary import (
@@ -84,12 +86,16 @@ class Plan:
     entries: dict[tuple[str, int], Path]
     work: dict[Unit, Work]
 
-    @property
-    def budgets(self) -> tuple[int, ...]:
-        """The budgets of its units that select from the front end's pools (the grid's,
-        carried by each unit alone; not a peer's, which extracts a pool of its own)."""
+    def budgets(self, cfg: RunConfig) -> dict[DetectorConfig, tuple[int, ...]]:
+        """The budgets of its units that select from the front end's pools, by the
+        detector of their pool (`RunConfig.for_method`; not a peer's budgets, which
+        extracts a pool of its own)."""
         own = {m for m, d in METHODS.items() if d.kind in (OWN_PIPELINE, TRACKS_PEER)}
-        return tuple(sorted({u.budget for u in self.work if u.budget > 0 and u.method not in own}))
+        out: dict[DetectorConfig, set[int]] = {}
+        for u in self.work:
+            det = cfg.for_method(known(u.method)).detector
+            out.setdefault(det, set()).update([u.budget] if u.budget > 0 and u.method not in own else [])
+        return {det: tuple(sorted(b)) for det, b in out.items()}
 
     @property
     def grants(self) -> tuple[str, ...]:
@@ -122,7 +128,7 @@ def _front_ends(
 
 
 def _scene(entry: Path, cfg: RunConfig, renders: Path, grants, bag: str = "") -> LoadedScene:
-    key = (str(entry), repr(cfg), tuple(grants), bag)
+    key = (str(entry), repr(cfg.detector), repr(cfg.signals), tuple(grants), bag)
     if _HELD.get("key") != key:
         _HELD.clear()  # let the previous scene go before loading the next
         whole, fronts = _front_ends(entry, cfg, renders, grants, bag)
@@ -138,14 +144,16 @@ def _scene(entry: Path, cfg: RunConfig, renders: Path, grants, bag: str = "") ->
 
 def scene_task(group: tuple, entry: Path, cfg: RunConfig, renders: Path, plan: Plan) -> dict:
     """The front ends of the render entry of `group` (scene, seed) under each geometry
-    granted (and of its bag), computed or read from their cache, checked against the
-    budgets; returns their seconds and the largest pool."""
+    granted (and of its bag), of each pool its units select from, computed or read from
+    their cache, checked against the budgets; returns their seconds and the largest pool."""
     t = time.perf_counter()
     bag = next((u.bag for u in plan.work if u.group == group), "")
-    whole, _ = _front_ends(entry, cfg, renders, plan.grants, bag)
-    sizes = [len(p) for p in next(iter(whole.values())).pools]
-    check_budgets(sizes, plan.budgets, f"{group[0]} seed {group[1]}")
-    largest = max(sizes)
+    largest = 0
+    for det, budgets in plan.budgets(cfg).items():
+        whole, _ = _front_ends(entry, replace(cfg, detector=det), renders, plan.grants, bag)
+        sizes = [len(p) for p in next(iter(whole.values())).pools]
+        check_budgets(sizes, budgets, f"{group[0]} seed {group[1]}, {det.detector} pool")
+        largest = max(largest, *sizes)
     return {"seconds": time.perf_counter() - t, "largest_pool": largest}
 
 
@@ -167,7 +175,8 @@ def compute_unit(
 
 
 def unit_task(unit: Unit, plan: Plan, cfg: RunConfig, ws: Workspace, *_after) -> list[dict]:
-    """The rows of one unit of a plan (`_after`: what it waits for)."""
+    """The rows of one unit of a plan, on its pool (`_after`: what it waits for)."""
+    cfg = cfg.for_method(known(unit.method))
     scene = _scene(plan.entries[unit.group], cfg, ws.renders, plan.grants, unit.bag)
     return compute_unit(scene, unit, plan.work[unit], cfg, ws)
 
@@ -215,13 +224,17 @@ def unit_size(unit: Unit, work: Work) -> tuple:
 
 
 def largest_first(plan: Plan) -> list[Unit]:
-    """The units of a plan, scene by scene as the plan holds them (a worker keeps the
-    scene it holds: `_scene`), the costliest of each scene first (`unit_size`), so that
-    the run does not end waiting on one large unit started last."""
+    """The units of a plan, scene by scene as the plan holds them and pool by pool (a
+    worker keeps the scene it holds: `_scene`), the costliest of each first (`unit_size`),
+    so that the run does not end waiting on one large unit started last."""
     groups = list(plan.entries)
     return sorted(
         plan.work,
-        key=lambda u: (groups.index(u.group), tuple(-x for x in unit_size(u, plan.work[u]))),
+        key=lambda u: (
+            groups.index(u.group),
+            METHODS[u.method].pool,
+            tuple(-x for x in unit_size(u, plan.work[u])),
+        ),
     )
 
 

@@ -21,7 +21,7 @@ import os
 import time
 from collections.abc import Callable
 from dataclasses import asdict, astuple, dataclass, field
-from functools import partial
+from functools import cached_property, partial
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +34,8 @@ from bench.console import log, progress
 from bench.failures import ERROR, exclusions, failures, outcomes
 from bench.frontend import plugins
 from bench.frontend.matchability import read_models
-from bench.frontend.policies import check_methods, learned_weights
+from bench.frontend.policies import learned_weights
+from bench.frontend.pools import POOLS, PoolSpec
 from bench.frontend.views import pixels_key, source_key
 from bench.harness.execute import Cluster, Plan, Work, check_scheduler, execute
 from bench.harness.keys import PREDICTION_CODE, evaluation_hash, prediction_hash
@@ -59,6 +60,7 @@ from bench.runs import (
 from bench.scenes.spec import load_spec, scene_names
 from bench.unit.bags import dataset_bags
 from bench.unit.config import RunConfig
+from bench.unit.pooled import SEPARATOR, known, own_spec, placement
 from bench.unit.tasks import TASK_RUNNERS
 from bench.vocabulary import (
     BAG,
@@ -81,7 +83,7 @@ _INVOCATIONS = itertools.count(1)
 def default_methods() -> tuple[str, ...]:
     """Every method the package declares, in display order (not those of modules)."""
     vocab = Vocabulary.current()
-    names = [n for n in METHODS if n not in plugins.ORIGIN]
+    names = [n for n in METHODS if n not in plugins.ORIGIN and SEPARATOR not in n]
     return tuple(sorted(names, key=vocab.order))
 
 
@@ -119,6 +121,16 @@ class BenchConfig:
     frontier: tuple[int, ...] = ()
     """Budgets at which `FRONTIER_PEERS` alone run besides `budgets`: the cost figure's
     frontiers (a regime's grid: `FRONTIER_BUDGETS`)."""
+    pools: tuple[str, ...] = ()
+    """The pools its methods run on (`bench.unit.pooled`: `sift`, `aliked`,
+    `aliked+ratio`, ...); empty: the run's own (`detector.detector`, `backend.matcher`)."""
+
+    @cached_property
+    def placed(self) -> tuple[tuple[str, ...], list[str]]:
+        """The names of its methods on its pools, and a line for each method on none
+        (`bench.unit.pooled.placement`)."""
+        specs = tuple(PoolSpec.parse(p) for p in self.pools)
+        return placement(self.methods, specs, own_spec(self.run))
 
     def _check_training_seeds(self) -> None:
         """Refuse evaluation seeds that a learned method's model was trained on."""
@@ -150,7 +162,10 @@ class BenchConfig:
             for s in self.scenes:
                 load_spec(s)
         plugins.load(self.run.policy.modules)
-        check_methods(self.methods)
+        for m in self.methods:
+            known(m)
+        for spec in self.pools:
+            POOLS[PoolSpec.parse(spec).pool].require()
         if not self.datasets:
             self._check_training_seeds()
         unknown = [p for p in self.protocols if p not in PROTOCOLS]
@@ -213,7 +228,7 @@ class BenchConfig:
             Unit(sc, sd, m, b, bags[sc].get(sd, ""))
             for sc in self.scenes
             for sd in self.seeds_of(sc)
-            for m in self.methods
+            for m in self.placed[0]
             for b in self.budgets_of(m)
             if self.jobs(m)
         ]
@@ -228,10 +243,8 @@ class BenchConfig:
 
     def jobs(self, method: str) -> list[Job]:
         """Every job of a unit of `method`: the tasks its kind runs (`TaskRunner.kinds`;
-        a peer runs the tasks that admit peers; a method that needs another detector's
-        pool runs none); a task without tracks (`Task.tracks`) one job, `NO_PROTOCOL`."""
-        if METHODS[method].pool not in ("", self.run.detector.detector):
-            return []
+        a peer runs the tasks that admit peers); a task without tracks (`Task.tracks`) one
+        job, `NO_PROTOCOL`."""
         peer, kind = METHODS[method].role == "peer", METHODS[method].kind
         claimed = {k for r in TASK_RUNNERS.values() for k in r.kinds}
         tasks = [
@@ -420,6 +433,8 @@ def _run_in(
         "git_commit": git_commit(),  # before this run rewrites any tracked result file
     }
     check_results_dir(ws.results, cfg.run.as_dict(), options.overwrite, RunConfig().as_dict())
+    for line in cfg.placed[1]:
+        log(line)
     code_hash(PREDICTION_CODE), evaluation_hash()  # taken once, from the code that starts
     df, rescore = _current_rows(cfg, ws, options)
     done, again = _keys(df[~rescore]), _keys(df[rescore])

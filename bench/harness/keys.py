@@ -11,8 +11,9 @@ from functools import partial
 from bench.codehash import code_hash, library_versions
 from bench.files import content_key
 from bench.frontend import plugins
-from bench.frontend.learned import LEARNED
+from bench.frontend.pools import POOLS
 from bench.unit.config import RunConfig
+from bench.unit.pooled import row_pool
 from bench.unit.predict import Keys
 from bench.unit.tasks import TASK_RUNNERS
 from bench.vocabulary import METHODS, METRICS, TASKS, deciding
@@ -29,10 +30,11 @@ def _deciding(cfg: RunConfig, method: str, task: str) -> dict:
     """What decides a method's predicted rows of a task but the code: the settings the
     prediction reads (`RunConfig.prediction`), the fields of the method and task that
     decide a row (`bench.vocabulary.deciding`), the versions of the libraries it runs
-    (`bench.codehash.library_versions`: a learned pool's or matcher's too, and the
-    selection models'), the method's own settings and input files (the learned weights),
+    (`bench.codehash.library_versions`, the selection models', and its pool's packages,
+    `Pool.identity`), the method's own settings and input files (the learned weights),
     and for a method from a module (`--policy-module`, an entry point) its module's
     content (`origin`)."""
+    cfg = cfg.for_method(method)  # its pool's detector and matcher
     own = cfg.policy_config(method)
     runner = TASK_RUNNERS[task]
     declared = METHODS[method]
@@ -42,9 +44,7 @@ def _deciding(cfg: RunConfig, method: str, task: str) -> dict:
         "own": cfg.own(method),
         "method": deciding(declared),
         "task": {"name": task, "grant": runner.spec.grant, "maps": runner.maps},
-        "libraries": library_versions(
-            learned=declared.pool in LEARNED or bool(declared.matcher), models=True
-        ),
+        "libraries": library_versions(models=True) | POOLS[cfg.detector.detector].identity(),
         "inputs": plugins.files_hash(own.inputs()) if hasattr(own, "inputs") else "",
         "origin": plugins.files_hash([origin]) if origin else "",
     }
@@ -94,4 +94,4 @@ def evaluation_hash(code: str | None = None) -> str:
 
 def unit_keys(cfg: RunConfig, method: str) -> Keys:
     """The keys of a method's units under `cfg` (what `bench.unit` is handed)."""
-    return Keys(partial(prediction_hash, cfg, method), evaluation_hash())
+    return Keys(partial(prediction_hash, cfg, method), evaluation_hash(), row_pool(cfg, method))

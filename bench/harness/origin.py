@@ -27,7 +27,8 @@ import pandas as pd
 from bench import ROOT, BenchError, __version__
 from bench.codehash import code_record, git_source, library_versions
 from bench.files import write_text_atomic
-from bench.frontend.learned import LEARNED
+from bench.frontend.pools import POOLS
+from bench.unit.pooled import known
 from bench.harness.keys import (
     PREDICTION_CODE,
     SCORING_CODE,
@@ -65,8 +66,10 @@ def snapshot_origin(rows: pd.DataFrame, cfg: RunConfig, commit: str, source=None
     code["scoring"] = code_record(SCORING_CODE, source)
     protocols = {}
     for method, task in sorted(set(zip(rows["method"], rows["task"]))):
-        if method not in METHODS:
-            raise BenchError(f"the snapshot's method {method!r} is not declared here")
+        try:
+            known(method)
+        except BenchError:
+            raise BenchError(f"the snapshot's method {method!r} is not declared here") from None
         want = prediction_hash(cfg, method, task, code["prediction"]["code"])
         found = set(rows["prediction_hash"][(rows["method"] == method) & (rows["task"] == task)])
         if found != {want}:
@@ -83,13 +86,14 @@ def snapshot_origin(rows: pd.DataFrame, cfg: RunConfig, commit: str, source=None
             f"the snapshot's rows were not scored by the code of {commit} "
             f"(evaluation_hash {', '.join(sorted(set(rows['evaluation_hash'])))}, its {scored})"
         )
-    learned = any(METHODS[m].pool in LEARNED or METHODS[m].matcher for m in set(rows["method"]))
+    pools = {cfg.for_method(m).detector.detector for m in set(rows["method"])}
     return {
         "version": __version__,
         "commit": commit,
         "rows": len(rows),
         "reference": reference_hash(),
-        "libraries": library_versions(learned=learned, models=True),
+        "libraries": library_versions(models=True)
+        | {k: v for p in sorted(pools) for k, v in POOLS[p].identity().items()},
         "code": {k: v["code"] for k, v in code.items()},
         "modules": code["prediction"]["modules"] | code["scoring"]["modules"],
         "protocols": protocols,

@@ -26,6 +26,8 @@ NOT_METRICS = {
     "row_checksum",
     "wall_ms",
     "render_s_per_view",
+    "pool",
+    "matcher",
 }
 """Columns that identify a row or time it: never compared as results (`*_ms` neither)."""
 LAST_BITS = (

@@ -137,6 +137,20 @@ class RunConfig:
         merged = {**self.methods, method: {**self.methods.get(method, {}), **values}}
         return replace(self, methods=merged)
 
+    def for_method(self, method: str) -> RunConfig:
+        """The settings a method's units run under: its pool's detector and its matcher
+        where it names them (`Method.pool`, `Method.matcher`: `bench.unit.pooled`), these
+        otherwise."""
+        m = METHODS[method]
+        detector, matcher = m.pool or self.detector.detector, m.matcher or self.backend.matcher
+        if (detector, matcher) == (self.detector.detector, self.backend.matcher):
+            return self
+        return replace(
+            self,
+            detector=replace(self.detector, detector=detector),
+            backend=replace(self.backend, matcher=matcher),
+        )
+
     def as_dict(self) -> dict:
         """The shared settings, and under `methods` each method's own (what
         `config.json` records; the folder is bound to the shared ones alone)."""

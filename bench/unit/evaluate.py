@@ -134,6 +134,7 @@ def identities(entry: Path, unit: Unit, jobs: list[Job], keys: Keys) -> list[dic
             BAG: unit.bag,
             "task": job.task,
             "protocol": job.protocol,
+            **keys.columns,
             **shared,
             "prediction_hash": keys.prediction(job.task),
             "evaluation_hash": keys.evaluation,

@@ -31,7 +31,7 @@ import json
 import shutil
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 
@@ -72,6 +72,8 @@ class Keys:
     stored job records, and what makes it current)."""
     evaluation: str
     """The `evaluation_hash` of every row."""
+    columns: dict[str, str] = field(default_factory=dict)
+    """What else names its rows: their pool and matcher (`bench.unit.pooled.row_pool`)."""
 
 
 def current(job: dict, keys: Keys, task: str) -> bool:

@@ -1,0 +1,14 @@
+"""Candidate pools: the registry (`registry`) and the built-in pools, one module each,
+registered on import."""
+
+from bench.frontend.pools import aliked, disk, opencv, xfeat  # noqa: F401  (registers them)
+from bench.frontend.pools.registry import (  # noqa: F401
+    ORIGIN,
+    POOLS,
+    RATIO,
+    Pool,
+    PoolSpec,
+    get_pool,
+    register_pool,
+    strongest_first,
+)

@@ -1,0 +1,162 @@
+"""Candidate pools (`bench.frontend.pools`) and the pools of a grid (`bench.unit.pooled`):
+every registered pool keeps the pool contract, a pool comes from a module of the user's
+own, and one grid runs its methods on several pools, its rows named and paired."""
+
+from __future__ import annotations
+
+import textwrap
+
+import numpy as np
+import pytest
+
+from bench import BenchError
+from bench.frontend import plugins
+from bench.frontend.features import DetectorConfig
+from bench.frontend.pools import POOLS, PoolSpec
+from bench.harness.execute import Cluster
+from bench.harness.grid import BenchConfig, RunOptions, run_benchmark
+from bench.results import Workspace
+from bench.unit import pooled
+from bench.unit.config import RunConfig
+from bench.vocabulary import METHODS
+from tests.conftest import TINY
+
+BUILT_IN = ("sift", "orb", "akaze", "aliked", "disk", "xfeat")
+
+
+@pytest.fixture(scope="module")
+def texture() -> np.ndarray:
+    """A 160 x 120 RGB image of blobs at two scales."""
+    import cv2
+
+    rng = np.random.default_rng(1)
+    img = sum(
+        cv2.resize(rng.random((120 // k, 160 // k, 3)), (160, 120), interpolation=cv2.INTER_CUBIC)
+        for k in (4, 12)
+    )
+    return np.clip(255 * (img - img.min()) / np.ptp(img), 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("name", BUILT_IN)
+def test_every_pool_keeps_the_pool_contract(texture, name):
+    """Shapes and types, at most the configured count (exactly it where the image has
+    more), the same pool twice, keypoints inside the image (COLMAP's convention)."""
+    if POOLS[name].packages:
+        pytest.importorskip("torch").set_num_threads(1)
+    cfg = DetectorConfig(detector=name, max_features=60, learned_keypoints=60, learned_max_edge=160)
+    first, again = (POOLS[name].detect(texture, cfg) for _ in range(2))
+    xy, size, angle, response, desc = first
+    n = len(xy)
+    assert n == 60 and xy.shape == (n, 2) and xy.dtype == np.float64
+    assert size.shape == angle.shape == response.shape == (n,) and len(desc) == n
+    assert desc.dtype == (np.uint8 if POOLS[name].binary else np.float32)
+    if not POOLS[name].binary:
+        assert np.allclose(np.linalg.norm(desc, axis=1), 1, atol=1e-5)
+    assert all(np.array_equal(a, b) for a, b in zip(first, again))
+    assert xy.min() >= 0 and np.all(xy.max(0) <= [160, 120])
+    points = POOLS[name].points(texture[..., 0], cfg)
+    assert points.ndim == 2 and points.shape[1] == 2 and len(points) > 0
+
+
+def test_a_pool_spec_names_a_pool_and_a_matcher_it_can_use():
+    assert PoolSpec.parse("aliked") == ("aliked", "lightglue")
+    assert PoolSpec.parse("aliked+ratio") == ("aliked", "ratio")
+    assert str(PoolSpec("xfeat", "lighterglue")) == "xfeat"
+    assert str(PoolSpec("xfeat", "ratio")) == "xfeat+ratio"
+    for bad in ("sift+lightglue", "nopool", "aliked+lighterglue"):
+        with pytest.raises(BenchError) as e:
+            PoolSpec.parse(bad)
+        assert "\n" not in str(e.value)
+
+
+def test_placement_runs_pool_methods_on_each_pool_and_says_what_runs_on_none():
+    own = PoolSpec("sift", "ratio")
+    specs = (own, PoolSpec.parse("aliked"), PoolSpec.parse("aliked+ratio"))
+    names, said = pooled.placement(("response", "colmap-b", "disk-b"), specs, own)
+    assert names == (
+        "response",
+        "response:aliked",
+        "response:aliked+ratio",
+        "colmap-b",  # extracts its own: once
+        "aliked-b",  # the pool's own top-B, with LightGlue, added
+        "aliked-b:aliked+ratio",
+    )
+    assert METHODS["response:aliked+ratio"].pool == "aliked"
+    assert METHODS["response:aliked+ratio"].matcher == "ratio"
+    assert len(said) == 1 and "disk-b (disk)" in said[0]
+    assert pooled.placement(("response", "disk-b"), (), own) == (
+        ("response",),
+        [said[0].replace("sift, aliked, aliked+ratio", "sift")],
+    )
+
+
+def test_a_pooled_name_is_declared_where_it_was_not(monkeypatch):
+    """A worker process meets `<method>:<pool>` before anything declared it."""
+    monkeypatch.setattr(pooled, "METHODS", {k: v for k, v in METHODS.items() if ":" not in k})
+    monkeypatch.delitem(METHODS, "response:orb", raising=False)
+    assert pooled.known("response:orb") == "response:orb"
+    assert METHODS["response:orb"].pool == "orb"
+    with pytest.raises(BenchError):
+        pooled.known("response:nopool")
+    with pytest.raises(BenchError):
+        pooled.known("colmap-b:orb")  # extracts its own: on no pool
+
+
+def test_a_pool_from_a_module_of_ones_own(tmp_path):
+    """`--pool-module`: a pool registered by a file, with its origin recorded (its content
+    decides its rows), usable in a grid; a file reading ground truth is refused."""
+    module = tmp_path / "my_pool.py"
+    module.write_text(
+        textwrap.dedent(
+            """
+            import cv2
+            import numpy as np
+            from bench.frontend.pools import Pool, register_pool
+
+            def detect(image, cfg):
+                gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) if image.ndim == 3 else image
+                kps, desc = cv2.ORB_create(nfeatures=cfg.max_features).detectAndCompute(gray, None)
+                xy = np.array([k.pt for k in kps], float).reshape(-1, 2) + 0.5
+                n = len(xy)
+                return xy, np.full(n, 8.0), np.full(n, -1.0), np.array([k.response for k in kps]), desc
+
+            register_pool(Pool("my-orb", detect, lambda g, cfg: detect(g, cfg)[0], 0.2, binary=True))
+            """
+        )
+    )
+    plugins.load([str(module)])
+    assert "my-orb" in POOLS and POOLS["my-orb"].identity()["pool module"]
+    names, _ = pooled.placement(
+        ("response",), (PoolSpec.parse("my-orb"),), PoolSpec("sift", "ratio")
+    )
+    assert names == ("response:my-orb",)
+    bad = tmp_path / "bad_pool.py"
+    bad.write_text("import numpy as np\nTRUTH = np.load('ground_truth/gt_00.npz')\n")
+    with pytest.raises(BenchError, match="no ground truth"):
+        plugins.load([str(bad)])
+
+
+def test_one_grid_runs_a_method_on_two_pools_its_rows_named_and_paired(tmp_path, renders_dir):
+    run = RunConfig(render=TINY)
+    grid = BenchConfig(
+        scenes=("table",),
+        seeds=(0,),
+        methods=("response",),
+        budgets=(16,),  # ORB finds 29 keypoints in a tiny view
+        tasks=("pairs",),
+        pools=("sift", "orb"),
+        run=run,
+    )
+    rows = run_benchmark(
+        grid, Workspace(tmp_path / "r", renders_dir), RunOptions(cluster=Cluster(1))
+    )
+    by = rows.set_index("method")
+    assert set(by.index) == {"response", "response:orb"}
+    assert by.loc["response", "pool"] == "sift" and by.loc["response:orb", "pool"] == "orb"
+    assert set(rows["matcher"]) == {"ratio"} and not rows["failure"].str.startswith("ERROR").any()
+    assert by.loc["response", "prediction_hash"] != by.loc["response:orb", "prediction_hash"]
+    assert rows.groupby(["scene", "seed", "budget", "bag"]).size().tolist() == [2]  # one cell
+    again = run_benchmark(
+        grid, Workspace(tmp_path / "r", renders_dir), RunOptions(cluster=Cluster(1))
+    )
+    assert len(again) == 2  # resumed: nothing computed twice
