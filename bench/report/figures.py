@@ -18,6 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.ticker import FixedLocator, MaxNLocator, NullLocator  # noqa: E402
+from matplotlib.transforms import Bbox  # noqa: E402
 
 from bench.files import META, atomic_path  # noqa: E402
 from bench.results import POINT_ERRORS, Workspace
@@ -366,15 +367,16 @@ def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | 
 
 def figure_transfer(ranks: pd.DataFrame, summary: pd.DataFrame, budget: int, out: Path) -> None:
     """Rendered rank against dataset rank at one budget, a panel per dataset, category of
-    `sees` and metric."""
+    `sees` and metric, each point named (`label_points`)."""
     panels = summary[summary["budget"] == budget]
     cols = min(4, len(panels))
     rows = -(-len(panels) // cols)
     fig, axes = plt.subplots(
-        rows, cols, figsize=(4.2 * cols, 4.2 * rows), squeeze=False, constrained_layout=True
+        rows, cols, figsize=(4.6 * cols, 4.6 * rows), squeeze=False, constrained_layout=True
     )
     for ax in axes.ravel()[len(panels) :]:
         fig.delaxes(ax)
+    drawn = []
     for ax, (_, s) in zip(axes.ravel(), panels.iterrows()):
         r = ranks[
             (ranks["dataset"] == s["dataset"])
@@ -385,8 +387,7 @@ def figure_transfer(ranks: pd.DataFrame, summary: pd.DataFrame, budget: int, out
         n = len(r)
         ax.plot([1, n], [1, n], color="0.8", lw=1)
         ax.scatter(r["rank_rendered"], r["rank_dataset"], s=18)
-        for _, p in r.iterrows():
-            ax.annotate(p["method"], (p["rank_rendered"], p["rank_dataset"]), fontsize=7)
+        drawn.append((ax, r))
         ax.set(
             xlabel="rank on the rendered benchmark",
             ylabel=f"rank on {s['dataset']}",
@@ -402,4 +403,41 @@ def figure_transfer(ranks: pd.DataFrame, summary: pd.DataFrame, budget: int, out
             axis.set_major_locator(MaxNLocator(integer=True))
         ax.invert_xaxis()
         ax.invert_yaxis()
+    fig.draw_without_rendering()  # the layout settled: the labels are placed in it
+    for ax, r in drawn:
+        label_points(ax, r["rank_rendered"], r["rank_dataset"], r["method"])
     save(fig, out, ("png",))
+
+
+STEPS = (0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5)
+"""The places `label_points` tries for a label, in lines (8.5 points: 7-point names) up."""
+
+
+def label_points(ax, x: pd.Series, y: pd.Series, names: pd.Series) -> None:
+    """Name each point (x, y) of `ax` beside it, toward the panel's middle, the names of
+    tied points in one label; a label that would cover another or a point moves a line
+    up or down at a time, with a leader line, inside the panel where it can."""
+    renderer, box = ax.figure.canvas.get_renderer(), ax.bbox
+    at = ax.transData.transform(np.column_stack([x, y]).astype(float))
+    taken = [Bbox.from_bounds(px - 3, py - 3, 6, 6) for px, py in at]  # the points
+    tied = pd.DataFrame({"x": x, "y": y, "name": names}).groupby(["x", "y"], sort=False)
+    for (px, py), text in tied["name"].agg("\n".join).items():
+        right = ax.transData.transform((px, py))[0] < box.x0 + box.width / 2
+        dx = 4 if right else -4
+        style = {"textcoords": "offset points", "fontsize": 7, "va": "center"}
+        style["ha"] = "left" if right else "right"
+        for dy in (*(8.5 * k for k in STEPS), None):  # None: no room, beside its point
+            label = ax.annotate(text, (px, py), xytext=(dx, dy or 0), **style)
+            label.set_in_layout(False)
+            at = label.get_window_extent(renderer)
+            inside = box.contains(at.x0, at.y0) and box.contains(at.x1, at.y1)
+            if dy is None or (inside and not any(at.overlaps(b) for b in taken)):
+                break
+            label.remove()
+        taken.append(at)
+        if dy:
+            leader = {"arrowstyle": "-", "color": "0.45", "lw": 0.6, "shrinkB": 2}
+            line = ax.annotate(
+                "", (px, py), xytext=(dx, dy), textcoords="offset points", arrowprops=leader
+            )
+            line.set_in_layout(False)
