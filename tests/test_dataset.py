@@ -152,6 +152,42 @@ def test_transfer_below_six_methods_gives_no_tau_and_says_why():
     assert math.isnan(five["kendall_tau"]) and "5 methods" in five["tau_note"]
 
 
+def test_the_transfer_figures_labels_of_tied_methods_never_overlap(monkeypatch, tmp_path):
+    """Methods tied on the dataset (five at one rank in kitti-seq2's sfm_maa, sees image)
+    had their names drawn over each other; methods tied on both sides share one label."""
+    from bench.report import figures
+
+    drawn = {}
+    monkeypatch.setattr(figures, "save", lambda fig, out, fmts: drawn.update(fig=fig))
+    tied = [("random", 13), ("grid", 11), ("quadtree", 10), ("ssc", 9), ("matchable", 8)]
+    at = {m: (r, 11) for m, r in tied}  # method: (rendered rank, dataset rank)
+    at |= {"texture": (12, 7), "response": (7, 8), "scale": (6, 5), "octave-scale": (5, 4)}
+    at |= {"peak-scale": (4, 3), "colmap-b": (3, 2), "response@colmap-soft-b": (2, 6)}
+    at |= {"colmap-soft-b": (1, 1), "x": (12, 12.5), "y": (12, 12.5)}
+    key = {"dataset": "kitti-seq2", "sees": "image", "metric": "sfm_maa", "budget": 256}
+    ranks = pd.DataFrame(
+        [key | {"method": m, "rank_rendered": r, "rank_dataset": d} for m, (r, d) in at.items()]
+    )
+    summary = pd.DataFrame(
+        [key | {"kendall_tau": 0.5, "tau_lo": 0.1, "tau_hi": 0.9, "tau_note": ""}]
+    )
+    figures.figure_transfer(ranks, summary, 256, tmp_path / "figure_transfer")
+    fig = drawn["fig"]
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    (ax,) = fig.axes
+    labels = [t for t in ax.texts if t.get_text()]
+    boxes = [t.get_window_extent(renderer) for t in labels]
+    assert not [
+        (a.get_text(), b.get_text())
+        for k, (a, p) in enumerate(zip(labels, boxes))
+        for b, q in zip(labels[k + 1 :], boxes[k + 1 :])
+        if p.overlaps(q)
+    ]
+    assert all(ax.bbox.contains(b.x0, b.y0) and ax.bbox.contains(b.x1, b.y1) for b in boxes)
+    assert sorted(t.get_text() for t in labels) == sorted([*list(at)[:-2], "x\ny"])
+
+
 def test_dataset_without_pixel_truth_scores_poses_and_leaves_the_rest_nan(
     dataset, renders_dir, tmp_path, capsys
 ):

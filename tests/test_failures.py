@@ -124,6 +124,7 @@ def test_list_options_ignore_spaces_around_items():
 
 def _table1(policies: list[str], metrics: dict[str, list[float]], budget: int = 256):
     t = pd.DataFrame({"method": policies, "strategy": policies, "budget": budget})
+    t["runs"], t["note"] = 20, ""
     for m, _ in Vocabulary.current().panels():
         values = metrics.get(m, [math.nan] * len(policies))
         t[m], t[f"{m}_lo"], t[f"{m}_hi"] = values, values, values
@@ -143,8 +144,8 @@ def test_figure3_of_an_sfm_only_run_draws_its_panels_alone_with_n_a_inside(monke
     (ax,) = drawn["fig"].axes  # one panel: no empty ones for the task that did not run
     assert "mAA" in ax.get_title()
     (na,) = [t for t in ax.texts if t.get_text() == "n/a"]
-    lo, hi = ax.get_xlim()
-    assert lo < na.get_position()[0] - 0.4 and na.get_position()[0] + 0.4 < hi
+    hi, lo = ax.get_ylim()  # the first row on top
+    assert lo < na.get_position()[1] - 0.4 and na.get_position()[1] + 0.4 < hi
     figures.figure3(
         t1, Vocabulary.current(), tmp_path / "figure3", note="3 failed (2 sfm: the mapper ...)"
     )
@@ -164,6 +165,54 @@ def test_figure3s_title_is_above_every_panel_title(monkeypatch, tmp_path, panels
     title = fig._suptitle.get_window_extent(renderer)
     tops = [ax.title.get_window_extent(renderer).y1 for ax in fig.axes]
     assert title.y0 > max(tops) and title.y1 <= fig.bbox.y1
+
+
+def test_figure3_draws_each_tasks_headline_once_with_a_mark_per_method(monkeypatch, tmp_path):
+    """Figure 3 had 13 panels of bars told apart by shades of one hue: now a panel per task
+    (its first headline metric), a marker of its own per method within its category."""
+    drawn = _drawn(monkeypatch)
+    vocab = Vocabulary.current()
+    methods = ["random", "texture", "grid", "adaptive", "cross-view", "oracle"]
+    t1 = _table1(methods, {m: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6] for m, _ in vocab.panels()})
+    figures.figure3(t1, vocab, tmp_path / "figure3")
+    axes = drawn["fig"].axes
+    titles = dict(vocab.panels())
+    assert [ax.get_title() for ax in axes] == [titles[m] for m in vocab.first_headline()]
+    ticks = [t.get_text() for t in axes[0].get_yticklabels()]
+    assert sorted(ticks) == sorted(methods)
+    for sees in ("image", "views"):  # the category named in every panel
+        assert all(figures.CATEGORY_NAMES[sees] in [t.get_text() for t in ax.texts] for ax in axes)
+    row = dict(zip(axes[0].get_yticks(), ticks))
+    points = [c.lines[0] for c in axes[0].containers]  # each method's errorbar
+    marker = {row[p.get_ydata()[0]]: p.get_marker() for p in points}
+    image = [marker[m] for m in ("random", "texture", "grid")]
+    views = [marker[m] for m in ("adaptive", "cross-view")]
+    assert len(set(image)) == 3 and len(set(views)) == 2
+
+
+@pytest.mark.parametrize(
+    "runs, excluded, interval, said",
+    [
+        (4, 0, False, "mean of 4 runs per method, no interval: a scene with 1 seed"),
+        (20, 2, True, "mean and 95% interval over 18-20 runs per method"),
+        (1, 0, False, "mean of 1 run per method, no interval: a scene with 1 seed"),
+    ],
+)
+def test_figure3s_title_counts_the_runs_as_table1_does(
+    monkeypatch, tmp_path, runs, excluded, interval, said
+):
+    """A quick run (4 scenes, one seed: Table 1's `runs` 4, no interval) was titled "mean
+    of one run: no interval"; the runs an sfm mean leaves out are not counted."""
+    drawn = _drawn(monkeypatch)
+    t1 = _table1(["texture", "random"], {"acc_completeness_pct": [3.0, 1.0], "sfm_maa": [0.5, 0.2]})
+    t1["runs"], t1["sfm_excluded_runs"] = runs, excluded
+    if not interval:
+        for m in ("acc_completeness_pct", "sfm_maa"):
+            t1[f"{m}_lo"] = t1[f"{m}_hi"] = math.nan
+        t1["note"] = "n/a (1 seed): acc_completeness_pct, sfm_maa"
+    figures.figure3(t1, Vocabulary.current(), tmp_path / "figure3")
+    title = drawn["fig"]._suptitle.get_text()
+    assert said in title and "one run" not in title
 
 
 def test_the_budget_figures_lines_never_share_a_hue_and_a_style(monkeypatch, tmp_path):

@@ -8,6 +8,7 @@ zero-height bar.
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import matplotlib
@@ -17,6 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.ticker import FixedLocator, MaxNLocator, NullLocator  # noqa: E402
+from matplotlib.transforms import Bbox  # noqa: E402
 
 from bench.files import META, atomic_path  # noqa: E402
 from bench.results import POINT_ERRORS, Workspace
@@ -34,15 +36,13 @@ from bench.vocabulary import (  # noqa: E402
 
 LOG_SCALE = {"runtime_proxy", "rmse"}
 CATEGORY_MAPS = {"image": "Blues", "views": "Oranges", "truth": "Greens"}
+"""Each category of what a selection sees has its colour family (others: greys)."""
+CATEGORY_NAMES = {"image": "sees its image", "views": "sees other views", "truth": "sees the truth"}
+"""Figure 3's name of each category (others: "other methods")."""
 SEES_ORDER = {"image": 0, "views": 1, "truth": 2}
 PEERS = ("peer",)
 """The roles whose whole-pool rows (budget 0) stand in Figure 3: stock COLMAP's default
 (not `all`, the whole pool, which no budget holds)."""
-"""Each category of what a selection sees has its colour family (others: greys)."""
-RUNTIME_PROXY = (
-    "runtime proxy: feature scoring work + descriptor comparisons + expected RANSAC "
-    "iterations, in thousands of operations (docs/protocol.md)"
-)
 
 
 def method_colours(methods, vocab: Vocabulary) -> dict:
@@ -86,72 +86,100 @@ def headline_budget(t1: pd.DataFrame) -> int:
     return HEADLINE_BUDGET if HEADLINE_BUDGET in budgets else budgets[len(budgets) // 2]
 
 
-def _errors(t: pd.DataFrame, m: str) -> np.ndarray:
-    """Asymmetric error bars; zero length where there is no interval (drawn without one)."""
-    lo, hi = (t[m] - t[f"{m}_lo"]).to_numpy(float), (t[f"{m}_hi"] - t[m]).to_numpy(float)
-    return np.nan_to_num(np.vstack([lo, hi]))
+def runs_said(t: pd.DataFrame, metrics: list[str], vocab: Vocabulary) -> str:
+    """How Figure 3's means were taken, in Table 1's terms: the runs each counts (`runs`,
+    less those a task's exclusion rule leaves out) and their interval, or why there is
+    none (`note`: an interval needs two seeds in every scene, a run per seed)."""
+    counts = set()
+    for m in metrics:
+        excluded = t.get(vocab.column(vocab.split(m)[0], "excluded_runs"), 0)
+        counts |= set((t["runs"] - excluded).fillna(t["runs"])[t[m].notna()].astype(int))
+    if not counts:
+        return "no method has a value"
+    runs = "-".join(map(str, sorted({min(counts), max(counts)}))) + " run" + "s" * (max(counts) > 1)
+    if any(t[f"{m}_lo"].notna().any() for m in metrics):
+        return f"mean and 95% interval over {runs} per method"
+    parts = [p.rpartition(": ") for note in t["note"].dropna() for p in note.split("; ")]
+    why = {w for w, _, ms in parts if set(ms.split(", ")) & set(metrics)}
+    why = {re.sub(r"n/a \((\d+ seeds?)\)", r"a scene with \1", w) for w in why}
+    return f"mean of {runs} per method, no interval: " + "; ".join(sorted(why))
 
 
 def figure3(
     t1: pd.DataFrame, vocab: Vocabulary, out: Path, title: str = "", note: str = ""
 ) -> None:
-    """Aggregate metrics per strategy at the headline budget (references included), with
-    95% intervals; bars are labelled by policy id (the display names are long).
-    One panel per metric the tasks draw (`Vocabulary.panels`) that has a value (the panels
-    of the tasks that ran); `note` (what failed, what the means leave out) below them."""
+    """Per method at the headline budget (references and peers included), each task's
+    first headline metric with its 95% interval: one panel per task that has a value, the
+    metric Table 1 tiers and the verdicts judge (the others, and other budgets, are Table
+    1's and `figure_budget`'s). Methods are rows, named once, under their category of
+    `sees` (named in each panel), each with its marker and interval line (`method_styles`);
+    `note` (what failed, what the means leave out) below the panels."""
     b = headline_budget(t1)
     whole = t1["method"].map(lambda m: m in vocab.methods and vocab.methods[m].role not in PEERS)
     t = t1[(t1["budget"] == b) | ((t1["budget"] == 0) & ~whole)].reset_index(drop=True)
     t = t.assign(_sees=t["method"].map(lambda m: vocab.sees(m) if m in vocab.methods else ""))
     order = t["_sees"].map(SEES_ORDER).fillna(len(SEES_ORDER))
     t = t.loc[order.sort_values(kind="stable").index].reset_index(drop=True)
-    every = vocab.panels()
-    panels = [(m, label) for m, label in every if m in t and np.isfinite(t[m].astype(float)).any()]
-    panels = panels or [(m, label) for m, label in every if m in t][:1]
-    cols = min(3, len(panels))
-    rows = -(-len(panels) // cols)
-    width = max(5.0, len(t) / 3)
-    fig, axes = plt.subplots(rows, cols, figsize=(width * cols, 3.7 * rows + 0.6), squeeze=False)
-    for ax in axes.ravel()[len(panels) :]:
-        fig.delaxes(ax)
-    colour = method_colours(t["method"], vocab)
-    colors = np.array([colour[m] for m in t["method"]])
-    for ax, (m, label) in zip(axes.ravel(), panels):
-        values = t[m].to_numpy(float)
-        ok = np.isfinite(values)
-        ax.bar(
-            np.flatnonzero(ok), values[ok], yerr=_errors(t, m)[:, ok], color=colors[ok], capsize=4
-        )
-        for k in np.flatnonzero(~ok):
-            ax.text(
-                k,
-                0.02,
-                "n/a",
-                transform=ax.get_xaxis_transform(),
-                ha="center",
-                fontsize=8,
-                color="gray",
+    every = [m for m in vocab.first_headline() if m in t]
+    panels = [m for m in every if np.isfinite(t[m].astype(float)).any()] or every[:1]
+    heads = t["_sees"].ne(t["_sees"].shift()).to_numpy()
+    y = np.arange(len(t)) + heads.cumsum()  # a row above each category for its name
+    width = max(8.0, 2 + 4 * len(panels))
+    fig, axes = plt.subplots(
+        1, len(panels), figsize=(width, 2.2 + 0.2 * y[-1]), sharey=True, squeeze=False
+    )
+    styles = method_styles(t["method"], vocab)
+    titles = dict(vocab.panels())
+    for ax, m in zip(axes[0], panels):
+        values, lo, hi = (t[c].to_numpy(float) for c in (m, f"{m}_lo", f"{m}_hi"))
+        for k, method in enumerate(t["method"]):
+            if not np.isfinite(values[k]):
+                ax.text(
+                    0.02,
+                    y[k],
+                    "n/a",
+                    transform=ax.get_yaxis_transform(),
+                    va="center",
+                    fontsize=8,
+                    color="gray",
+                )
+                continue
+            style = styles[method]
+            xerr = [[values[k] - lo[k]], [hi[k] - values[k]]] if np.isfinite(lo[k]) else None
+            line = ax.errorbar(
+                values[k], y[k], xerr=xerr, fmt=style["marker"], color=style["color"], capsize=3
             )
-        ax.set_xticks(range(len(t)), t["method"], rotation=50, ha="right", fontsize=8)
-        ax.set_xlim(-0.6, len(t) - 0.4)  # every slot inside, a missing last one's "n/a" too
-        ax.set_title(label, fontsize=10)
-        if m in LOG_SCALE and (values[ok] > 0).any():
-            ax.set_yscale("log")
-    spread = any(t[f"{m}_lo"].notna().any() for m, _ in panels if f"{m}_lo" in t)
-    how = "mean and 95% interval over runs" if spread else "mean of one run: no interval"
+            for bar in line[2]:
+                bar.set_linestyle(style["linestyle"])
+        for k in np.flatnonzero(heads):
+            sees = t["_sees"][k]
+            ax.text(
+                0.01,
+                y[k] - 1,
+                CATEGORY_NAMES.get(sees, "other methods"),
+                fontsize=8,
+                transform=ax.get_yaxis_transform(),
+                va="center",
+                style="italic",
+                color=plt.get_cmap(CATEGORY_MAPS.get(sees, "Greys"))(0.8),
+            )
+        ax.grid(axis="x", alpha=0.3)
+        ax.set_title(titles.get(m, m), fontsize=10)
+        if m in LOG_SCALE and (values[np.isfinite(values)] > 0).any():
+            ax.set_xscale("log")
+    axes[0, 0].set_yticks(y, t["method"], fontsize=8)
+    axes[0, 0].set_ylim(y[-1] + 0.8, -0.8)  # the first row on top
     fig.suptitle(
         title
-        or f"Metrics per method at budget {b} ({how}); colour: what its selection sees "
-        "(blue: its image, orange: other views, green: the ground truth)"
+        or f"Each task's headline metric per method at budget {b}\n"
+        f"{runs_said(t, panels, vocab)}; colour: what its selection sees, marker: the method",
+        fontsize=11,
     )
-    if any(m == "runtime_proxy" for m, _ in panels):
-        note = f"{note}\n{RUNTIME_PROXY}" if note else RUNTIME_PROXY
     bottom = 0.0
     if note:
         fig.text(0.01, 0.005, note, fontsize=8, wrap=True, va="bottom")
         bottom = min(0.25, (0.1 + 0.18 * (1 + note.count("\n"))) / fig.get_figheight())
-    top = 1 - 0.45 / fig.get_figheight()  # the overall title's band, above every panel's
-    fig.tight_layout(rect=(0, bottom, 1, top))
+    fig.tight_layout(rect=(0, bottom, 1, 1))  # the overall title's band its own
     save(fig, out, ("png", "pdf"))
 
 
@@ -339,15 +367,16 @@ def figure2(df: pd.DataFrame, results: Path, renders: Path, out: Path) -> str | 
 
 def figure_transfer(ranks: pd.DataFrame, summary: pd.DataFrame, budget: int, out: Path) -> None:
     """Rendered rank against dataset rank at one budget, a panel per dataset, category of
-    `sees` and metric."""
+    `sees` and metric, each point named (`label_points`)."""
     panels = summary[summary["budget"] == budget]
     cols = min(4, len(panels))
     rows = -(-len(panels) // cols)
     fig, axes = plt.subplots(
-        rows, cols, figsize=(4.2 * cols, 4.2 * rows), squeeze=False, constrained_layout=True
+        rows, cols, figsize=(4.6 * cols, 4.6 * rows), squeeze=False, constrained_layout=True
     )
     for ax in axes.ravel()[len(panels) :]:
         fig.delaxes(ax)
+    drawn = []
     for ax, (_, s) in zip(axes.ravel(), panels.iterrows()):
         r = ranks[
             (ranks["dataset"] == s["dataset"])
@@ -358,8 +387,7 @@ def figure_transfer(ranks: pd.DataFrame, summary: pd.DataFrame, budget: int, out
         n = len(r)
         ax.plot([1, n], [1, n], color="0.8", lw=1)
         ax.scatter(r["rank_rendered"], r["rank_dataset"], s=18)
-        for _, p in r.iterrows():
-            ax.annotate(p["method"], (p["rank_rendered"], p["rank_dataset"]), fontsize=7)
+        drawn.append((ax, r))
         ax.set(
             xlabel="rank on the rendered benchmark",
             ylabel=f"rank on {s['dataset']}",
@@ -375,4 +403,41 @@ def figure_transfer(ranks: pd.DataFrame, summary: pd.DataFrame, budget: int, out
             axis.set_major_locator(MaxNLocator(integer=True))
         ax.invert_xaxis()
         ax.invert_yaxis()
+    fig.draw_without_rendering()  # the layout settled: the labels are placed in it
+    for ax, r in drawn:
+        label_points(ax, r["rank_rendered"], r["rank_dataset"], r["method"])
     save(fig, out, ("png",))
+
+
+STEPS = (0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5)
+"""The places `label_points` tries for a label, in lines (8.5 points: 7-point names) up."""
+
+
+def label_points(ax, x: pd.Series, y: pd.Series, names: pd.Series) -> None:
+    """Name each point (x, y) of `ax` beside it, toward the panel's middle, the names of
+    tied points in one label; a label that would cover another or a point moves a line
+    up or down at a time, with a leader line, inside the panel where it can."""
+    renderer, box = ax.figure.canvas.get_renderer(), ax.bbox
+    at = ax.transData.transform(np.column_stack([x, y]).astype(float))
+    taken = [Bbox.from_bounds(px - 3, py - 3, 6, 6) for px, py in at]  # the points
+    tied = pd.DataFrame({"x": x, "y": y, "name": names}).groupby(["x", "y"], sort=False)
+    for (px, py), text in tied["name"].agg("\n".join).items():
+        right = ax.transData.transform((px, py))[0] < box.x0 + box.width / 2
+        dx = 4 if right else -4
+        style = {"textcoords": "offset points", "fontsize": 7, "va": "center"}
+        style["ha"] = "left" if right else "right"
+        for dy in (*(8.5 * k for k in STEPS), None):  # None: no room, beside its point
+            label = ax.annotate(text, (px, py), xytext=(dx, dy or 0), **style)
+            label.set_in_layout(False)
+            at = label.get_window_extent(renderer)
+            inside = box.contains(at.x0, at.y0) and box.contains(at.x1, at.y1)
+            if dy is None or (inside and not any(at.overlaps(b) for b in taken)):
+                break
+            label.remove()
+        taken.append(at)
+        if dy:
+            leader = {"arrowstyle": "-", "color": "0.45", "lw": 0.6, "shrinkB": 2}
+            line = ax.annotate(
+                "", (px, py), xytext=(dx, dy), textcoords="offset points", arrowprops=leader
+            )
+            line.set_in_layout(False)
