@@ -68,6 +68,8 @@ TABLE1_EQUAL = "table1_equal.csv"
 VERDICTS = "verdicts.csv"
 # The cost per method and budget, and quality against it (`bench.report.cost`).
 TABLE_COST, FIGURE_COST = "table_cost.csv", "figure_cost"
+# Which detector and which selection at a budget, across pools (`bench.report.pools`).
+TABLE_POOLS = "table_pools.csv"
 FIGURES = ("figure2", "figure3", "figure_budget", "figure_views")
 """The report's figures, without their suffix (`.png`; Figure 3 also `.pdf`)."""
 FIGURE2, FIGURE3, FIGURE_BUDGET, FIGURE_VIEWS = FIGURES

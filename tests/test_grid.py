@@ -374,7 +374,7 @@ def test_plot_rejects_bad_runs_csv_in_one_line(tmp_path, capsys, content, messag
         (["run", "--scenes", "table", "facade"], "list options take one comma-separated list"),
         (["run", "--seeds", "-1"], "seeds must be non-negative integers"),
         (["run", "--scenes", "moon"], "unknown scene 'moon'"),
-        (["run", "--detector", "surf"], "invalid choice: 'surf'"),
+        (["run", "--detector", "surf"], "unknown detector 'surf'; valid: sift"),
         (["run", "--weights", "0.3,x,0,0,0"], "is not a list of float"),
         (["run", "--weights", "0.3,0.2"], "weights must be five numbers"),
         (["run", "--seeds", "3-1"], "the range 3-1 is empty (write it low-high)"),

@@ -239,7 +239,7 @@ def test_the_package_map_of_the_docs_names_every_module():
             package = head
         elif not line.startswith("    ") or line.startswith("               "):
             package = package if line.startswith("               ") else ""
-        listed |= {package + w for w in re.findall(r"\b[\w]+\.py\b", line)}
+        listed |= {package + w for w in re.findall(r"\b[\w/]+\.py\b", line)}
     on_disk = {
         str(p.relative_to(PACKAGE))
         for p in PACKAGE.rglob("*.py")

@@ -160,3 +160,39 @@ def test_one_grid_runs_a_method_on_two_pools_its_rows_named_and_paired(tmp_path,
         grid, Workspace(tmp_path / "r", renders_dir), RunOptions(cluster=Cluster(1))
     )
     assert len(again) == 2  # resumed: nothing computed twice
+
+
+def test_table_pools_names_each_pools_peer_and_best_selection_against_colmap_b():
+    """Hand-made rows on two pools: each pool's peer and best own-image selection, with its
+    mean and its paired difference from `colmap-b` over the cells both have."""
+    from bench.report.pools import recommendation, table_pools
+    from bench.vocabulary import Vocabulary
+
+    methods = {  # method: (pool, matcher, sfm mAA in each of 4 cells)
+        "colmap-b": ("", "", [0.4, 0.5, 0.4, 0.5]),
+        "octave-scale": ("sift", "ratio", [0.5, 0.5, 0.4, 0.6]),
+        "scale": ("sift", "ratio", [0.3, 0.3, 0.3, 0.3]),
+        "aliked-b": ("aliked", "lightglue", [0.9, 1.0, 0.8, 0.9]),
+        "octave-scale:aliked": ("aliked", "lightglue", [0.8, 0.9, 0.9, 0.8]),
+    }
+    pooled.declare_pooled("octave-scale", PoolSpec.parse("aliked"))
+    rows = [
+        {"scene": sc, "seed": sd, "method": m, "budget": 256, "pool": p, "matcher": mt}
+        | {"sfm_maa": v[2 * sc_i + sd]}
+        for m, (p, mt, v) in methods.items()
+        for sc_i, sc in enumerate(("facade", "table"))
+        for sd in (0, 1)
+    ]
+    import pandas as pd
+
+    table = table_pools(pd.DataFrame(rows), Vocabulary.current())
+    by = table.set_index(["pool", "role", "sees"])
+    assert by.loc[("aliked/lightglue", "peer", "image"), "method"] == "aliked-b"
+    assert by.loc[("aliked/lightglue", "selection", "image"), "method"] == "octave-scale:aliked"
+    best = by.loc[("sift/ratio", "selection", "image")]
+    assert best["method"] == "octave-scale" and best["mean"] == pytest.approx(0.5)
+    assert best["mean_diff"] == pytest.approx(0.05) and best["n"] == 4
+    assert by.loc[("colmap", "peer", "image"), "method"] == "colmap-b"
+    said = recommendation(table, Vocabulary.current())
+    assert said[0].startswith("At B = 256 in sfm_maa, `aliked-b` on the aliked/lightglue pool leads")
+    assert table_pools(pd.DataFrame(rows).assign(pool="sift"), Vocabulary.current()).empty

@@ -119,7 +119,7 @@ def test_a_task_is_added_in_one_place(renders_dir, tmp_path):
         ("backend.ratio=2", "backend.ratio must lie in (0, 1]"),
         ("backend.ratio=x", "--set backend.ratio=x: expected float"),
         ("backend.speed=1", "BackendConfig has no setting 'speed'; valid: ratio,"),
-        ("backend.matcher=lightglue", "lightglue needs a pool with LightGlue weights"),
+        ("backend.matcher=lightglue", "the sift pool is matched with ratio"),
         ("policy.tiles=8", "expected 2 comma-separated values"),
         ("policy.weights=1", "set its fields (weights.texture,"),
         ("signals.first_pass=2", "signals.first_pass >= 8"),

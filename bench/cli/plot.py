@@ -18,7 +18,7 @@ from bench.cli.common import (
 HELP = "rebuild the tables and figures from runs.csv (no rendering, no reconstruction)"
 DESCRIPTION = (
     "Rewrite table1.csv, table1_twoview.csv, table2.csv, paired.csv, paired_sfm.csv, "
-    "table_scenes.csv, frontend_cost.csv, verdicts.csv, table_cost.csv, figure_cost.png, "
+    "table_scenes.csv, frontend_cost.csv, verdicts.csv, table_cost.csv, table_pools.csv (rows on several pools), figure_cost.png, "
     "figure3.png/.pdf, figure_budget.png (where the grid has several budgets), and the "
     "results page README.md from "
     "RESULTS/runs.csv and RESULTS/vocabulary.json alone, and figure2.png from them plus an "

@@ -46,7 +46,8 @@ DESCRIPTION = (
     "frontend_cost.csv, verdicts.csv, table_cost.csv, figure_cost.png, figure2.png, "
     "figure3.png/.pdf, figure_budget.png (with several budgets), the results page "
     "README.md, config.json, vocabulary.json and manifest.json (rows a run replaces go to "
-    "runs.stale.csv, never deleted); with --dataset also transfer.csv, "
+    "runs.stale.csv, never deleted); with --pools also table_pools.csv (each pool's peer "
+    "and best selections against colmap-b); with --dataset also transfer.csv, "
     "transfer_ranks.csv and figure_transfer.png (the datasets' ranking against the rendered "
     "one, --rendered) and, with several datasets, table1-<dataset>.csv."
 )

@@ -147,6 +147,7 @@ def scene_task(group: tuple, entry: Path, cfg: RunConfig, renders: Path, plan: P
     granted (and of its bag), of each pool its units select from, computed or read from
     their cache, checked against the budgets; returns their seconds and the largest pool."""
     t = time.perf_counter()
+    plugins.load(cfg.policy.modules)  # the pools and policies from outside, on a worker
     bag = next((u.bag for u in plan.work if u.group == group), "")
     largest = 0
     for det, budgets in plan.budgets(cfg).items():
@@ -176,6 +177,7 @@ def compute_unit(
 
 def unit_task(unit: Unit, plan: Plan, cfg: RunConfig, ws: Workspace, *_after) -> list[dict]:
     """The rows of one unit of a plan, on its pool (`_after`: what it waits for)."""
+    plugins.load(cfg.policy.modules)  # in a worker process, the policies from outside
     cfg = cfg.for_method(known(unit.method))
     scene = _scene(plan.entries[unit.group], cfg, ws.renders, plan.grants, unit.bag)
     return compute_unit(scene, unit, plan.work[unit], cfg, ws)

@@ -120,7 +120,9 @@ def figure3(
     t = t.assign(_sees=t["method"].map(lambda m: vocab.sees(m) if m in vocab.methods else ""))
     order = t["_sees"].map(SEES_ORDER).fillna(len(SEES_ORDER))
     t = t.loc[order.sort_values(kind="stable").index].reset_index(drop=True)
-    every = [m for m in vocab.first_headline() if m in t]
+    every = [m for m in vocab.first_headline() if m in t] or [
+        m for m, _ in vocab.panels() if m in t
+    ]  # a grid without any task's first headline metric: its drawn ones
     panels = [m for m in every if np.isfinite(t[m].astype(float)).any()] or every[:1]
     heads = t["_sees"].ne(t["_sees"].shift()).to_numpy()
     y = np.arange(len(t)) + heads.cumsum()  # a row above each category for its name

@@ -19,6 +19,7 @@ from bench.failures import outcomes
 from bench.report import nbv
 from bench.report.categories import headline, unjudged, verdict_sentences
 from bench.report.cost import frontier_only
+from bench.report.pools import recommendation
 from bench.report.power import min_units
 from bench.report.text import ci, column_format, signed
 from bench.report.text import num as _num
@@ -40,6 +41,7 @@ from bench.results import (
     TABLE1_EQUAL,
     TABLE2,
     TABLE_COST,
+    TABLE_POOLS,
     TRANSFER,
     VERDICTS,
     png,
@@ -432,6 +434,16 @@ def _verdicts_section(verdicts: pd.DataFrame, missing: list[str]) -> list[str]:
     return out + [f"- {line}" for line in said + [m[0].upper() + m[1:] for m in missing]] + [""]
 
 
+def _pools_section(pools: pd.DataFrame, vocab: Vocabulary) -> list[str]:
+    """Which detector and which selection at a budget (`table_pools.csv`), where the grid
+    ran on several pools."""
+    said = recommendation(pools, vocab)
+    if not said:
+        return []
+    head = "## Pools: which detector and which selection at a budget (table_pools.csv)"
+    return [head, ""] + [f"- {line}" for line in said] + [""]
+
+
 def _cost_section(cost: pd.DataFrame) -> list[str]:
     """Table 1c: what each method matched and the time it took, at the headline budget
     (`table_cost.csv` has every budget)."""
@@ -547,6 +559,7 @@ def results_page(results: Path, runs: pd.DataFrame | None = None) -> str:
     out += _table1_section(t1, vocab, "Table 1: means over runs, 95% intervals", recomputed)
     out += _tiers_section(t1, vocab)
     out += _verdicts_section(verdicts, unjudged(vocab, set(runs["method"])))
+    out += _pools_section(_read(results, TABLE_POOLS), vocab)
     out += _cost_section(_read(results, TABLE_COST))
     out += _equal_section(_read(results, TABLE1_EQUAL))
     ran = set(t1["method"]) if "method" in t1 else set()  # a method not run has no section

@@ -41,6 +41,7 @@ from bench.report.figures import (
 )
 from bench.report.nbv import figure_views, table3
 from bench.report.page import results_page
+from bench.report.pools import table_pools
 from bench.report.tables import (
     equal_keypoints,
     frontend_cost,
@@ -73,6 +74,7 @@ from bench.results import (
     TABLE2,
     TABLE3,
     TABLE_COST,
+    TABLE_POOLS,
     TABLE_SCENES,
     TRANSFER,
     TRANSFER_RANKS,
@@ -176,6 +178,7 @@ def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> list[pd.
         TABLE3: table3(df, vocab),
         TABLE1_EQUAL: equal_keypoints(frame, vocab),
         VERDICTS: category_verdicts(frame, vocab) if len(frame) else pd.DataFrame(),
+        TABLE_POOLS: table_pools(frame, vocab),
         TABLE_COST: table_cost(
             costed, headline_frame(costed, vocab, dataset=datasets), vocab, _settings(results)
         ),

@@ -1,0 +1,116 @@
+"""`table_pools.csv`: which detector and which selection at a budget, from a grid run on
+several candidate pools (`bench run --pools`; rows carry their `pool` and `matcher`).
+
+Per budget, ranking metric (the first headline metric of each task the peers run, as
+`verdicts.csv`) and pool (a detector with its matcher): the pool's own top-B peer and the
+best selection of each category (`sees`: its own image, other views) on that pool, each
+with its mean over the cells that count (`bench.report.tables.solvable`) and its paired
+difference from `BASELINE`, stock COLMAP's SIFT held to B (what the field runs at a
+budget), over the (scene, seed) units both have, with its 95% interval
+(`bench.report.stats.paired_difference`). The stock-COLMAP peers extract their own SIFT
+keypoints: their pool is `colmap`. `recommendation` says, per budget and metric, which
+(pool, method) leads, and its difference from `BASELINE`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+
+from bench.report.categories import (
+    CATEGORIES,
+    POLICY_ROLES,
+    _best,
+    _signed,
+    _three,
+    _verdict,
+    peer_metrics,
+)
+from bench.report.stats import paired_difference
+from bench.report.tables import solvable
+from bench.vocabulary import Vocabulary
+
+BASELINE = "colmap-b"
+OWN_EXTRACTION = "colmap"
+"""The pool named for the rows of a peer that extracts its own keypoints (no `pool`)."""
+
+
+def pools_of(frame: pd.DataFrame) -> pd.Series:
+    """Each row's pool and matcher as one name (`aliked/lightglue`; `colmap` for a peer
+    that extracts its own)."""
+    pool = frame["pool"].fillna("").astype(str)
+    matcher = frame["matcher"].fillna("").astype(str)
+    return (pool + "/" + matcher).where(pool != "", OWN_EXTRACTION)
+
+
+def table_pools(frame: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
+    """`table_pools.csv` (module docstring; `frame`: `headline_frame`); empty unless its
+    rows ran on two pools or more."""
+    if "pool" not in frame or frame["pool"].fillna("").nunique() < 2:
+        return pd.DataFrame()
+    lower = vocab.lower_better()
+    pool_of = dict(zip(frame["method"], pools_of(frame)))
+    out = []
+    for metric in (m for m in peer_metrics(vocab) if m in frame):
+        counted = solvable(frame, metric, vocab)
+        counted = counted.assign(pool_name=counted["method"].map(pool_of))
+        for budget in sorted(b for b in pd.unique(counted["budget"]) if b > 0):
+            at = counted[counted["budget"] == budget]
+            wide = at.pivot_table(index=["scene", "seed"], columns="method", values=metric)
+            for pool, on in at.groupby("pool_name", sort=True):
+                for role, sees, method in _leaders(vocab, set(on["method"]), wide, metric in lower):
+                    out.append(
+                        {"budget": budget, "metric": metric, "pool": pool, "role": role}
+                        | {"sees": sees, "method": method, "mean": wide[method].mean()}
+                        | {"runs": int(wide[method].count())}
+                        | _against(wide, method, metric in lower)
+                    )
+    return pd.DataFrame(out)
+
+
+def _leaders(vocab: Vocabulary, methods: set, wide: pd.DataFrame, lower: bool):
+    """(role, sees, method): the pool's best peer held to B, and its best selection of
+    each category."""
+    budgeted = [m for m in methods if m in vocab.methods and not vocab.methods[m].whole_pool]
+    peers = [m for m in budgeted if vocab.methods[m].role == "peer" and "@" not in m]
+    best = _best(wide, peers, lower)
+    if best:
+        yield "peer", vocab.sees(best), best
+    for sees in CATEGORIES:
+        chosen = [m for m in budgeted if vocab.methods[m].role in POLICY_ROLES]
+        best = _best(wide, [m for m in chosen if vocab.sees(m) == sees], lower)
+        if best:
+            yield "selection", sees, best
+
+
+def _against(wide: pd.DataFrame, method: str, lower: bool) -> dict:
+    """`method` minus `BASELINE` over the units both have (none where either is missing)."""
+    if BASELINE not in wide or method == BASELINE:
+        return {"vs": BASELINE, "n": 0, "mean_diff": math.nan, "lo": math.nan, "hi": math.nan}
+    both = wide[[method, BASELINE]].dropna()
+    res = paired_difference(both[method] - both[BASELINE], both.index.get_level_values(0), lower)
+    return {"vs": BASELINE} | res | {"verdict": _verdict(res, lower)}
+
+
+def recommendation(table: pd.DataFrame, vocab: Vocabulary) -> list[str]:
+    """A sentence per budget and metric: the leading (pool, method) of `table_pools.csv`,
+    its mean, and its difference from `BASELINE`."""
+    if table.empty:
+        return []
+    lower = vocab.lower_better()
+    out = []
+    for (budget, metric), at in table.groupby(["budget", "metric"], sort=True):
+        best = at.sort_values("mean", ascending=metric in lower).iloc[0]
+        diff = (
+            f"; against `{BASELINE}`: {_signed(best['mean_diff'])} "
+            f"[{_signed(best['lo'])}, {_signed(best['hi'])}] "
+            f"over {int(best['n'])} runs, {best['verdict']}"
+            if best.get("n", 0) and isinstance(best.get("verdict"), str)
+            else ""
+        )
+        out.append(
+            f"At B = {budget} in {metric}, `{best['method']}` on the {best['pool']} pool leads "
+            f"({_three(best['mean'])}){diff}."
+        )
+    return out
