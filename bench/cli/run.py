@@ -55,10 +55,12 @@ DESCRIPTION = (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The grid's lists (`_grid_arguments`), the settings (`_settings_arguments`), what
-    the grid runs on (`_input_arguments`) and where (`_folder_arguments`)."""
+    the grid runs on (`_input_arguments`, `_dataset_arguments`) and where
+    (`_folder_arguments`)."""
     _grid_arguments(parser)
     _settings_arguments(parser)
     _input_arguments(parser)
+    _dataset_arguments(parser)
     _folder_arguments(parser)
 
 
@@ -167,8 +169,8 @@ def _settings_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _input_arguments(parser: argparse.ArgumentParser) -> None:
-    """What the grid runs on: the smoke preset, a dataset, outside policies and pools, the
-    detector, the render settings."""
+    """What the grid runs on: the smoke preset, the regime, outside policies and pools,
+    the detector, the render settings."""
     from bench.frontend.pools import POOLS
 
     parser.add_argument(
@@ -176,6 +178,44 @@ def _input_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="smoke run: tiny renders, one seed, budget 256 (the nbv task: 5 candidates)",
     )
+    regime_arg(
+        parser,
+        "sets the default --views, --seeds (0 with --quick) and --results "
+        f"(./{LATEST} or ./{regime_folder(LATEST, 'dense')}; --quick: ./{QUICK} or "
+        f"./{regime_folder(QUICK, 'dense')})",
+    )
+    parser.add_argument(
+        "--policy-module",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="a Python file whose @policy functions are registered (repeatable); see "
+        "examples/my_policy.py and 'Writing a policy' below",
+    )
+    parser.add_argument(
+        "--pool-module",
+        action="append",
+        default=[],
+        dest="policy_module",
+        metavar="FILE",
+        help="a Python file that registers a candidate pool of your own detector with "
+        "bench.frontend.pools.register_pool (repeatable); name it in --pools or --detector; "
+        "see docs/extending.md",
+    )
+    parser.epilog = policy_guide()
+    parser.add_argument(
+        "--detector",
+        default="sift",
+        metavar="POOL",
+        help=f"the run's own candidate pool: {', '.join(POOLS)} or a --pool-module's "
+        "(default: %(default)s)",
+    )
+    add_config_args(parser, RenderConfig, quick=QUICK_RENDER, choices={"variant": VARIANTS})
+
+
+def _dataset_arguments(parser: argparse.ArgumentParser) -> None:
+    """A dataset instead of the rendered scenes: its folder, its bags, the rendered
+    folders its ranking is compared with."""
     parser.add_argument(
         "--dataset",
         type=Path,
@@ -219,39 +259,6 @@ def _input_arguments(parser: argparse.ArgumentParser) -> None:
         f"{ROOT / PUBLISHED} and {ROOT / regime_folder(PUBLISHED, 'dense')}); each dataset's "
         "`matched` rows are those of the regime nearest its view count",
     )
-    regime_arg(
-        parser,
-        "sets the default --views, --seeds (0 with --quick) and --results "
-        f"(./{LATEST} or ./{regime_folder(LATEST, 'dense')}; --quick: ./{QUICK} or "
-        f"./{regime_folder(QUICK, 'dense')})",
-    )
-    parser.add_argument(
-        "--policy-module",
-        action="append",
-        default=[],
-        metavar="FILE",
-        help="a Python file whose @policy functions are registered (repeatable); see "
-        "examples/my_policy.py and 'Writing a policy' below",
-    )
-    parser.add_argument(
-        "--pool-module",
-        action="append",
-        default=[],
-        dest="policy_module",
-        metavar="FILE",
-        help="a Python file that registers a candidate pool of your own detector with "
-        "bench.frontend.pools.register_pool (repeatable); name it in --pools or --detector; "
-        "see docs/extending.md",
-    )
-    parser.epilog = policy_guide()
-    parser.add_argument(
-        "--detector",
-        default="sift",
-        metavar="POOL",
-        help=f"the run's own candidate pool: {', '.join(POOLS)} or a --pool-module's "
-        "(default: %(default)s)",
-    )
-    add_config_args(parser, RenderConfig, quick=QUICK_RENDER, choices={"variant": VARIANTS})
 
 
 def _folder_arguments(parser: argparse.ArgumentParser) -> None:

@@ -424,6 +424,31 @@ def _job_key(unit: Unit, job: Job) -> tuple:
     return (*astuple(unit), *job)
 
 
+def _missing(cfg: BenchConfig, df: pd.DataFrame, rescore: pd.Series) -> tuple[set, dict]:
+    """The keys of the current rows, and the work of each unit with rows missing (or only
+    to score again); one line where the grid has no unit at all. The rows of other bags
+    (another --bag-size or --bags) are other rows, kept."""
+    done, again = _keys(df[~rescore]), _keys(df[rescore])
+    work = {}
+    for unit in cfg.units():
+        missing = [j for j in cfg.jobs(unit.method) if _job_key(unit, j) not in done]
+        if missing:
+            redo = all(_job_key(unit, j) in again for j in missing)
+            work[unit] = Work(tuple(missing), rescore=redo)
+    if not cfg.units():
+        only = [
+            f"the {', '.join(r.kinds)} methods only {t}" for t, r in TASK_RUNNERS.items() if r.kinds
+        ]
+        raise BenchError(
+            f"nothing to compute: no method of {', '.join(cfg.methods)} runs a task of "
+            f"{', '.join(cfg.tasks)} (the COLMAP peers run only "
+            f"{', '.join(t for t, r in TASK_RUNNERS.items() if r.spec.peers)}"
+            + "".join(f"; {o}" for o in only)
+            + ")"
+        )
+    return done, work
+
+
 def _run_in(
     cfg: BenchConfig, ws: Workspace, options: RunOptions, report: Report | None
 ) -> pd.DataFrame:
@@ -437,25 +462,8 @@ def _run_in(
         log(line)
     code_hash(PREDICTION_CODE), evaluation_hash()  # taken once, from the code that starts
     df, rescore = _current_rows(cfg, ws, options)
-    done, again = _keys(df[~rescore]), _keys(df[rescore])
-    work = {}  # the rows of other bags (another --bag-size or --bags) are other rows, kept
-    for unit in cfg.units():
-        missing = [j for j in cfg.jobs(unit.method) if _job_key(unit, j) not in done]
-        if missing:
-            redo = all(_job_key(unit, j) in again for j in missing)
-            work[unit] = Work(tuple(missing), rescore=redo)
+    done, work = _missing(cfg, df, rescore)
     n_rows = sum(len(w.jobs) for w in work.values())
-    if not cfg.units():
-        only = [
-            f"the {', '.join(r.kinds)} methods only {t}" for t, r in TASK_RUNNERS.items() if r.kinds
-        ]
-        raise BenchError(
-            f"nothing to compute: no method of {', '.join(cfg.methods)} runs a task of "
-            f"{', '.join(cfg.tasks)} (the COLMAP peers run only "
-            f"{', '.join(t for t, r in TASK_RUNNERS.items() if r.spec.peers)}"
-            + "".join(f"; {o}" for o in only)
-            + ")"
-        )
     stage_s = dict.fromkeys(
         ["render", "frontend", "select", "match", "verify", "task", "evaluate_matches", "evaluate"],
         0.0,
@@ -475,21 +483,7 @@ def _run_in(
     plan = Plan(entries, work)
     t_runs = time.perf_counter()
     try:
-        with models_replaced(ws.results, options.overwrite) as state:
-            for new in _computed(plan, cfg.run, ws, options.cluster, stage_s):
-                vocab = Vocabulary.current()
-                if not state["bound"]:  # the folder is bound by the first rows it gets
-                    bind_results_dir(ws.results, cfg.run.as_dict(), vocab, options.overwrite)
-                    moved = keep_runs(ws.runs_csv, done)  # the rows computed again go first
-                    if moved:
-                        log(
-                            f"{moved} row(s) of {ws.runs_csv} that this run replaces or no "
-                            f"longer counts as current moved, as they were, to {STALE}"
-                        )
-                    state["bound"] = True
-                rows = [r | {"invocation": invocation["id"]} for r in new]
-                check_unchanged()  # the rows' hashes name the code that computed them
-                append_runs(ws.runs_csv, rows, vocab)
+        _append_rows(plan, cfg, ws, options, stage_s, done, invocation["id"])
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the rows written keep their seconds
         stage_s["runs_wall"] = wall["runs"] = time.perf_counter() - t_runs
         seconds = {"total": time.perf_counter() - t_start}
@@ -503,14 +497,7 @@ def _run_in(
         "wall": wall | {"total": time.perf_counter() - t_start},
         "cluster": _cluster_record(options.cluster),
     }
-    write_manifest(ws, cfg.run.as_dict(), invocation, out)  # before the report: its page shows it
-    if report is not None:
-        t = time.perf_counter()
-        report(of_bags(cfg, out), ws.results, ws.renders)
-        invocation["seconds"]["report"] = invocation["wall"]["report"] = time.perf_counter() - t
-        invocation["seconds"]["total"] = time.perf_counter() - t_start
-        invocation["wall"]["total"] = invocation["seconds"]["total"]
-        write_manifest(ws, cfg.run.as_dict(), invocation, out)
+    _reported(cfg, ws, invocation, out, report, t_start)
     ours = in_grid(cfg, out)
     said = [
         failures(ours),
@@ -524,6 +511,40 @@ def _run_in(
         + f"; results in {ws.results}"
     )
     return out
+
+
+def _reported(cfg, ws: Workspace, invocation: dict, out, report: Report | None, t_start) -> None:
+    """The run's manifest, written before its report (whose page shows it) and again with
+    the report's seconds."""
+    write_manifest(ws, cfg.run.as_dict(), invocation, out)
+    if report is not None:
+        t = time.perf_counter()
+        report(of_bags(cfg, out), ws.results, ws.renders)
+        invocation["seconds"]["report"] = invocation["wall"]["report"] = time.perf_counter() - t
+        invocation["seconds"]["total"] = time.perf_counter() - t_start
+        invocation["wall"]["total"] = invocation["seconds"]["total"]
+        write_manifest(ws, cfg.run.as_dict(), invocation, out)
+
+
+def _append_rows(plan, cfg: BenchConfig, ws: Workspace, options: RunOptions, stage_s, done, run_id):
+    """Compute the plan's units, appending each one's rows to `runs.csv` as it finishes;
+    the folder is bound by the first rows it gets, when the rows this run replaces are
+    moved aside (`keep_runs`)."""
+    with models_replaced(ws.results, options.overwrite) as state:
+        for new in _computed(plan, cfg.run, ws, options.cluster, stage_s):
+            vocab = Vocabulary.current()
+            if not state["bound"]:
+                bind_results_dir(ws.results, cfg.run.as_dict(), vocab, options.overwrite)
+                moved = keep_runs(ws.runs_csv, done)  # the rows computed again go first
+                if moved:
+                    log(
+                        f"{moved} row(s) of {ws.runs_csv} that this run replaces or no "
+                        f"longer counts as current moved, as they were, to {STALE}"
+                    )
+                state["bound"] = True
+            rows = [r | {"invocation": run_id} for r in new]
+            check_unchanged()  # the rows' hashes name the code that computed them
+            append_runs(ws.runs_csv, rows, vocab)
 
 
 def _interrupted(ws: Workspace, cfg: BenchConfig, invocation: dict, stage_s: dict) -> None:

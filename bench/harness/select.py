@@ -53,15 +53,12 @@ class SelectRequest:
     """The detector, signal, policy and back-end settings, as `bench run` has them."""
 
 
-def select_to_database(request: SelectRequest, out: Path, seconds: dict | None = None) -> Path:
-    """Write OUT/database.db (module docstring); returns its path. `seconds`, if given,
-    receives the seconds of each step: read, the front end's (`stage.compute`), select,
-    write (the database and the overlays)."""
-    clock = {} if seconds is None else seconds
-    out = Path(out)
+def _checked(request: SelectRequest, out: Path):
+    """The request's settings, checked before any work: a folder to write, SIFT's pool
+    (COLMAP's matchers read its descriptors), a method `bench select` can run."""
     if out.exists() and not out.is_dir():
         raise BenchError(f"--out {out} is a file; give a folder for database.db")
-    policy, budget, cfg = request.policy, request.budget, request.settings.validate()
+    cfg = request.settings.validate()
     if cfg.detector.detector != "sift":
         raise BenchError(
             "bench select writes COLMAP's SIFT descriptors, which COLMAP's matchers read: "
@@ -69,9 +66,51 @@ def select_to_database(request: SelectRequest, out: Path, seconds: dict | None =
         )
     plugins.load(cfg.policy.modules)
     valid = [m for m in METHODS if runner(m).photos]
-    if policy not in valid:
-        what = "a method bench select cannot run" if policy in METHODS else "unknown"
-        raise BenchError(f"--policy {policy!r} is {what}; valid: {', '.join(valid)}")
+    if request.policy not in valid:
+        what = "a method bench select cannot run" if request.policy in METHODS else "unknown"
+        raise BenchError(f"--policy {request.policy!r} is {what}; valid: {', '.join(valid)}")
+    return cfg
+
+
+def _written(out: Path, views, pools, sel, pairs, overlays: bool) -> Path:
+    """OUT/database.db of the selections (and their verified pairs), an older one kept
+    aside; OUT/overlays/ with them drawn, where asked."""
+    out.mkdir(parents=True, exist_ok=True)
+    db = out / "database.db"
+    if db.exists():
+        kept = keep_aside(db)
+        log(f"{db} already existed: kept as {kept}; the new one is {db}")
+    try:
+        with atomic_path(db) as tmp:
+            write_database(
+                tmp,
+                [v.camera for v in views],
+                [v.name for v in views],
+                [c.xy[s] for c, s in zip(pools, sel)],
+                pairs,
+                [c.descriptors[s] for c, s in zip(pools, sel)],
+            )
+            untrust_guessed_focals(tmp, views)
+    except Exception as e:
+        raise BenchError(f"cannot write {db}: {e}") from e
+    shutil.rmtree(out / "overlays", ignore_errors=True)  # never beside another run's
+    for v, c, s in zip(views, pools, sel) if overlays else ():
+        path = (out / "overlays" / v.name).with_suffix(".png")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        img = np.ascontiguousarray(v.image[..., ::-1])
+        for x, y in c.xy[s] - 0.5:
+            cv2.circle(img, (int(round(x)), int(round(y))), 3, (0, 255, 0), 1, cv2.LINE_AA)
+        cv2.imwrite(str(path), img)
+    return db
+
+
+def select_to_database(request: SelectRequest, out: Path, seconds: dict | None = None) -> Path:
+    """Write OUT/database.db (module docstring); returns its path. `seconds`, if given,
+    receives the seconds of each step: read, the front end's (`stage.compute`), select,
+    write (the database and the overlays)."""
+    clock = {} if seconds is None else seconds
+    out, cfg = Path(out), _checked(request, out)
+    policy, budget = request.policy, request.budget
     t = time.perf_counter()
     views = load_image_folder(request.images, request.cameras)
     clock["read"] = time.perf_counter() - t
@@ -90,33 +129,7 @@ def select_to_database(request: SelectRequest, out: Path, seconds: dict | None =
     pairs = select_match.match(cams, pools, sel, policy, cfg)[0] if request.match else []
     clock["select"] = time.perf_counter() - step
     step = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
-    db = out / "database.db"
-    if db.exists():
-        kept = keep_aside(db)
-        log(f"{db} already existed: kept as {kept}; the new one is {db}")
-    try:
-        with atomic_path(db) as tmp:
-            write_database(
-                tmp,
-                cams,
-                [v.name for v in views],
-                [c.xy[s] for c, s in zip(pools, sel)],
-                pairs,
-                [c.descriptors[s] for c, s in zip(pools, sel)],
-            )
-            untrust_guessed_focals(tmp, views)
-    except Exception as e:
-        raise BenchError(f"cannot write {db}: {e}") from e
-    shutil.rmtree(out / "overlays", ignore_errors=True)  # never beside another run's
-    if request.overlays:
-        for v, c, s in zip(views, pools, sel):
-            path = (out / "overlays" / v.name).with_suffix(".png")
-            path.parent.mkdir(parents=True, exist_ok=True)
-            img = np.ascontiguousarray(v.image[..., ::-1])
-            for x, y in c.xy[s] - 0.5:
-                cv2.circle(img, (int(round(x)), int(round(y))), 3, (0, 255, 0), 1, cv2.LINE_AA)
-            cv2.imwrite(str(path), img)
+    db = _written(out, views, pools, sel, pairs, request.overlays)
     clock["write"] = time.perf_counter() - step
     n, kept = len(views), sum(len(s) for s in sel)
     seconds = f"{(time.perf_counter() - t) / n:.2f} s per image"
