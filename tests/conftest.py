@@ -5,6 +5,7 @@ from __future__ import annotations
 import signal
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -180,3 +181,13 @@ def snapshot_of(results: Path, folder: Path) -> Path:
     shutil.copytree(results, folder)
     write_origin(folder, folder_origin(folder, "test", Path.read_text))
     return folder
+
+
+def blobs(seed: int) -> np.ndarray:
+    """A 160 x 120 RGB image of blobs at two scales."""
+    rng = np.random.default_rng(seed)
+    img = sum(
+        cv2.resize(rng.random((120 // k, 160 // k, 3)), (160, 120), interpolation=cv2.INTER_CUBIC)
+        for k in (4, 12)
+    )
+    return np.clip(255 * (img - img.min()) / np.ptp(img), 0, 255).astype(np.uint8)

@@ -19,7 +19,7 @@ from bench import BenchError
 from bench.frontend import learned
 from bench.frontend.features import DetectorConfig
 from bench.frontend.pools import POOLS
-from tests.conftest import TINY
+from tests.conftest import TINY, blobs
 
 torch = pytest.importorskip("torch")
 torch.set_num_threads(1)
@@ -46,13 +46,7 @@ def offline(monkeypatch):
 
 @pytest.fixture(scope="module")
 def texture() -> np.ndarray:
-    """A 160 x 120 RGB image of blobs at two scales."""
-    rng = np.random.default_rng(0)
-    img = sum(
-        cv2.resize(rng.random((120 // k, 160 // k, 3)), (160, 120), interpolation=cv2.INTER_CUBIC)
-        for k in (4, 12)
-    )
-    return np.clip(255 * (img - img.min()) / np.ptp(img), 0, 255).astype(np.uint8)
+    return blobs(0)
 
 
 @LEARNED
@@ -81,9 +75,7 @@ def test_the_pool_is_the_highest_scoring_keypoints_strongest_first(texture, cfg)
     assert xy.min() >= 0 and np.all(xy.max(0) <= [160, 120])
 
 
-@pytest.mark.parametrize(
-    "cfg, px", [(ALIKED, 2.0), (XFEAT, 3.0)], ids=["lightglue", "lighterglue"]
-)
+@pytest.mark.parametrize("cfg, px", [(ALIKED, 2.0), (XFEAT, 3.0)], ids=["lightglue", "lighterglue"])
 def test_the_learned_matcher_recovers_a_known_homography(texture, cfg, px):
     """Nine matches in ten within px of the homography (XFeat's keypoints lie on whole
     pixels of the network's input: 3 px)."""

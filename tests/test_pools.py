@@ -19,22 +19,14 @@ from bench.results import Workspace
 from bench.unit import pooled
 from bench.unit.config import RunConfig
 from bench.vocabulary import METHODS
-from tests.conftest import TINY
+from tests.conftest import TINY, blobs
 
 BUILT_IN = ("sift", "orb", "akaze", "aliked", "disk", "xfeat")
 
 
 @pytest.fixture(scope="module")
 def texture() -> np.ndarray:
-    """A 160 x 120 RGB image of blobs at two scales."""
-    import cv2
-
-    rng = np.random.default_rng(1)
-    img = sum(
-        cv2.resize(rng.random((120 // k, 160 // k, 3)), (160, 120), interpolation=cv2.INTER_CUBIC)
-        for k in (4, 12)
-    )
-    return np.clip(255 * (img - img.min()) / np.ptp(img), 0, 255).astype(np.uint8)
+    return blobs(1)
 
 
 @pytest.mark.parametrize("name", BUILT_IN)
@@ -194,5 +186,7 @@ def test_table_pools_names_each_pools_peer_and_best_selection_against_colmap_b()
     assert best["mean_diff"] == pytest.approx(0.05) and best["n"] == 4
     assert by.loc[("colmap", "peer", "image"), "method"] == "colmap-b"
     said = recommendation(table, Vocabulary.current())
-    assert said[0].startswith("At B = 256 in sfm_maa, `aliked-b` on the aliked/lightglue pool leads")
+    assert said[0].startswith(
+        "At B = 256 in sfm_maa, `aliked-b` on the aliked/lightglue pool leads"
+    )
     assert table_pools(pd.DataFrame(rows).assign(pool="sift"), Vocabulary.current()).empty

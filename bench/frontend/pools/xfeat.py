@@ -45,6 +45,8 @@ XFEAT = register_pool(
         "xfeat",
         detect=lambda image, cfg: learned.as_pool(_found(image, cfg)),
         points=lambda gray, cfg: _found(gray, cfg)[0],
+        # ALIKED's share of near duplicates: within 0.3 of another candidate of view 0,
+        # 0.54 of XFeat's on the corridor (ALIKED's 0.42), 0.69 on the facade (0.70)
         duplicate_distance=0.3,
         matcher="lighterglue",
         match=lambda a, b: learned.glue(lighterglue(), a, b),
