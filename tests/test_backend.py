@@ -278,6 +278,37 @@ def test_a_forward_drive_is_mapped_from_a_forward_first_pair_only(tmp_path, monk
     assert rec.model is None and "the mapper registered" in rec.failure
 
 
+def test_the_forward_start_maps_a_first_pair_of_under_one_degree(monkeypatch):
+    """COLMAP halves the first pair's angle twice by itself where it maps no model (2 to 1
+    to 0.5 degrees from `FORWARD_START`; 4 to 2 to 1 from 4): three views 0.5 m apart
+    along their optical axis, 60 points 4-8 m ahead among 300 at 20-40 m, whose widest
+    pair's median triangulation angle is 0.65 degrees, are mapped from 2 and not from 4."""
+    from bench.backend import reconstruction
+    from bench.camera import look_at
+
+    cams = [look_at((0.0, y, 1.5), (0.0, y + 10.0, 1.5)) for y in (0.0, 0.5, 1.0)]
+    rng = np.random.default_rng(5)
+    d = np.r_[rng.uniform(4, 8, 60), rng.uniform(20, 40, 300)]
+    X = np.c_[rng.uniform(-0.55, 0.55, 360) * d, d + 1, 1.5 + rng.uniform(-0.4, 0.4, 360) * d]
+    X = X[np.all([_inside(c, X) for c in cams], axis=0)]
+    rays = [X - c.center for c in cams[::2]]
+    cos = np.sum(rays[0] * rays[1], 1) / np.prod([np.linalg.norm(r, axis=1) for r in rays], 0)
+    assert 0.5 < np.degrees(np.median(np.arccos(cos))) < 1.0
+    xy, ids = [c.project(X)[0] for c in cams], np.arange(len(X))
+    pairs = [
+        PairMatches(i, j, np.c_[ids, ids], np.c_[ids, ids], "CALIBRATED")
+        for i, j in [(0, 1), (0, 2), (1, 2)]
+    ]
+    rec = mapping_task(cams, _names(3), xy, pairs, BackendConfig())
+    est = registered_poses(rec.model, {n: k for k, n in enumerate(_names(3))})
+    row, _ = pose_metrics(est, cams)
+    assert row["registered_views"] == 3 and row["maa"] > 0.9
+    four = {**reconstruction.FORWARD_START, "init_min_tri_angle": 4.0}
+    monkeypatch.setattr(reconstruction, "FORWARD_START", four)
+    rec = mapping_task(cams, _names(3), xy, pairs, BackendConfig())
+    assert rec.model is None and "the mapper registered" in rec.failure
+
+
 def _inside(cam, X) -> np.ndarray:
     uv = cam.project(X)[0]
     return (uv[:, 0] > 0) & (uv[:, 0] < cam.width) & (uv[:, 1] > 0) & (uv[:, 1] < cam.height)

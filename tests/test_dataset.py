@@ -20,13 +20,15 @@ from bench import BenchError
 from bench.backend.matching import BackendConfig
 from bench.backend.reconstruction import fixed_intrinsics_options
 from bench.binding import read_vocabulary
+from bench.camera import Camera, look_at, write_colmap_rig
 from bench.cli import main
 from bench.evaluation.export import export_dataset
-from bench.frontend.colmap_model import read_model
+from bench.frontend import formats
+from bench.frontend.colmap_model import read_model, read_reconstruction
 from bench.frontend.features import DetectorConfig, detect
 from bench.frontend.geometry import RIG, SignalConfig
 from bench.frontend.stage import front_end
-from bench.frontend.views import load_image_folder, load_views, source_key
+from bench.frontend.views import Source, load_image_folder, load_views, source_key
 from bench.harness.grid import BenchConfig
 from bench.harness.select import SelectRequest, select_to_database
 from bench.report.transfer import transfer
@@ -603,3 +605,97 @@ def test_the_biggest_movers_name_which_rank_is_which():
     three = list("abc")
     row, _ = compare(pd.Series([1.0, 2, 3], three), pd.Series([3.0, 2, 1], three), False)
     assert row["biggest_movers"] == "a rendered 1 -> set 3; c rendered 3 -> set 1"
+
+
+# --- the formats of a dataset's model (bench.frontend.formats) -----------------------
+
+
+def _tiny_dataset(folder: Path, model: str = "sparse") -> list[Camera]:
+    """Three 64x48 noise images in `images/` and their COLMAP text model in `model`."""
+    cams = [look_at((x, -6.0, 1.0), (0.0, 0.0, 1.0), width=64, height=48) for x in (-1, 0, 1)]
+    (folder / "images").mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    for k in range(3):
+        cv2.imwrite(
+            str(folder / "images" / f"v{k}.png"), rng.integers(0, 255, (48, 64, 3), np.uint8)
+        )
+    _mkdir(folder / model)
+    write_colmap_rig(cams, folder / model, [f"v{k}.png" for k in range(3)])
+    return cams
+
+
+def test_the_colmap_models_are_the_first_two_formats_of_the_registry(tmp_path):
+    assert list(formats.FORMATS)[:2] == ["colmap-binary", "colmap-text"]
+    cams = _tiny_dataset(tmp_path / "text")
+    _tiny_dataset(tmp_path / "bin", "text")
+    rec = read_reconstruction(tmp_path / "bin" / "text")
+    rec.write_binary(str(_mkdir(tmp_path / "bin" / "sparse" / "0")))
+    shutil.rmtree(tmp_path / "bin" / "text")
+    for name, kind in (("text", "colmap-text"), ("bin", "colmap-binary")):
+        src = Source.of(tmp_path / name)
+        assert src.format.name == kind and src.images == tmp_path / name / "images"
+        views = load_views(src)
+        assert [v.name for v in views] == ["v0.png", "v1.png", "v2.png"]
+        for v, c in zip(views, cams):
+            assert np.allclose(v.camera.K, c.K) and np.allclose(v.camera.t, c.t)
+
+
+@pytest.fixture
+def registry(monkeypatch):
+    """The registry of formats, as it is, for a test to add to (restored after it)."""
+    monkeypatch.setattr(formats, "FORMATS", dict(formats.FORMATS))
+    return formats.FORMATS
+
+
+def test_a_format_registered_elsewhere_is_read_by_source_and_load_views(tmp_path, registry):
+    """A format of one's own (here a JSON file of cameras beside `images/`) is one decorated
+    reader: `Source.of` and `load_views` read it, and its file is part of the key."""
+
+    def read_json(folder: Path) -> list[tuple[str, Camera]]:
+        cams = json.loads((folder / "rig.json").read_text())
+        return sorted(
+            (name, Camera(c["w"], c["h"], *c["k"], np.array(c["R"]), np.array(c["t"])))
+            for name, c in cams.items()
+        )
+
+    formats.dataset_format(
+        "rig-json", lambda f: (f / "rig.json").is_file(), "a rig.json", places=(".",)
+    )(read_json)
+    cams = _tiny_dataset(tmp_path / "ds")
+    shutil.rmtree(tmp_path / "ds" / "sparse")
+    rig = {
+        f"v{k}.png": {
+            "w": 64,
+            "h": 48,
+            "k": [c.fx, c.fy, c.cx, c.cy],
+            "R": c.R.tolist(),
+            "t": c.t.tolist(),
+        }
+        for k, c in enumerate(cams)
+    }
+    (tmp_path / "ds" / "rig.json").write_text(json.dumps(rig))
+    src = Source.of(tmp_path / "ds")
+    assert src.format.name == "rig-json" and src.seen() == {}
+    views = load_views(tmp_path / "ds")
+    assert [v.name for v in views] == ["v0.png", "v1.png", "v2.png"]
+    assert all(np.allclose(v.camera.R, c.R) for v, c in zip(views, cams))
+    assert views[2].image.shape == (48, 64, 3)
+    key = source_key(tmp_path / "ds")
+    rig["v0.png"]["k"][0] += 1
+    (tmp_path / "ds" / "rig.json").write_text(json.dumps(rig))
+    assert source_key(tmp_path / "ds") != key
+
+
+def test_a_folder_of_no_known_format_is_one_line_naming_each_format(tmp_path, registry):
+    is_rig = lambda f: (f / "rig.json").is_file()  # noqa: E731
+    formats.dataset_format("rig-json", is_rig, "a rig.json")(lambda folder: [])
+    _tiny_dataset(tmp_path / "ds")
+    (tmp_path / "ds" / "sparse" / "images.txt").unlink()  # cameras alone are no model
+    with pytest.raises(BenchError) as err:
+        Source.of(tmp_path / "ds")
+    said = str(err.value)
+    assert "\n" not in said and said.startswith(f"{tmp_path / 'ds'} is neither a render entry")
+    for what in ("COLMAP binary model (cameras.bin, images.bin)", "a rig.json in sparse/0/"):
+        assert what in said
+    with pytest.raises(BenchError, match="holds no model"):
+        load_image_folder(tmp_path / "ds" / "images", tmp_path / "ds" / "sparse")

@@ -136,6 +136,43 @@ def test_a_signal_to_the_process_group_with_workers_stops_in_a_few_lines(
     assert len(read_runs(tmp_path / "r" / "runs.csv")) >= 1  # the rows computed are kept
 
 
+STARTING = """
+import os, signal, sys
+from distributed import nanny
+from bench.cli import Terminated, _terminate
+from bench.harness import execute
+
+start = nanny.Nanny.start_unsafe
+
+async def signalled(self):  # as `timeout` sends it, while the workers start
+    os.kill(os.getpid(), signal.SIGTERM)
+    return await start(self)
+
+nanny.Nanny.start_unsafe = signalled
+signal.signal(signal.SIGTERM, _terminate)
+plan = execute.Plan({}, {})
+try:
+    list(execute._on_dask(plan, None, None, execute.Cluster(workers=2), None))
+except Terminated:
+    print("terminated", file=sys.stderr)
+    sys.exit(143)
+"""
+
+
+def test_a_sigterm_while_the_local_cluster_starts_ends_in_one_line():
+    """Stopped half-started, distributed's exit hook failed on the workers still starting
+    (`AssertionError: Status.init`, a traceback after the last line); now the start ends,
+    the cluster is closed, and the SIGTERM is acted on."""
+    import subprocess
+    import sys
+
+    proc = subprocess.run(
+        [sys.executable, "-c", STARTING], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 143, proc.stderr
+    assert proc.stderr.strip() == "terminated", proc.stderr
+
+
 def test_the_readme_synopsis_names_every_option_of_every_command():
     import argparse
     import re

@@ -189,7 +189,8 @@ FORWARD_START = {"init_min_tri_angle": 2.0, "init_max_forward_motion": 1.0}
 """The mapper's options of the second start, where COLMAP's defaults (16 degrees, which it
 relaxes to 8 and 4 by itself; a first pair moving within 18 degrees of the optical axis
 refused) register fewer than two views: the first pair may move along the axis, at 2
-degrees of triangulation angle. Never tried where the defaults map."""
+degrees of triangulation angle (relaxed by COLMAP in the same way, to 1 and 0.5: a pair of
+0.65 degrees is mapped, tests/test_backend.py). Never tried where the defaults map."""
 
 
 def fixed_intrinsics_options(

@@ -435,10 +435,9 @@ def transfer_methods(methods: tuple[str, ...]) -> None:
 def has_pixel_truth(dataset: Path) -> bool:
     """Whether a dataset has per-pixel ground truth (which the oracle needs)."""
     from bench.evaluation import layers
-    from bench.frontend.colmap_model import read_model
     from bench.frontend.views import Source
 
-    names = [n for n, _ in read_model(Source.of(dataset).model)]
+    names = [n for n, _ in Source.of(dataset).cameras()]
     ok = layers.has_pixel_truth(dataset, names)
     if not ok:
         log(f"{dataset} has no per-pixel ground truth: the oracle is left out")

@@ -38,8 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=Path,
         default=None,
         metavar="MODEL",
-        help="COLMAP text model (folder with cameras.txt and images.txt) giving intrinsics and "
-        "poses",
+        help="a model giving intrinsics and poses: a folder with COLMAP's cameras and images "
+        "(.txt or .bin), or a model of another registered format",
     )
     parser.add_argument(
         "--match",

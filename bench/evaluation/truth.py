@@ -22,7 +22,6 @@ from bench.evaluation.layers import (
     surface_samples,
 )
 from bench.files import read_meta
-from bench.frontend.colmap_model import points_seen
 from bench.frontend.features import Candidates
 from bench.frontend.geometry import saturation_depth
 from bench.frontend.views import Source
@@ -242,7 +241,7 @@ def scene_truth(source: Path, cams: list[Camera], names: list[str], pools) -> Sc
         return truth
     cloud, gts = read_dataset_layers(source, names, cams)
     truth = SceneTruth.build(cams, gts, pools, cloud)
-    seen = points_seen(Source.of(source).model)
+    seen = Source.of(source).seen()
     truth.seen = [seen.get(n, np.zeros(0, np.int64)) for n in names]
     if gts is not None:
         truth.kind = "per-pixel"

@@ -28,20 +28,15 @@ _UNDISTORTED = {"SIMPLE_PINHOLE": 3, "PINHOLE": 4, "SIMPLE_RADIAL": 4, "RADIAL":
 """Camera models accepted, and how many parameters precede their distortion ones."""
 
 
+def holds(folder: Path, ext: str) -> bool:
+    """Whether `folder` holds a model's cameras and images in COLMAP's binary ('bin') or
+    text ('txt') files."""
+    return all((Path(folder) / f"{f}.{ext}").is_file() for f in FILES[:2])
+
+
 def model_format(folder: Path) -> str | None:
-    """'bin' or 'txt' when `folder` holds a model's cameras and images, else None."""
-    for ext in ("bin", "txt"):
-        if all((Path(folder) / f"{f}.{ext}").is_file() for f in FILES[:2]):
-            return ext
-    return None
-
-
-def find_model(dataset: Path) -> Path | None:
-    """A dataset's model: `sparse/0/` (as `colmap mapper` writes it) or `sparse/`."""
-    for folder in (Path(dataset) / "sparse" / "0", Path(dataset) / "sparse"):
-        if model_format(folder):
-            return folder
-    return None
+    """'bin' or 'txt' (binary where both are there) when `folder` holds a model, else None."""
+    return next((ext for ext in ("bin", "txt") if holds(folder, ext)), None)
 
 
 @cache

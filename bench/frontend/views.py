@@ -3,12 +3,12 @@
 Three sources give the same list of `View`s:
 
 * a render entry (`renders/<scene>-s<seed>-<key>/`): its images and its COLMAP rig;
-* a dataset in the COLMAP layout, `DIR/images/` and a model in `DIR/sparse/0/` or
-  `DIR/sparse/` (text or binary, `bench.frontend.colmap_model`): the views of the model,
+* a dataset, `DIR/images/` and a model of a registered format (`bench.frontend.formats`:
+  COLMAP's, binary or text, in `DIR/sparse/0/` or `DIR/sparse/`): the views of the model,
   posed;
 * a folder of images without poses (`bench select`): every image in it (`IMAGE_SUFFIXES`;
   the other files are named in one log line), with a camera from a COLMAP model when one
-  is given, else from the focal-length prior (EXIF's 35 mm equivalent focal length, or
+  is given (of a registered format), else from the focal-length prior (EXIF's 35 mm equivalent focal length, or
   COLMAP's default 1.2 x max(width, height), a guess: `View.focal_known` False, and the
   front end estimates it from the images, `bench.frontend.geometry.estimate_focal`).
 
@@ -41,7 +41,8 @@ from bench.files import (
     read_meta,
     views_pixels,
 )
-from bench.frontend.colmap_model import check_images, find_model, read_model
+from bench.frontend.colmap_model import check_images
+from bench.frontend.formats import DatasetFormat, find_model, format_of, layouts, read_cameras
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".webp")
 """The image files a folder's views are read from (those OpenCV decodes)."""
@@ -115,12 +116,23 @@ class View:
 
 @dataclass(frozen=True)
 class Source:
-    """Where a set of views lives: the image folder and the posed model, if any."""
+    """Where a set of views lives: the image folder, and the model that poses them."""
 
     images: Path
-    model: Path | None
+    model: Path
+    format: DatasetFormat
+    """The model's format (`bench.frontend.formats`)."""
     dataset: bool = False
     """A dataset's folder: the model must pose exactly the images in `images`."""
+
+    def cameras(self) -> list[tuple[str, Camera]]:
+        """(image name, camera) of every image the model poses, in name order."""
+        return self.format.read(self.model)
+
+    def seen(self) -> dict[str, np.ndarray]:
+        """The ids of the model's points each image observes, by image name (none for a
+        model without points)."""
+        return self.format.seen(self.model)
 
     @staticmethod
     def kind(path: Path) -> str:
@@ -130,20 +142,19 @@ class Source:
 
     @staticmethod
     def of(path: Path) -> Source:
-        """A render entry, or a dataset folder with `images/` and `sparse/`."""
+        """A render entry (its COLMAP rig), or a dataset folder: `images/` and a model of a
+        registered format where that format keeps it (`bench.frontend.formats`)."""
         path = Path(path)
         if Source.kind(path) == "render":
             problem = entry_problem(path)
             if problem:
                 raise BenchError(f"render entry {path} is not usable: {problem}")
-            return Source(path, path)
-        model = find_model(path)
-        if (path / "images").is_dir() and model is not None:
-            return Source(path / "images", model, dataset=True)
-        raise BenchError(
-            f"{path} is neither a render entry nor a dataset (images/ and a COLMAP model in "
-            "sparse/ or sparse/0/)"
-        )
+            return Source(path, path, format_of(path))
+        found = find_model(path)
+        if (path / "images").is_dir() and found is not None:
+            fmt, model = found
+            return Source(path / "images", model, fmt, dataset=True)
+        raise BenchError(f"{path} is neither a render entry nor a dataset: images/ and {layouts()}")
 
 
 def source_key(path: Path) -> str:
@@ -245,7 +256,7 @@ def load_views(source: Path | Source) -> list[View]:
     """The calibrated, posed views of a render entry or a dataset (see the module docstring);
     each image is decoded when first needed."""
     src = source if isinstance(source, Source) else Source.of(source)
-    model = read_model(src.model)
+    model = src.cameras()
     if src.dataset:
         check_images([n for n, _ in model], image_files(src.images), src.model, src.images)
     return [
@@ -274,7 +285,7 @@ def _posed_views(folder: Path, model: Path) -> list[View]:
     """The views of the folder's images that the model poses; the model's images that the
     folder lacks, and the folder's images it does not pose, are counted in a line each."""
     present = set(image_files(folder))
-    posed = read_model(model)
+    posed = read_cameras(model)
     absent = [n for n, _ in posed if n not in present]
     if absent:
         log(
@@ -295,7 +306,7 @@ def _posed_views(folder: Path, model: Path) -> list[View]:
 
 
 def load_image_folder(folder: Path, model: Path | None = None) -> list[View]:
-    """Every image of a folder: posed from a COLMAP model when one is given (the images
+    """Every image of a folder: posed from a model when one is given (the images
     both hold, `_posed_views`), else unposed with the focal-length prior; the files it
     skips are named. At least two images."""
     folder = Path(folder)

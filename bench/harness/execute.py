@@ -8,7 +8,7 @@ stored prediction) and scores (`bench.unit.evaluate`). Renders come first, from 
 process: with N local workers, N scenes side by side, each in a process of its own
 (`bench.render.entry.render_scenes`: Mitsuba's LLVM variant uses every core and the CUDA
 variant the GPU, and the developing step of one scene runs while another is traced).
-Each worker process holds one thread per library (`one_thread_per_library`). Units are
+Each worker process holds one thread per library (`bench.harness.workers`). Units are
 submitted scene by scene, the costliest of each scene first (`largest_first`). A worker
 holds one scene at a time (`_scene`; a dataset's bag, `Unit.bag`, is a scene of its own,
 `bench.unit.bags`). Rows come
@@ -32,7 +32,6 @@ from __future__ import annotations
 import math
 import os
 import signal
-import sys
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
@@ -259,12 +258,15 @@ def _result(future):
 
 def _local_cluster(workers: int):
     """A local cluster of single-threaded worker processes that start with Ctrl-C ignored
-    (it reaches this process alone, which stops them) and log only critical errors. No
+    (it reaches this process alone, which stops them), are set up before they take work
+    (`bench.harness.workers`: SIGTERM ignored too) and log only critical errors. No
     dashboard; the scheduler's HTTP server (Dask's health and metrics routes) takes a free
     port of this machine's own, not 8787, so nobody is told that 8787 is in use."""
     import logging
 
     from distributed import LocalCluster
+
+    from bench.harness.workers import WorkerSetup
 
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited by the workers
     try:
@@ -275,43 +277,10 @@ def _local_cluster(workers: int):
             dashboard_address=None,
             scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
             silence_logs=logging.CRITICAL,
+            plugins={WorkerSetup()},
         )
     finally:
         signal.signal(signal.SIGINT, previous)
-
-
-def one_thread_per_library() -> None:
-    """Hold this process to one thread in each library that starts its own pool: OpenCV
-    (its pool has one thread per core otherwise), and BLAS, OpenMP (COLMAP) and torch,
-    whose pools Dask's nanny already sizes to one (`OMP_NUM_THREADS`, `OPENBLAS_NUM_THREADS`
-    and `MKL_NUM_THREADS` set before a worker starts; torch reads the first). N workers
-    then run N threads on N cores, not N times the cores."""
-    import cv2
-
-    cv2.setNumThreads(1)
-    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[name] = "1"  # for a library loaded later, and for a worker not nannied
-    torch = sys.modules.get("torch")  # imported only by the learned methods
-    if torch is not None:
-        torch.set_num_threads(1)
-
-
-def _worker_setup():
-    """A worker plugin: one thread per library (`one_thread_per_library`), and SIGTERM
-    ignored in the worker process, as Ctrl-C is, so that a signal to the whole process
-    group (`timeout`, systemd) reaches this process alone, which stops the workers. Set
-    after importing pycolmap, whose import installs glog's failure signal handler (SIGTERM
-    included: it printed each worker's native stack)."""
-    from distributed import WorkerPlugin
-
-    class WorkerSetup(WorkerPlugin):
-        def setup(self, worker):
-            import pycolmap  # noqa: F401
-
-            one_thread_per_library()
-            signal.signal(signal.SIGTERM, signal.SIG_IGN)
-
-    return WorkerSetup()
 
 
 def check_scheduler(address: str) -> None:
@@ -347,15 +316,51 @@ def check_scheduler(address: str) -> None:
     raise BenchError(f"cannot reach the Dask scheduler {address}: {why}")
 
 
-def _on_dask(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, on_scene: OnScene):
-    from distributed import Client, as_completed
+def _start(cluster: Cluster, plan: Plan):
+    """A client of the cluster, the local cluster it starts (None with a scheduler), and
+    the plan sent to every worker. A SIGTERM meanwhile is held until they are, then acted
+    on once both are closed: stopped half-started, distributed's exit hook failed on the
+    workers still starting (`AssertionError: Status.init`), and a scatter on the
+    scheduler on the workers gone (`KeyError`), each a traceback after the run's last line."""
+    from distributed import Client
 
-    local = _local_cluster(cluster.workers) if cluster.scheduler is None else None
-    client = Client(cluster.scheduler or local, timeout="10s")
+    held, failed = [], None
+    previous = signal.getsignal(signal.SIGTERM)
+    if previous is not signal.SIG_IGN:  # one ignored stays ignored
+        signal.signal(signal.SIGTERM, lambda signum, frame: held.append(signum))
+    local = client = shared = None
     try:
-        if local is not None:
-            client.register_plugin(_worker_setup(), name="bench-worker-setup")
+        local = _local_cluster(cluster.workers) if cluster.scheduler is None else None
+        client = Client(cluster.scheduler or local, timeout="10s")
         shared = client.scatter(plan, broadcast=True)  # sent once, not with every unit
+    except BaseException as e:  # raised again below, unless a SIGTERM held stops the run
+        failed = e
+    finally:  # None: a handler not set from Python, which cannot be set back
+        signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+    try:
+        if held:
+            signal.raise_signal(signal.SIGTERM)  # for the handler before, now
+        if failed is not None:
+            raise failed
+    except BaseException:
+        _disconnect(client, local)
+        raise
+    return client, local, shared
+
+
+def _disconnect(client, local) -> None:
+    """Close a client and the local cluster it started, either of them None."""
+    if client is not None:
+        client.close()
+    if local is not None:
+        local.close()
+
+
+def _on_dask(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, on_scene: OnScene):
+    from distributed import as_completed
+
+    client, local, shared = _start(cluster, plan)
+    try:
         fronts = {
             client.submit(
                 _as_value, scene_task, group, entry, cfg, ws.renders, shared, pure=False
@@ -397,9 +402,7 @@ def _on_dask(plan: Plan, cfg: RunConfig, ws: Workspace, cluster: Cluster, on_sce
             else:
                 yield _result(future)
     finally:
-        client.close()
-        if local is not None:
-            local.close()
+        _disconnect(client, local)
 
 
 def default_workers() -> int:

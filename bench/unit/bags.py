@@ -28,7 +28,6 @@ import numpy as np
 from bench import BenchError
 from bench.evaluation.relative import MIN_SHARED
 from bench.evaluation.truth import COVISIBLE_DEG, covisible_pairs, scene_truth
-from bench.frontend.colmap_model import points_seen, read_model
 from bench.frontend.geometry import RIG
 from bench.frontend.stage import FrontEnd
 from bench.frontend.views import Source, load_views
@@ -68,8 +67,8 @@ def draw_bags(n: int, links, size: int, count: int) -> list[tuple[int, ...]]:
 @cache
 def dataset_bags(folder: str, size: int, count: int) -> tuple[str, ...]:
     """The bags of a dataset folder (`Unit.bag`: image names, space-separated)."""
-    model = read_model(Source.of(Path(folder)).model)
-    seen_of = points_seen(Source.of(Path(folder)).model)
+    source = Source.of(Path(folder))
+    model, seen_of = source.cameras(), source.seen()
     cams = [c for _, c in model]
     seen = [seen_of.get(n, np.zeros(0, np.int64)) for n, _ in model]
     links, _ = covisible_pairs(cams, seen, MIN_SHARED)

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.evaluation.metrics import coverage_pct, match_metrics
-from bench.frontend.colmap_model import read_model, read_reconstruction
+from bench.frontend.colmap_model import read_reconstruction
 from bench.frontend.signals import seconds_of
 from bench.frontend.views import Source, pixels_key, source_key
 from bench.render.entry import entry_meta
@@ -123,7 +123,7 @@ def identities(entry: Path, unit: Unit, jobs: list[Job], keys: Keys) -> list[dic
     shared = {
         "render_key": source_key(entry),
         "pixels": pixels_key(entry),
-        "views": len(unit.bag.split()) or len(read_model(Source.of(entry).model)),
+        "views": len(unit.bag.split()) or len(Source.of(entry).cameras()),
     }
     return [
         {
