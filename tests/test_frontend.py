@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
 from bench import BenchError
-from bench.camera import look_at
+from bench.camera import look_at, write_colmap_rig
+from bench.cli import main
 from bench.frontend.features import DetectorConfig, detect
-from bench.frontend.geometry import epipolar_distances, parallax
+from bench.frontend.geometry import IMAGES, RIG, epipolar_distances, parallax
 from bench.frontend.policies import (
     POLICIES,
     PolicyConfig,
@@ -26,8 +28,9 @@ from bench.frontend.signals import (
     Signals,
     compute_signals,
 )
-from bench.frontend.stage import front_end
-from bench.frontend.views import View
+from bench.frontend.stage import cache_file, front_end
+from bench.frontend.views import View, load_image_folder
+from tests.test_select import photos
 
 BUDGET = 64
 
@@ -349,3 +352,71 @@ def test_weights_are_a_vector_keyed_by_signal_name():
         one = Signals(**{s: np.array([float(s == name)]) for s in SIGNALS})
         sign = -1 if name == "ambiguity" else 1
         assert adaptive_score(one, w)[0] == pytest.approx(sign * weight), name
+
+
+# --- the front end alone: bench frontend ----------------------------------------------
+
+
+def _frontend(folder, out, *extra) -> int:
+    return main(["frontend", "--images", str(folder), "--out", str(out), *extra])
+
+
+def test_bench_frontend_writes_the_cache_file_front_end_reads(tmp_path, capsys):
+    folder, out = photos(tmp_path / "im"), tmp_path / "cache"
+    assert _frontend(folder, out) == 0
+    path = Path(capsys.readouterr().out.strip())
+    assert path.parent == out and path.name.startswith("im-sift-images-") and path.is_file()
+    det, sig = DetectorConfig(), SignalConfig()
+    fe = front_end(folder, det, sig, out, IMAGES, load_image_folder(folder))
+    assert fe.cached and cache_file(folder, det, sig, out, IMAGES) == path
+    with np.load(path) as z:
+        assert all(np.array_equal(z[f"xy_{v}"], p.xy) for v, p in enumerate(fe.pools))
+        assert np.array_equal(z["texture_2"], fe.signals[2].texture)
+    assert _frontend(folder, out) == 0
+    assert "read from the cache" in capsys.readouterr().err
+    assert [p.name for p in out.iterdir()] == [path.name]
+
+
+def test_bench_frontend_on_a_dataset_is_what_bench_run_reads(tmp_path, capsys):
+    """The front end of a dataset under the rig's geometry, in the cache `bench run` reads
+    (RENDERS/frontend/), is what a run's units read: no second computation."""
+    from bench.harness.execute import _front_ends
+    from bench.unit.config import RunConfig
+
+    ds = tmp_path / "ds"
+    photos(ds / "images")
+    cams = [look_at((x, -6.0, 1.0), (0.0, 0.0, 1.0), width=160, height=120) for x in (-0.2, 0, 0.2)]
+    (ds / "sparse").mkdir()
+    write_colmap_rig(cams, ds / "sparse", [f"p{k}.png" for k in range(3)])
+    assert _frontend(ds, tmp_path / "renders" / "frontend") == 0
+    assert "-sift-rig-" in capsys.readouterr().out
+    whole, _ = _front_ends(ds, RunConfig(render=None), tmp_path / "renders", (RIG,))
+    assert whole[RIG].cached
+
+
+@pytest.mark.parametrize(
+    "make, extra, said",
+    [
+        (lambda d: d, (), "image folder {d} does not exist"),
+        (lambda d: d.mkdir() or d, (), "{d} holds 0 usable image(s)"),
+        (photos, ("--geometry", "rig"), "--geometry rig needs the views' poses"),
+        (lambda d: (d / "images").mkdir(parents=True) or d, (), "{d} is neither a render entry"),
+    ],
+)
+def test_bench_frontend_refuses_a_folder_in_one_line(tmp_path, capsys, make, extra, said):
+    folder = make(tmp_path / "im")
+    assert _frontend(folder, tmp_path / "cache", *extra) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and said.format(d=folder) in err
+    assert not (tmp_path / "cache").exists()
+
+
+def test_python_m_bench_frontend_is_bench_frontend():
+    import subprocess
+    import sys
+
+    proc = subprocess.run(
+        [sys.executable, "-m", "bench.frontend", "--help"], capture_output=True, text=True
+    )
+    assert proc.returncode == 0 and proc.stdout.startswith("usage: bench frontend")
+    assert "<detector>-<geometry>-<key>.npz" in " ".join(proc.stdout.split())

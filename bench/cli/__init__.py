@@ -30,6 +30,7 @@ COMMANDS = (
     "train-weights",
     "train-matchability",
     "select",
+    "frontend",
     "export",
     "gallery",
 )
@@ -43,6 +44,7 @@ NATIVE = (
     "train-weights",
     "train-matchability",
     "select",
+    "frontend",
     "export",
 )
 """The commands that load COLMAP, whose import installs glog's failure signal handler (a

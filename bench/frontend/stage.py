@@ -9,8 +9,9 @@ length is a guess (photographs without EXIF) get the focal length estimated from
 images (`bench.frontend.geometry.estimate_focal`) before the signals read the geometry.
 `compute` is this stage for any views (`bench select` calls it on a folder of
 photographs, with the signals its policy reads); `front_end` caches it for a render
-entry or dataset; `subset` is the front end of some of its views alone (a dataset's bag),
-cached beside it by `bag_front_end`.
+entry, a dataset or a folder of images (`bench frontend`, the stage alone); `subset` is
+the front end of some of its views alone (a dataset's bag), cached beside it by
+`bag_front_end`.
 
 Cached (npz beside the render cache) by the render entry, the geometry granted, the
 detector and signal settings (and a pool's packages' versions, `Pool.identity`) and the code
@@ -81,18 +82,20 @@ def front_end(
     views: list[View] | None = None,
     bagged: bool = False,
 ) -> FrontEnd:
-    """Candidates and signals of every view of `entry` (a render entry or a dataset) under
-    the geometry granted (RIG or IMAGES), computed or read from the cache; `views`: the
-    entry's (`load_views`), shared between geometries so that each image is decoded once,
-    and only when the cache misses. `bagged` (every unit reads a bag of its views, whose
-    other signals are the bag's own): only what `subset` takes of it (`view_alone`)."""
+    """Candidates and signals of every view of `entry` (a render entry or a dataset, or a
+    folder of images alone with its views given) under the geometry granted (RIG or
+    IMAGES), computed or read from the cache; `views`: the entry's (`load_views`, or
+    `load_image_folder` for a folder of images), shared between geometries so that each
+    image is decoded once, and only when the cache misses. `bagged` (every unit reads a bag
+    of its views, whose other signals are the bag's own): only what `subset` takes of it
+    (`view_alone`)."""
     entry = Path(entry)
     if grant not in (RIG, IMAGES):
         raise BenchError(f"unknown geometry {grant!r}; valid: {RIG}, {IMAGES}")
     views = load_views(entry) if views is None else views
     if grant == IMAGES:
         views = [v.without_pose() for v in views]
-    path = _path(entry, det, sig, cache_dir, grant, bagged)
+    path = cache_file(entry, det, sig, cache_dir, grant, bagged)
     cached = _read(path, views)
     if cached is not None:
         return cached
@@ -117,14 +120,17 @@ def bag_front_end(
     """`subset(full, keep, ...)` of `full`, the bagged `front_end` of `entry` under `grant`,
     computed or read from the cache beside it: a bag's signals are computed once, not by
     every worker that holds the bag."""
-    name = _path(entry, det, sig, cache_dir, grant, bagged=True).stem
+    name = cache_file(entry, det, sig, cache_dir, grant, bagged=True).stem
     path = Path(cache_dir) / f"{name}-bag-{content_key(list(keep))}.npz"
     cached = _read(path, [full.views[i] for i in keep])
     return cached if cached is not None else _write(path, subset(full, keep, det, sig))
 
 
-def _path(entry: Path, det: DetectorConfig, sig: SignalConfig, cache_dir, grant, bagged) -> Path:
-    """The cache file of `front_end`, named by what decides it (module docstring)."""
+def cache_file(
+    entry: Path, det: DetectorConfig, sig: SignalConfig, cache_dir, grant, bagged=False
+) -> Path:
+    """The cache file of `front_end` (`bench frontend` prints it), named by what decides
+    it (module docstring)."""
     key = content_key(
         {
             "entry": source_key(entry),
@@ -263,7 +269,8 @@ def _estimate_focal(views, work, pools, sig):
     if found.factor is None:
         log(
             f"{what}: it is guessed, 1.2 x max(width, height), because the images do not "
-            f"determine it: {found.why}; the geometry of the signals may be poor: give --cameras"
+            f"determine it: {found.why}; the geometry of the signals may be poor: give a "
+            "model of the cameras (bench select --cameras; a dataset)"
         )
         return views, work
     factor, pairs = found.factor, found.pairs

@@ -6,11 +6,12 @@ Three sources give the same list of `View`s:
 * a dataset, `DIR/images/` and a model of a registered format (`bench.frontend.formats`:
   COLMAP's, binary or text, in `DIR/sparse/0/` or `DIR/sparse/`): the views of the model,
   posed;
-* a folder of images without poses (`bench select`): every image in it (`IMAGE_SUFFIXES`;
-  the other files are named in one log line), with a camera from a COLMAP model when one
-  is given (of a registered format), else from the focal-length prior (EXIF's 35 mm equivalent focal length, or
-  COLMAP's default 1.2 x max(width, height), a guess: `View.focal_known` False, and the
-  front end estimates it from the images, `bench.frontend.geometry.estimate_focal`).
+* a folder of images without poses (`bench select`, `bench frontend`): every image in it
+  (`IMAGE_SUFFIXES`; the other files are named in one log line), with a camera from a
+  model when one is given (of a registered format), else from the focal-length prior
+  (EXIF's 35 mm equivalent focal length, or COLMAP's default 1.2 x max(width, height), a
+  guess: `View.focal_known` False, and the front end estimates it from the images,
+  `bench.frontend.geometry.estimate_focal`).
 
 An image is read whole or refused: a file OpenCV cannot decode, and a JPEG that ends
 before its end-of-image marker (OpenCV would return its decoded part), are refused in one
@@ -157,25 +158,36 @@ class Source:
         raise BenchError(f"{path} is neither a render entry nor a dataset: images/ and {layouts()}")
 
 
+def images_alone(path: Path) -> bool:
+    """Whether `path` is a folder of images alone (`load_image_folder`'s): neither a render
+    entry nor a folder with `images/`, which is a dataset's (`Source.of`)."""
+    return Source.kind(path) != "render" and not (Path(path) / "images").is_dir()
+
+
 def source_key(path: Path) -> str:
     """What a set of views is, by content: a render entry's name (its key hashes what made
     its pixels); for a dataset, a hash of its model and every image (not its folder's
-    name), so a dataset whose contents change is computed again."""
-    path = Path(path)
-    src = Source.of(path)
-    if Source.kind(path) == "render":
-        return path.name
-    files = sorted(p for p in src.model.iterdir() if p.is_file())
-    files += sorted(p for p in src.images.rglob("*") if p.is_file())
+    name), so a dataset whose contents change is computed again; for a folder of images
+    alone (`images_alone`), a hash of its images."""
+    path, alone = Path(path), images_alone(path)
+    if alone:
+        files = [path / name for name in image_files(path)]
+    else:
+        src = Source.of(path)
+        if Source.kind(path) == "render":
+            return path.name
+        files = sorted(p for p in src.model.iterdir() if p.is_file())
+        files += sorted(p for p in src.images.rglob("*") if p.is_file())
     stats = tuple((str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in files)
-    return f"dataset-{_contents_key(path, stats)}"
+    return f"{'images' if alone else 'dataset'}-{_contents_key(path, stats)}"
 
 
 def pixels_key(path: Path) -> str:
     """What the images of a set of views are, by content: for a render entry the hash of
     its views' decoded pixels (`image_pixels_key`, recorded in its meta as it is made; the
-    reference set's are its manifest's), for a dataset its `source_key` (its files'
-    contents). Two rows with the same `pixels` read the same images, on any machine."""
+    reference set's are its manifest's), for a dataset or a folder of images its
+    `source_key` (its files' contents). Two rows with the same `pixels` read the same
+    images, on any machine."""
     path = Path(path)
     if Source.kind(path) == "render":
         return read_meta(path).get("pixels") or views_pixels(sorted(path.glob("view_*.png")))
