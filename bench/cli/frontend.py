@@ -29,8 +29,8 @@ DESCRIPTION = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from bench.frontend.features import DETECTORS
     from bench.frontend.geometry import IMAGES, RIG
+    from bench.frontend.pools import POOLS
 
     parser.add_argument(
         "--images",
@@ -49,8 +49,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--detector",
         default="sift",
-        choices=DETECTORS,
-        help="candidate detector (default: %(default)s)",
+        metavar="POOL",
+        help=f"the candidate pool: {', '.join(POOLS)} (default: %(default)s)",
     )
     parser.add_argument(
         "--geometry",

@@ -93,7 +93,9 @@ class Plan:
         out: dict[DetectorConfig, set[int]] = {}
         for u in self.work:
             det = cfg.for_method(known(u.method)).detector
-            out.setdefault(det, set()).update([u.budget] if u.budget > 0 and u.method not in own else [])
+            out.setdefault(det, set()).update(
+                [u.budget] if u.budget > 0 and u.method not in own else []
+            )
         return {det: tuple(sorted(b)) for det, b in out.items()}
 
     @property
