@@ -108,7 +108,7 @@ def test_aliked_b_runs_end_to_end_with_lightglue(tmp_path, renders_dir, monkeypa
     rows = run_benchmark(replace(grid, run=run), ws, RunOptions(cluster=Cluster(1)))
     assert len(calls) == 15 and set(rows["method"]) == {"aliked-b"}
     assert (rows["status"] == "ok").all() and (rows["tentative_matches"] > 0).all()
-    assert not grid.units() and "aliked-b (aliked)" in grid.placed[1][0]
+    assert not grid.units() and "aliked-b (its pool: aliked) not on sift" in grid.placed[1][0]
 
 
 def test_without_the_extra_a_learned_detector_is_one_line(monkeypatch):

@@ -75,11 +75,10 @@ def test_placement_runs_pool_methods_on_each_pool_and_says_what_runs_on_none():
     )
     assert METHODS["response:aliked+ratio"].pool == "aliked"
     assert METHODS["response:aliked+ratio"].matcher == "ratio"
-    assert len(said) == 1 and "disk-b (disk)" in said[0]
-    assert pooled.placement(("response", "disk-b"), (), own) == (
-        ("response",),
-        [said[0].replace("sift, aliked, aliked+ratio", "sift")],
-    )
+    assert len(said) == 1 and "disk-b (its pool: disk) not on sift, aliked, aliked+ratio" in said[0]
+    names, said = pooled.placement(("octave-scale", "disk-b"), specs[:2], own)
+    assert names == ("octave-scale", "aliked-b")  # SIFT's octaves: on SIFT's pool alone
+    assert "octave-scale (its pool: sift) not on aliked; disk-b" in said[0]
 
 
 def test_a_pooled_name_is_declared_where_it_was_not(monkeypatch):
@@ -177,7 +176,8 @@ def test_table_pools_names_each_pools_peer_and_best_selection_against_colmap_b()
     ]
     import pandas as pd
 
-    table = table_pools(pd.DataFrame(rows), Vocabulary.current())
+    frame = pd.DataFrame(rows)
+    table = table_pools(frame.drop(columns=["pool", "matcher"]), Vocabulary.current(), frame)
     by = table.set_index(["pool", "role", "sees"])
     assert by.loc[("aliked/lightglue", "peer", "image"), "method"] == "aliked-b"
     assert by.loc[("aliked/lightglue", "selection", "image"), "method"] == "octave-scale:aliked"
@@ -189,4 +189,5 @@ def test_table_pools_names_each_pools_peer_and_best_selection_against_colmap_b()
     assert said[0].startswith(
         "At B = 256 in sfm_maa, `aliked-b` on the aliked/lightglue pool leads"
     )
-    assert table_pools(pd.DataFrame(rows).assign(pool="sift"), Vocabulary.current()).empty
+    one = frame.assign(pool="sift")
+    assert table_pools(one, Vocabulary.current(), one).empty

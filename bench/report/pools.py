@@ -44,13 +44,13 @@ def pools_of(frame: pd.DataFrame) -> pd.Series:
     return (pool + "/" + matcher).where(pool != "", OWN_EXTRACTION)
 
 
-def table_pools(frame: pd.DataFrame, vocab: Vocabulary) -> pd.DataFrame:
-    """`table_pools.csv` (module docstring; `frame`: `headline_frame`); empty unless its
-    rows ran on two pools or more."""
-    if "pool" not in frame or frame["pool"].fillna("").nunique() < 2:
+def table_pools(frame: pd.DataFrame, vocab: Vocabulary, rows: pd.DataFrame) -> pd.DataFrame:
+    """`table_pools.csv` (module docstring; `frame`: the `headline_frame` of `rows`, the
+    runs); empty unless the rows ran on two pools or more."""
+    if "pool" not in rows or rows["pool"].fillna("").nunique() < 2:
         return pd.DataFrame()
     lower = vocab.lower_better()
-    pool_of = dict(zip(frame["method"], pools_of(frame)))
+    pool_of = dict(zip(rows["method"], pools_of(rows)))
     out = []
     for metric in (m for m in peer_metrics(vocab) if m in frame):
         counted = solvable(frame, metric, vocab)

@@ -178,7 +178,7 @@ def write_tables(df: pd.DataFrame, results: Path, vocab: Vocabulary) -> list[pd.
         TABLE3: table3(df, vocab),
         TABLE1_EQUAL: equal_keypoints(frame, vocab),
         VERDICTS: category_verdicts(frame, vocab) if len(frame) else pd.DataFrame(),
-        TABLE_POOLS: table_pools(frame, vocab),
+        TABLE_POOLS: table_pools(frame, vocab, df),
         TABLE_COST: table_cost(
             costed, headline_frame(costed, vocab, dataset=datasets), vocab, _settings(results)
         ),

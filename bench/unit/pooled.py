@@ -140,13 +140,11 @@ def placement(methods, specs, own: PoolSpec) -> tuple[tuple[str, ...], list[str]
             continue
         here = [on_pool(method, s, own) for s in specs]
         names += [n for n in here if n is not None]
-        if all(n is None for n in here):
-            said.append(f"{method} ({m.pool})")
+        off = [str(s) for s, n in zip(specs, here) if n is None]
+        if off:
+            said.append(f"{method} (its pool: {m.pool}) not on {', '.join(off)}")
     if said:
-        said = [
-            f"not on the grid's pools ({', '.join(map(str, specs))}), so not run: "
-            f"{', '.join(said)}; add their pools to --pools"
-        ]
+        said = ["methods bound to one pool run on it alone: " + "; ".join(said)]
     return tuple(dict.fromkeys(names)), said
 
 
