@@ -409,14 +409,3 @@ def test_bench_frontend_refuses_a_folder_in_one_line(tmp_path, capsys, make, ext
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and said.format(d=folder) in err
     assert not (tmp_path / "cache").exists()
-
-
-def test_python_m_bench_frontend_is_bench_frontend():
-    import subprocess
-    import sys
-
-    proc = subprocess.run(
-        [sys.executable, "-m", "bench.frontend", "--help"], capture_output=True, text=True
-    )
-    assert proc.returncode == 0 and proc.stdout.startswith("usage: bench frontend")
-    assert "<detector>-<geometry>-<key>.npz" in " ".join(proc.stdout.split())

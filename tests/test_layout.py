@@ -55,9 +55,9 @@ def imports_of(source: str) -> set[str]:
 
 def stage_of(name: str) -> int:
     """Position in the data flow; -1 for the shared modules directly in `bench/`, and the
-    top for a command line's entry (`python -m bench`, `python -m bench.frontend`)."""
+    top for `python -m bench`."""
     parts = name.split(".")
-    if name.endswith(".__main__"):
+    if name == "bench.__main__":
         return len(STAGES)
     return STAGES.index(parts[1]) if len(parts) > 1 and parts[1] in STAGES else -1
 
