@@ -81,13 +81,13 @@ def run(args: argparse.Namespace) -> None:
     cfg = apply_settings(cfg, args.settings).validate()
     images = args.images.resolve()
     alone = images_alone(images)
-    views = load_image_folder(images) if alone else load_views(images)
     grant = args.geometry or (IMAGES if alone else RIG)
     if grant == RIG and alone:
         raise BenchError(
             f"--geometry {RIG} needs the views' poses, and {images} is a folder of images "
             f"alone: give a dataset (images/ and {layouts()}), or --geometry {IMAGES}"
         )
+    views = load_image_folder(images) if alone else load_views(images)
     t = time.perf_counter()
     fe = front_end(images, cfg.detector, cfg.signals, args.out, grant, views)
     how = "read from the cache" if fe.cached else f"computed in {time.perf_counter() - t:.1f} s"

@@ -9,11 +9,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-import cv2
 import numpy as np
 
 from bench import BenchError
-from bench.frontend.pools import POOLS, aliked, get_pool, strongest_first
+from bench.frontend.pools import POOLS, aliked, get_pool
 from bench.frontend.views import View
 
 
@@ -70,11 +69,6 @@ class DetectorConfig:
             )
         POOLS[self.detector].require()
         return self
-
-    @property
-    def binary(self) -> bool:
-        """Whether descriptors are binary strings (Hamming distance)."""
-        return POOLS[self.detector].binary
 
 
 @dataclass
