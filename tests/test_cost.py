@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import pandas as pd
 
-from bench.unit.config import RunConfig
 from bench.harness.execute import Plan, Work
 from bench.harness.grid import BenchConfig
 from bench.report.cost import frontier_only
+from bench.unit.config import RunConfig
 from bench.vocabulary import FRONTIER_PEERS, Unit
 
 

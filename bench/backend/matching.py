@@ -29,6 +29,7 @@ from bench.frontend.features import Candidates
 from bench.frontend.pools import POOLS, RATIO
 from bench.twoview import configuration, two_view_geometry, verification_options
 
+
 @dataclass(frozen=True)
 class BackendConfig:
     """Matching, verification and reconstruction settings."""

@@ -35,7 +35,6 @@ from scipy.sparse.csgraph import connected_components
 
 from bench import BenchError
 from bench.frontend.features import tile_of
-from bench.frontend.pools import strongest_first
 from bench.frontend.policies import (
     ADAPTIVE_SIGNALS,
     PolicyConfig,
@@ -46,6 +45,7 @@ from bench.frontend.policies import (
     multiview_policy,
     settings_for,
 )
+from bench.frontend.pools import strongest_first
 
 
 @dataclass(frozen=True)

@@ -87,7 +87,9 @@ def glue(net, a, b) -> np.ndarray:
 
     def side(xy, desc, size):
         t = {"keypoints": xy - 0.5, "descriptors": desc, "image_size": size}
-        return {k: torch().tensor(np.asarray(v, np.float32))[None].to(device()) for k, v in t.items()}
+        return {
+            k: torch().tensor(np.asarray(v, np.float32))[None].to(device()) for k, v in t.items()
+        }
 
     with torch().inference_mode():
         out = net({"image0": side(*a), "image1": side(*b)})

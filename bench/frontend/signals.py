@@ -58,13 +58,13 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from bench.frontend.features import Candidates, DetectorConfig, descriptor_distances, detect_points
-from bench.frontend.pools import POOLS
 from bench.frontend.geometry import (
     EPIPOLAR_PX,
     EPIPOLAR_RATIO,
     SignalConfig,
     view_geometry,
 )
+from bench.frontend.pools import POOLS
 from bench.frontend.views import View
 
 SAME_POINT_PX = 8.0
@@ -407,7 +407,7 @@ def compute_signals(
     that selects with one policy asks for what it reads. `step()`, if given, is called as
     each view's own signals are done (progress)."""
     n, clock = len(views), _Clock()
-    tau2 = POOLS[det.detector].duplicate_distance**2
+    tau2 = POOLS[det.detector].duplicate_distance ** 2
     values: list[dict[str, np.ndarray]] = [{} for _ in range(n)]
     near_dupes = [np.zeros(len(c)) for c in pools]
     epi_views = [np.zeros(len(c)) for c in pools]

@@ -36,8 +36,8 @@ from bench.console import log, progress
 from bench.files import atomic_path, content_key
 from bench.frontend import features
 from bench.frontend.features import Candidates, DetectorConfig
-from bench.frontend.pools import POOLS
 from bench.frontend.geometry import IMAGES, RIG, SignalConfig, estimate_focal, focal_camera
+from bench.frontend.pools import POOLS
 from bench.frontend.signals import (
     SIGNALS,
     TIMED,

@@ -28,7 +28,6 @@ from bench import ROOT, BenchError, __version__
 from bench.codehash import code_record, git_source, library_versions
 from bench.files import write_text_atomic
 from bench.frontend.pools import POOLS
-from bench.unit.pooled import known
 from bench.harness.keys import (
     PREDICTION_CODE,
     SCORING_CODE,
@@ -39,6 +38,7 @@ from bench.harness.keys import (
 from bench.render.reference import read_manifest
 from bench.results import ORIGIN
 from bench.unit.config import RunConfig
+from bench.unit.pooled import known
 from bench.vocabulary import METHODS
 
 
