@@ -153,9 +153,10 @@ def test_one_grid_runs_a_method_on_two_pools_its_rows_named_and_paired(tmp_path,
     assert len(again) == 2  # resumed: nothing computed twice
 
 
-def test_table_pools_names_each_pools_peer_and_best_selection_against_colmap_b():
+def test_table_pools_names_each_pools_peer_and_best_selection_against_colmap_b_and_its_top_b():
     """Hand-made rows on two pools: each pool's peer and best own-image selection, with its
-    mean and its paired difference from `colmap-b` over the cells both have."""
+    mean and its paired differences from `colmap-b` and from its pool's own top-B over the
+    cells both have."""
     from bench.report.pools import recommendation, table_pools
     from bench.vocabulary import Vocabulary
 
@@ -178,16 +179,46 @@ def test_table_pools_names_each_pools_peer_and_best_selection_against_colmap_b()
 
     frame = pd.DataFrame(rows)
     table = table_pools(frame.drop(columns=["pool", "matcher"]), Vocabulary.current(), frame)
-    by = table.set_index(["pool", "role", "sees"])
-    assert by.loc[("aliked/lightglue", "peer", "image"), "method"] == "aliked-b"
-    assert by.loc[("aliked/lightglue", "selection", "image"), "method"] == "octave-scale:aliked"
-    best = by.loc[("sift/ratio", "selection", "image")]
+    by = table.set_index(["pool", "role", "sees", "vs"])
+    assert by.loc[("aliked/lightglue", "peer", "image", "colmap-b"), "method"] == "aliked-b"
+    chosen = by.loc[("aliked/lightglue", "selection", "image")]
+    assert set(chosen["method"]) == {"octave-scale:aliked"}
+    assert chosen.loc["colmap-b", "mean_diff"] == pytest.approx(0.4)
+    assert chosen.loc["aliked-b", "mean_diff"] == pytest.approx(-0.05)
+    assert chosen.loc["aliked-b", "n"] == 4
+    best = by.loc[("sift/ratio", "selection", "image", "colmap-b")]
     assert best["method"] == "octave-scale" and best["mean"] == pytest.approx(0.5)
     assert best["mean_diff"] == pytest.approx(0.05) and best["n"] == 4
-    assert by.loc[("colmap", "peer", "image"), "method"] == "colmap-b"
+    assert by.loc[("colmap", "peer", "image", ""), "method"] == "colmap-b"
     said = recommendation(table, Vocabulary.current())
-    assert said[0].startswith(
-        "At B = 256 in sfm_maa, `aliked-b` on the aliked/lightglue pool leads"
+    assert len(said) == 1 and said[0].startswith(
+        "At B = 256 in sfm_maa, of the `image` selections `aliked-b` on the aliked/lightglue "
+        "pool leads (0.900); against `colmap-b`: +0.450 ["
     )
+    assert said[0].endswith("over 4 runs, tied.")  # 2 scenes: no interval
     one = frame.assign(pool="sift")
     assert table_pools(one, Vocabulary.current(), one).empty
+
+
+def test_a_cross_pool_snapshots_grid_is_repeated_with_its_pools(tmp_path):
+    """`bench reproduce` and `bench verdict` repeat a snapshot's grid: a cross-pool one's
+    rows name their pools and matchers, and the run that repeats them must run on each."""
+    import pandas as pd
+
+    from bench.cli.common import snapshot_grid
+
+    (tmp_path / "config.json").write_text('{"settings": {"render": null}}')
+    rows = pd.DataFrame(
+        {
+            "method": ["colmap-b", "octave-scale", "aliked-b", "aliked-b:aliked+ratio"],
+            "pool": ["", "sift", "aliked", "aliked"],
+            "matcher": ["", "ratio", "lightglue", "ratio"],
+            "protocol": ["none", "p", "p", "p"],
+            "budget": [256] * 4,
+            "task": ["sfm"] * 4,
+        }
+    )
+    argv = snapshot_grid(tmp_path, rows)
+    assert argv[argv.index("--pools") + 1] == "sift,aliked,aliked+ratio"
+    assert "--pools" not in snapshot_grid(tmp_path, rows[rows["pool"] != "aliked"])
+    assert "--pools" not in snapshot_grid(tmp_path, rows.drop(columns=["pool", "matcher"]))

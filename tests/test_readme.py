@@ -72,3 +72,39 @@ def test_the_next_views_gains_come_from_the_published_next_views_table(tmp_path)
 def test_the_readme_is_read_whole():
     """A newcomer reads it from top to bottom: at most 300 lines (docs/ holds the rest)."""
     assert len((ROOT / "README.md").read_text().splitlines()) <= 300
+
+
+def test_the_cross_pool_leaders_come_from_the_published_pools_table(tmp_path):
+    """Each category's leader across pools at each budget, minus `colmap-b` and minus its
+    own pool's top-B, as `table_pools.csv` gives them (a peer is its own top-B)."""
+    sparse = ROOT / "results" / "published"
+    (tmp_path / "vocabulary.json").write_bytes((sparse / "vocabulary.json").read_bytes())
+    at = dict(budget=256, metric="sfm_maa", runs=20, n=20, wins=1, ties=0, losses=0)
+    aliked = dict(pool="aliked/lightglue", verdict="above")
+    rows = [
+        at
+        | aliked
+        | dict(role="peer", sees="image", method="aliked-b", mean=0.9)
+        | dict(vs="colmap-b", mean_diff=0.4, lo=0.2, hi=0.6),
+        at
+        | aliked
+        | dict(role="selection", sees="image", method="quadtree:aliked", mean=0.8)
+        | dict(vs="colmap-b", mean_diff=0.3, lo=0.1, hi=0.5),
+        at
+        | aliked
+        | dict(role="selection", sees="views", method="track-first:aliked")
+        | dict(mean=0.95, vs="aliked-b", mean_diff=0.05, lo=-0.01, hi=0.11, verdict="tied"),
+        at
+        | aliked
+        | dict(role="selection", sees="views", method="track-first:aliked")
+        | dict(mean=0.95, vs="colmap-b", mean_diff=0.45, lo=0.3, hi=0.6),
+        at | dict(pool="colmap", role="peer", sees="image", method="colmap-b", mean=0.5, vs=""),
+    ]
+    pd.DataFrame(rows).to_csv(tmp_path / "table_pools.csv", index=False)
+    said = results_section({"sparse": sparse}, None, None, tmp_path)
+    assert "| 256 | sfm (sfm_maa) | image | `aliked-b` 0.900 (aliked/lightglue) | +0.400 " in said
+    assert "[+0.200, +0.600] above | itself |" in said
+    row = "| 256 | sfm (sfm_maa) | views | `track-first:aliked` 0.950 (aliked/lightglue) | "
+    assert row + "+0.450 [+0.300, +0.600] above | +0.050 [-0.010, +0.110] tied |" in said
+    assert "`quadtree:aliked`" not in said  # not its category's leader
+    assert "Which detector" not in results_section({"sparse": sparse}, None, None, None)

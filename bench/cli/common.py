@@ -26,6 +26,9 @@ results/published-datasets (`bench publish --to` it; the README states its verdi
 NBV = "nbv"
 """The published next-views snapshot's folder is `regime_folder(PUBLISHED, NBV)`,
 results/published-nbv (the README states its chooser's gains)."""
+POOLS_RUN = "pools"
+"""The published cross-pool snapshot's folder is `regime_folder(PUBLISHED, POOLS_RUN)`,
+results/published-pools (`bench run --pools`; the README states its leaders)."""
 
 REGIMES = {"sparse": (6, "0-4"), "dense": (21, "0,1")}
 """Rig regimes: (views on each scene's path, default seeds). The sparse regime's views are
@@ -369,10 +372,22 @@ def results_arg(parser: argparse.ArgumentParser, default: Path | None, what: str
     parser.add_argument("--results", type=folder, default=default, help=what)
 
 
+def snapshot_pools(rows) -> list[str]:
+    """The pools of a snapshot's rows (`bench.frontend.pools.PoolSpec`: `sift`,
+    `aliked+ratio`), in order of first appearance; none for rows from before pools."""
+    from bench.frontend.pools import PoolSpec
+
+    if "pool" not in rows:
+        return []
+    pairs = rows.loc[rows["pool"].fillna("") != "", ["pool", "matcher"]].drop_duplicates()
+    return [str(PoolSpec(p, m)) for p, m in pairs.itertuples(index=False)]
+
+
 def snapshot_grid(snapshot: Path, rows) -> list[str]:
     """`bench run` options that repeat a snapshot's grid and settings on `rows` (a slice of
-    its rows): its scenes, seeds, budgets, tasks and protocols, and for a rendered one its
-    render settings (its config.json; a dataset's rows need their --dataset folders)."""
+    its rows): its scenes, seeds, budgets, tasks, protocols and, where they are several,
+    pools, and for a rendered one its render settings (its config.json; a dataset's rows
+    need their --dataset folders)."""
     from bench.binding import read_settings
 
     render = read_settings(Path(snapshot))["render"]
@@ -380,6 +395,8 @@ def snapshot_grid(snapshot: Path, rows) -> list[str]:
     out = ["--budget", ",".join(str(b) for b in sorted(set(rows["budget"]) - {0}))]
     out += ["--tasks", ",".join(sorted(set(rows["task"])))]
     out += ["--protocols", ",".join(protocols)] if protocols else []
+    pools = snapshot_pools(rows)
+    out += ["--pools", ",".join(pools)] if len(pools) > 1 else []
     if render is None:
         return out
     out += ["--scenes", ",".join(sorted(set(rows["scene"])))]

@@ -9,6 +9,7 @@ from bench.cli.common import (
     LATEST,
     NBV,
     PHOTOS,
+    POOLS_RUN,
     PUBLISHED,
     REGIMES,
     folder,
@@ -113,7 +114,8 @@ def readme_section(base: Path = PUBLISHED) -> str:
     from bench.report.summary import results_section
 
     snapshots = {r: regime_folder(base, r) for r in REGIMES}
-    return results_section(snapshots, regime_folder(base, PHOTOS), regime_folder(base, NBV))
+    photos, nbv, pools = (regime_folder(base, r) for r in (PHOTOS, NBV, POOLS_RUN))
+    return results_section(snapshots, photos, nbv, pools)
 
 
 def _origin(results: Path) -> tuple[dict | None, str]:

@@ -5,11 +5,13 @@ Per budget, ranking metric (the first headline metric of each task the peers run
 `verdicts.csv`) and pool (a detector with its matcher): the pool's own top-B peer and the
 best selection of each category (`sees`: its own image, other views) on that pool, each
 with its mean over the cells that count (`bench.report.tables.solvable`) and its paired
-difference from `BASELINE`, stock COLMAP's SIFT held to B (what the field runs at a
-budget), over the (scene, seed) units both have, with its 95% interval
-(`bench.report.stats.paired_difference`). The stock-COLMAP peers extract their own SIFT
-keypoints: their pool is `colmap`. `recommendation` says, per budget and metric, which
-(pool, method) leads, and its difference from `BASELINE`.
+difference, over the (scene, seed) units both have, with its 95% interval
+(`bench.report.stats.paired_difference`), from each of two references (`vs`, a row
+each): `BASELINE`, stock COLMAP's SIFT held to B (what the field runs at a budget), and
+the pool's own top-B peer (`aliked-b`), which a selection on a pool must beat to be
+worth its cost. The stock-COLMAP peers extract their own SIFT keypoints: their pool is
+`colmap`. `recommendation` says, per budget, metric and category, which (pool, method)
+leads, and its differences from both.
 """
 
 from __future__ import annotations
@@ -59,13 +61,17 @@ def table_pools(frame: pd.DataFrame, vocab: Vocabulary, rows: pd.DataFrame) -> p
             at = counted[counted["budget"] == budget]
             wide = at.pivot_table(index=["scene", "seed"], columns="method", values=metric)
             for pool, on in at.groupby("pool_name", sort=True):
-                for role, sees, method in _leaders(vocab, set(on["method"]), wide, metric in lower):
-                    out.append(
-                        {"budget": budget, "metric": metric, "pool": pool, "role": role}
-                        | {"sees": sees, "method": method, "mean": wide[method].mean()}
-                        | {"runs": int(wide[method].count())}
-                        | _against(wide, method, metric in lower)
-                    )
+                leaders = list(_leaders(vocab, set(on["method"]), wide, metric in lower))
+                own = next((m for role, _, m in leaders if role == "peer"), "")
+                for role, sees, method in leaders:
+                    row = {"budget": budget, "metric": metric, "pool": pool, "role": role}
+                    row |= {"sees": sees, "method": method, "mean": wide[method].mean()}
+                    row |= {"runs": int(wide[method].count())}
+                    for vs in dict.fromkeys((BASELINE, own)):
+                        if vs and vs != method:
+                            out.append(row | _against(wide, method, vs, metric in lower))
+                    if method == BASELINE:
+                        out.append(row | {"vs": ""})
     return pd.DataFrame(out)
 
 
@@ -84,33 +90,41 @@ def _leaders(vocab: Vocabulary, methods: set, wide: pd.DataFrame, lower: bool):
             yield "selection", sees, best
 
 
-def _against(wide: pd.DataFrame, method: str, lower: bool) -> dict:
-    """`method` minus `BASELINE` over the units both have (none where either is missing)."""
-    if BASELINE not in wide or method == BASELINE:
-        return {"vs": BASELINE, "n": 0, "mean_diff": math.nan, "lo": math.nan, "hi": math.nan}
-    both = wide[[method, BASELINE]].dropna()
-    res = paired_difference(both[method] - both[BASELINE], both.index.get_level_values(0), lower)
-    return {"vs": BASELINE} | res | {"verdict": _verdict(res, lower)}
+def _against(wide: pd.DataFrame, method: str, vs: str, lower: bool) -> dict:
+    """`method` minus `vs` over the units both have (none where `vs` did not run)."""
+    if vs not in wide:
+        return {"vs": vs, "n": 0, "mean_diff": math.nan, "lo": math.nan, "hi": math.nan}
+    both = wide[[method, vs]].dropna()
+    res = paired_difference(both[method] - both[vs], both.index.get_level_values(0), lower)
+    return {"vs": vs} | res | {"verdict": _verdict(res, lower)}
+
+
+def _diff(r) -> str:
+    """`r`'s paired difference as a sentence's clause."""
+    if not r.get("n", 0) or not isinstance(r.get("verdict"), str):
+        return f"against `{r['vs']}`: no paired cell"
+    return (
+        f"against `{r['vs']}`: {_signed(r['mean_diff'])} [{_signed(r['lo'])}, "
+        f"{_signed(r['hi'])}] over {int(r['n'])} runs, {r['verdict']}"
+    )
 
 
 def recommendation(table: pd.DataFrame, vocab: Vocabulary) -> list[str]:
-    """A sentence per budget and metric: the leading (pool, method) of `table_pools.csv`,
-    its mean, and its difference from `BASELINE`."""
+    """A sentence per budget, metric and category (`sees`): its leading (pool, method) of
+    `table_pools.csv` across pools, its mean, and its differences from `BASELINE` and from
+    its pool's own top-B."""
     if table.empty:
         return []
     lower = vocab.lower_better()
     out = []
-    for (budget, metric), at in table.groupby(["budget", "metric"], sort=True):
+    for (budget, metric, sees), at in table.groupby(["budget", "metric", "sees"], sort=True):
         best = at.sort_values("mean", ascending=metric in lower).iloc[0]
-        diff = (
-            f"; against `{BASELINE}`: {_signed(best['mean_diff'])} "
-            f"[{_signed(best['lo'])}, {_signed(best['hi'])}] "
-            f"over {int(best['n'])} runs, {best['verdict']}"
-            if best.get("n", 0) and isinstance(best.get("verdict"), str)
-            else ""
-        )
+        against = at[(at["method"] == best["method"]) & (at["vs"].fillna("") != "")]
+        said = "; ".join(_diff(r) for _, r in against.iterrows())
         out.append(
-            f"At B = {budget} in {metric}, `{best['method']}` on the {best['pool']} pool leads "
-            f"({_three(best['mean'])}){diff}."
+            f"At B = {budget} in {metric}, of the `{sees}` selections `{best['method']}` on "
+            f"the {best['pool']} pool leads ({_three(best['mean'])})"
+            + (f"; {said}" if said else "")
+            + "."
         )
     return out

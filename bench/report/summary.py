@@ -11,7 +11,8 @@ published photo sets' folder, where there is one, gives rows of its own (`PHOTO_
 is a cell) and, from its `transfer.csv`, a table row per set, task and category: whether
 the renders predict its ranking as well as the other sets do
 (`bench.report.transfer.prediction`). The next-views snapshot, where there is one, gives
-its chooser's pooled paired gains (`_nbv_rows`).
+its chooser's pooled paired gains (`_nbv_rows`), and the cross-pool snapshot, where there
+is one, each category's leader across pools at each budget (`_pools_rows`).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ import pandas as pd
 from bench import BenchError
 from bench.binding import read_vocabulary
 from bench.report.transfer import CANNOT_TELL, prediction
-from bench.results import TABLE1, TABLE3, TRANSFER, VERDICTS
+from bench.results import TABLE1, TABLE3, TABLE_POOLS, TRANSFER, VERDICTS
 from bench.vocabulary import HEADLINE_BUDGET, Vocabulary
 
 BEGIN = "<!-- results: written by `bench publish --readme` from the published snapshots -->"
@@ -94,11 +95,14 @@ def _advice(snapshot: Path, regime: str) -> list[str]:
 
 
 def results_section(
-    snapshots: dict[str, Path], photos: Path | None, nbv: Path | None = None
+    snapshots: dict[str, Path],
+    photos: Path | None,
+    nbv: Path | None = None,
+    pools: Path | None = None,
 ) -> str:
     """The README's results section (module docstring) from the regime snapshots
-    (`{regime name: folder}`, those that exist), the published photo sets' folder and the
-    next-views snapshot's."""
+    (`{regime name: folder}`, those that exist), the published photo sets' folder, the
+    next-views snapshot's and the cross-pool snapshot's."""
     found = {r: Path(f) for r, f in snapshots.items() if (Path(f) / TABLE1).is_file()}
     if not found:
         raise BenchError("no published snapshot with a table1.csv: nothing to summarise")
@@ -127,6 +131,8 @@ def results_section(
     for regime, folder in folders.items():
         lines += _advice(folder, regime)
     lines.append("")
+    if pools is not None and (Path(pools) / TABLE_POOLS).is_file():
+        lines += _pools_rows(pd.read_csv(Path(pools) / TABLE_POOLS), Path(pools))
     if photos is not None and (Path(photos) / TRANSFER).is_file():
         vocab = read_vocabulary(next(iter(found.values())))
         lines += _transfer_rows(pd.read_csv(Path(photos) / TRANSFER), Path(photos), vocab)
@@ -139,6 +145,61 @@ def results_section(
     if nbv is not None and (Path(nbv) / TABLE3).is_file():
         lines += _nbv_rows(pd.read_csv(Path(nbv) / TABLE3), Path(nbv))
     return "\n".join(lines) + "\n"
+
+
+def _pools_rows(table: pd.DataFrame, pools: Path) -> list[str]:
+    """Per budget, task and category of the cross-pool snapshot (`table_pools.csv`,
+    `bench.report.pools`): the leader across pools, its paired difference from
+    `colmap-b` and, for a selection, from its own pool's top-B."""
+    vocab = read_vocabulary(pools)
+    out = [
+        f"Which detector and which selection ({pools.as_posix()}/README.md: one grid on the",
+        f"pools {', '.join(f'`{p}`' for p in sorted(set(table['pool'])))} (detector/matcher),",
+        "sparse renders): per budget, task and category, the leader across pools, minus",
+        "`colmap-b` and, for a selection, minus its own pool's top-B (paired over the cells):",
+        "",
+        "| B | task (metric) | sees | leads (pool) | - `colmap-b` | - its pool's top-B |",
+        "|---|---|---|---|---|---|",
+    ]
+    lower = vocab.lower_better()
+    tasks = list(vocab.tasks)
+    order = table.assign(
+        task_order=[
+            tasks.index(t) if t in tasks else len(tasks)
+            for t in (_task(vocab, m) for m in table["metric"])
+        ]
+    )
+    for (budget, _, metric, sees), at in order.groupby(
+        ["budget", "task_order", "metric", "sees"], sort=True
+    ):
+        best = at.sort_values("mean", ascending=metric in lower).iloc[0]
+        diffs = at[at["method"] == best["method"]].set_index("vs")
+        cells = [
+            "itself" if vs == best["method"] else _pooled_diff(diffs, vs)
+            for vs in ("colmap-b", _own_top_b(table, budget, metric, best["pool"]))
+        ]
+        out.append(
+            f"| {budget} | {_task(vocab, metric)} ({metric}) | {sees} | `{best['method']}` "
+            f"{_num(best['mean'])} ({best['pool']}) | {cells[0]} | {cells[1]} |"
+        )
+    return out + [""]
+
+
+def _own_top_b(table: pd.DataFrame, budget: int, metric: str, pool: str) -> str:
+    """The pool's own top-B peer in `table_pools.csv` (`colmap-b` for SIFT's)."""
+    at = table[(table["budget"] == budget) & (table["metric"] == metric)]
+    peer = at[(at["pool"] == pool) & (at["role"] == "peer")]["method"]
+    return str(peer.iloc[0]) if len(peer) else "colmap-b"
+
+
+def _pooled_diff(diffs: pd.DataFrame, vs: str) -> str:
+    """A leader's paired difference from `vs` (`diffs`: its rows by `vs`) with its
+    interval and verdict, as the table writes it."""
+    if vs not in diffs.index or not diffs.loc[vs, "n"] or pd.isna(diffs.loc[vs, "mean_diff"]):
+        return "n/a"
+    r = diffs.loc[vs]
+    diff = f"{_num(r['mean_diff'], True)} [{_num(r['lo'], True)}, {_num(r['hi'], True)}]"
+    return f"{diff} {r['verdict']}"
 
 
 def _predicts(r) -> str:
