@@ -194,3 +194,31 @@ def test_reproduce_classes_last_bits_of_a_residual_apart_from_a_moved_score():
     far = published.copy()
     far.loc[1, "rmse"] = 0.2001  # a residual beyond the tolerance has moved
     assert list(compare_rows(published, far).moved) == ["rmse"]
+
+
+def test_a_pool_modules_verdict_runs_its_pool_alone_beside_the_cross_pool_snapshot(
+    quick_results, renders_dir, tmp_path, capsys, monkeypatch
+):
+    """`bench verdict` on a pool module (examples/my_pool.py): its pool's own top-B and the
+    snapshot's selections named by --methods, on its pool alone, judged against the
+    cross-pool snapshot's `colmap-b`; nothing of the snapshot is computed again."""
+    from bench.cli import verdict
+
+    root = tmp_path / "root"
+    snapshot_of(quick_results, root / "results" / "published-pools")
+    monkeypatch.setattr(verdict, "ROOT", root)
+    calls = []
+    spy(monkeypatch, calls)
+    out = tmp_path / "v"
+    argv = ["verdict", str(ROOT / "examples" / "my_pool.py"), "--results", str(out)]
+    argv += ["--workers", "1", "--renders", str(renders_dir)]
+    assert main([*argv, "--methods", "oracle"]) == 2  # not a selection: one line
+    assert "--methods may name only those" in capsys.readouterr().err
+    assert main([*argv, "--methods", "texture"]) == 0
+    assert sorted(set(calls)) == [("response:sift-upright", 64), ("texture:sift-upright", 64)]
+    rows = pd.read_csv(out / "pools" / "runs.csv")
+    assert set(rows["pool"]) == {"sift-upright"} and set(rows["matcher"]) == {"ratio"}
+    said = capsys.readouterr().out
+    assert "--pools sift-upright" in said
+    assert said.count("`texture:sift-upright` (") == 2  # sfm and pairs at 64
+    assert "against the best own-image peer, `colmap-b`" in said

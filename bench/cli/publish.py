@@ -59,9 +59,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--readme",
         action="store_true",
         help="only rewrite ./README.md's results section (between its markers) from the "
-        f"published snapshots, ./{PUBLISHED} and ./{dense[1]}, and the photo sets' "
-        f"./{regime_folder(PUBLISHED, PHOTOS)}; publishing into a regime's snapshot rewrites "
-        "it too",
+        f"published snapshots, ./{PUBLISHED} and ./{dense[1]}, the photo sets' "
+        f"./{regime_folder(PUBLISHED, PHOTOS)}, the next views' "
+        f"./{regime_folder(PUBLISHED, NBV)} and the cross-pool "
+        f"./{regime_folder(PUBLISHED, POOLS_RUN)}; publishing into one of them rewrites it too",
     )
 
 
@@ -182,5 +183,7 @@ def run(args: argparse.Namespace) -> None:
             "a regime's only with --regime sparse|dense"
         )
     print(f"published {n} files of {args.results} in {args.to}")
-    if args.to.resolve() in {regime_folder(PUBLISHED, r).resolve() for r in (*REGIMES, PHOTOS)}:
+    if args.to.resolve() in {
+        regime_folder(PUBLISHED, r).resolve() for r in (*REGIMES, PHOTOS, NBV, POOLS_RUN)
+    }:
         write_readme(required=False)

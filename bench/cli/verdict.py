@@ -11,6 +11,7 @@ from pathlib import Path
 from bench import ROOT, BenchError
 from bench.cli.common import (
     PHOTOS,
+    POOLS_RUN,
     PUBLISHED,
     REGIMES,
     parse_list,
@@ -33,7 +34,11 @@ DESCRIPTION = (
     "row) and the same pixels; where the code differs from a snapshot's, the modules are "
     "named and one cell of its peers is computed again, as `bench reproduce` does, and "
     "compared before the verdict. A second call resumes; editing the module recomputes its "
-    "rows alone. Exit 1 when no verdict at all could be made."
+    "rows alone. A pool module (one that registers a candidate pool: docs/extending.md) is "
+    "judged against the cross-pool snapshot (results/published-pools) alone: its pool's own "
+    "top-B (`<pool>-b`, or `response:<pool>` on a pool matched by the ratio test) and the "
+    "snapshot's selections that run on any pool (or --methods of them), each on its pool "
+    "with its matcher. Exit 1 when no verdict at all could be made."
 )
 REPRODUCED = ("facade", 0, 256)
 """The cell of a rendered snapshot's peers computed again where the code differs (scene,
@@ -41,8 +46,14 @@ seed, budget; where the snapshot lacks one, its first scene or seed, its middle 
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("module", type=Path, metavar="MODULE", help="a policy module (.py)")
-    parser.add_argument("--methods", default=None, help="its methods to run (default: all)")
+    parser.add_argument(
+        "module", type=Path, metavar="MODULE", help="a policy module or a pool module (.py)"
+    )
+    parser.add_argument(
+        "--methods",
+        default=None,
+        help="its methods to run (default: all; a pool module: the snapshot's selections)",
+    )
     parser.add_argument(
         "--regimes", default=",".join(REGIMES), help="rendered snapshots (default: %(default)s)"
     )
@@ -88,19 +99,27 @@ def _checked(args: argparse.Namespace) -> tuple[Path, list[tuple[str, list[str]]
 
 def run(args: argparse.Namespace) -> None:
     from bench.frontend import plugins
+    from bench.frontend.pools import ORIGIN as POOL_ORIGIN
     from bench.harness.origin import read_origin
     from bench.unit import declared  # noqa: F401 (every method of the package, first)
 
     module, snapshots = _checked(args)
+    plugins.load((str(module),))  # the package's methods imported first: not the module's
+    pools = sorted(p for p, origin in POOL_ORIGIN.items() if Path(origin) == module)
+    if pools:  # a pool module: the cross-pool snapshot alone
+        snapshots = [(POOLS_RUN, [])]
     folders = {name: ROOT / regime_folder(PUBLISHED, name) for name, _ in snapshots}
     origins = {name: read_origin(folder) for name, folder in folders.items()}
-    plugins.load((str(module),))  # the package's methods imported first: not the module's
-    new = sorted(m for m, origin in plugins.ORIGIN.items() if Path(origin) == module)
-    methods = parse_list("--methods", args.methods, str) if args.methods else new
-    if not methods or set(methods) - set(new):
-        raise BenchError(
-            f"{module.name} declares {', '.join(new) or 'no policy'}; --methods may name only those"
-        )
+    if pools:
+        methods = _on_pools(args, pools, folders[POOLS_RUN])
+    else:
+        new = sorted(m for m, origin in plugins.ORIGIN.items() if Path(origin) == module)
+        methods = parse_list("--methods", args.methods, str) if args.methods else new
+        if not methods or set(methods) - set(new):
+            raise BenchError(
+                f"{module.name} declares {', '.join(new) or 'no policy'}; --methods may name "
+                "only those"
+            )
     base = args.results or Path(f"results/verdict-{module.stem}")
     judged = 0
     for name, where in snapshots:
@@ -108,6 +127,30 @@ def run(args: argparse.Namespace) -> None:
         judged += _judge(args, module, methods, snapshot, base)
     if not judged:
         raise SystemExit(1)
+
+
+def _on_pools(args, pools: list[str], snapshot: Path) -> list[str]:
+    """A pool module's methods (`DESCRIPTION`), declared on each of its pools."""
+    from bench.frontend.pools import POOLS, PoolSpec
+    from bench.results import RUNS
+    from bench.runs import read_runs
+    from bench.unit.pooled import POOLED_KINDS, SEPARATOR, declare_pooled, pool_peer
+    from bench.vocabulary import METHODS
+
+    names = {m.partition(SEPARATOR)[0] for m in set(read_runs(snapshot / RUNS)["method"])}
+    free = sorted(m for m in names if METHODS[m].kind in POOLED_KINDS and not METHODS[m].pool)
+    chosen = parse_list("--methods", args.methods, str) if args.methods else free
+    if not chosen or set(chosen) - set(free):
+        raise BenchError(
+            f"{snapshot} runs {', '.join(free) or 'no selection'} on every pool; --methods "
+            "may name only those"
+        )
+    out = []
+    for pool in pools:
+        spec = PoolSpec(pool, POOLS[pool].matcher)
+        out.append(pool_peer(pool) or declare_pooled("response", spec))
+        out += [declare_pooled(m, spec) for m in chosen]
+    return out
 
 
 @dataclass(frozen=True)
@@ -180,6 +223,14 @@ def _module_argv(args, module, methods, snap: Snapshot, published, budgets, out)
     argv += ["--policy-module", str(module), "--methods", ",".join(methods), "--frontier", "none"]
     argv += snapshot_grid(snap.folder, published)
     argv[argv.index("--budget") + 1] = ",".join(map(str, budgets))
+    if snap.name == POOLS_RUN:  # the module's pools, with their matchers, alone
+        if "--pools" in argv:
+            del argv[argv.index("--pools") : argv.index("--pools") + 2]
+        from bench.frontend.pools import PoolSpec
+        from bench.vocabulary import METHODS
+
+        specs = {str(PoolSpec(METHODS[m].pool, METHODS[m].matcher)): 0 for m in methods}
+        argv += ["--pools", ",".join(specs)]
     return argv + (["--workers", str(args.workers)] if args.workers else [])
 
 
