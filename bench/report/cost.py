@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
 from bench.report.categories import peer_metrics
 from bench.report.figures import method_styles, plt, save
@@ -154,6 +155,9 @@ def figure_cost(cost: pd.DataFrame, vocab: Vocabulary, out: Path) -> bool:
                 color=styles[method]["color"],
             )
         ax.set_xscale("log")
+        ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))  # 100, 200, 500, ...
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:,.0f}"))
+        ax.xaxis.set_minor_formatter(NullFormatter())  # no label over another
         ax.set_xlabel("front end + matching ms per view (log)")
         ax.set_ylabel(metric)
         ax.set_title(f"{metric} against its cost, each budget a point")
