@@ -663,3 +663,15 @@ def test_select_lists_only_the_policies_it_runs(tmp_path, capsys):
         assert f"--policy {policy!r} {what}" in err and "adaptive" in err
         valid = err.split("valid: ")[1].split(", ")
         assert "colmap-b" not in valid and "random-view" not in valid and "oracle" not in valid
+
+
+def test_the_transfer_hint_counts_the_methods_as_placed_on_the_pools(tmp_path, capsys):
+    """Three methods on three pools rank seven: no "will hold no tau" line, which counted
+    the names given to --methods."""
+    d = str(_tiny_dataset(tmp_path / "set"))
+    where = ["--results", str(tmp_path / "r"), "--renders", str(tmp_path / "renders")]
+    argv = ["run", "--dataset", d, "--methods", "texture,grid,random", "--budget", "0", *where]
+    assert main(argv) == 2  # refused later, for its budget
+    assert "will hold no tau: --methods gives 3 budgeted method(s)" in capsys.readouterr().err
+    assert main([*argv, "--pools", "sift,orb"]) == 2
+    assert "will hold no tau" not in capsys.readouterr().err

@@ -419,12 +419,15 @@ def rendered_arg(paths: list[Path]) -> list[Path]:
     return list(paths)
 
 
-def transfer_methods(methods: tuple[str, ...]) -> None:
-    """Say before any work when a dataset run's methods are too few for a tau."""
+def transfer_methods(cfg) -> None:
+    """Say before any work when a dataset run's methods, as placed on its pools, are too
+    few for a tau."""
     from bench.report.transfer import MIN_METHODS, NEEDS
     from bench.vocabulary import METHODS
 
-    ranked = [m for m in methods if m in METHODS and not METHODS[m].whole_pool]
+    if not all(m in METHODS for m in cfg.methods):
+        return  # a name not declared yet: the grid's check says so, in one line
+    ranked = [m for m in cfg.placed[0] if not METHODS[m].whole_pool]
     if len(ranked) < MIN_METHODS:
         log(
             f"transfer.csv will hold no tau: --methods gives {len(ranked)} budgeted method(s) "
@@ -495,7 +498,6 @@ def grid_of(args: argparse.Namespace):
         truth = all([has_pixel_truth(d) for d in datasets])  # what the oracle selects by
         kinds = {p: METHODS[p].kind for p in methods if p in METHODS}
         methods = tuple(p for p in methods if truth or kinds.get(p) != GROUND_TRUTH)
-        transfer_methods(methods)
     else:
         seeds = parse_list(
             "--seeds",
@@ -524,6 +526,8 @@ def grid_of(args: argparse.Namespace):
         frontier=() if frontier == "none" else parse_list("--frontier", frontier, int, "1024,2048"),
         pools=parse_list("--pools", args.pools, str, "sift,aliked") if args.pools else (),
     )
+    if datasets:
+        transfer_methods(cfg)
     results = args.results or (
         LATEST.with_name(f"dataset-{datasets[0].name}" if len(datasets) == 1 else "datasets")
         if datasets
