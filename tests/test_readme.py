@@ -101,10 +101,10 @@ def test_the_cross_pool_leaders_come_from_the_published_pools_table(tmp_path):
         at | dict(pool="colmap", role="peer", sees="image", method="colmap-b", mean=0.5, vs=""),
     ]
     pd.DataFrame(rows).to_csv(tmp_path / "table_pools.csv", index=False)
-    said = results_section({"sparse": sparse}, None, None, tmp_path)
-    assert "| 256 | sfm (sfm_maa) | image | `aliked-b` 0.900 (aliked/lightglue) | +0.400 " in said
-    assert "[+0.200, +0.600] above | itself |" in said
-    row = "| 256 | sfm (sfm_maa) | views | `track-first:aliked` 0.950 (aliked/lightglue) | "
+    said = results_section({"sparse": sparse}, None, None, {"renders": tmp_path})
+    row = "| renders | 256 | sfm (sfm_maa) | `aliked-b` 0.900 (aliked/lightglue) | +0.400 "
+    row += "[+0.200, +0.600] above | itself | `track-first:aliked` 0.950 (aliked/lightglue) | "
     assert row + "+0.450 [+0.300, +0.600] above | +0.050 [-0.010, +0.110] tied |" in said
     assert "`quadtree:aliked`" not in said  # not its category's leader
-    assert "Which detector" not in results_section({"sparse": sparse}, None, None, None)
+    missing = {"renders": tmp_path / "none"}
+    assert "Which detector" not in results_section({"sparse": sparse}, None, None, missing)

@@ -28,7 +28,9 @@ NBV = "nbv"
 results/published-nbv (the README states its chooser's gains)."""
 POOLS_RUN = "pools"
 """The published cross-pool snapshot's folder is `regime_folder(PUBLISHED, POOLS_RUN)`,
-results/published-pools (`bench run --pools`; the README states its leaders)."""
+results/published-pools (`bench run --pools`; the README states its leaders), and the
+photo sets' in bags on several pools `regime_folder(PUBLISHED, POOLS_PHOTOS)`."""
+POOLS_PHOTOS = "pools-datasets"
 
 REGIMES = {"sparse": (6, "0-4"), "dense": (21, "0,1")}
 """Rig regimes: (views on each scene's path, default seeds). The sparse regime's views are

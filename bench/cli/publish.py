@@ -9,6 +9,7 @@ from bench.cli.common import (
     LATEST,
     NBV,
     PHOTOS,
+    POOLS_PHOTOS,
     POOLS_RUN,
     PUBLISHED,
     REGIMES,
@@ -61,8 +62,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="only rewrite ./README.md's results section (between its markers) from the "
         f"published snapshots, ./{PUBLISHED} and ./{dense[1]}, the photo sets' "
         f"./{regime_folder(PUBLISHED, PHOTOS)}, the next views' "
-        f"./{regime_folder(PUBLISHED, NBV)} and the cross-pool "
-        f"./{regime_folder(PUBLISHED, POOLS_RUN)}; publishing into one of them rewrites it too",
+        f"./{regime_folder(PUBLISHED, NBV)} and the cross-pool ones, "
+        f"./{regime_folder(PUBLISHED, POOLS_RUN)} (renders) and "
+        f"./{regime_folder(PUBLISHED, POOLS_PHOTOS)} (photo sets); publishing into one of "
+        "them rewrites it too",
     )
 
 
@@ -112,10 +115,14 @@ def write_readme(readme: Path = README, required: bool = True) -> None:
 def readme_section(base: Path = PUBLISHED) -> str:
     """The README's results section from the regimes' snapshots (`base` the sparse one's
     folder), the photo sets' and the next views' (`bench.report.summary`)."""
-    from bench.report.summary import results_section
+    from bench.report.summary import PHOTO_ROWS, results_section
 
     snapshots = {r: regime_folder(base, r) for r in REGIMES}
-    photos, nbv, pools = (regime_folder(base, r) for r in (PHOTOS, NBV, POOLS_RUN))
+    photos, nbv = regime_folder(base, PHOTOS), regime_folder(base, NBV)
+    pools = {
+        "renders": regime_folder(base, POOLS_RUN),
+        PHOTO_ROWS: regime_folder(base, POOLS_PHOTOS),
+    }
     return results_section(snapshots, photos, nbv, pools)
 
 
@@ -184,6 +191,7 @@ def run(args: argparse.Namespace) -> None:
         )
     print(f"published {n} files of {args.results} in {args.to}")
     if args.to.resolve() in {
-        regime_folder(PUBLISHED, r).resolve() for r in (*REGIMES, PHOTOS, NBV, POOLS_RUN)
+        regime_folder(PUBLISHED, r).resolve()
+        for r in (*REGIMES, PHOTOS, NBV, POOLS_RUN, POOLS_PHOTOS)
     }:
         write_readme(required=False)

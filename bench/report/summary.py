@@ -98,11 +98,12 @@ def results_section(
     snapshots: dict[str, Path],
     photos: Path | None,
     nbv: Path | None = None,
-    pools: Path | None = None,
+    pools: dict[str, Path] | None = None,
 ) -> str:
     """The README's results section (module docstring) from the regime snapshots
     (`{regime name: folder}`, those that exist), the published photo sets' folder, the
-    next-views snapshot's and the cross-pool snapshot's."""
+    next-views snapshot's and the cross-pool snapshots' (`{renders or photographs:
+    folder}`, those that exist)."""
     found = {r: Path(f) for r, f in snapshots.items() if (Path(f) / TABLE1).is_file()}
     if not found:
         raise BenchError("no published snapshot with a table1.csv: nothing to summarise")
@@ -131,8 +132,9 @@ def results_section(
     for regime, folder in folders.items():
         lines += _advice(folder, regime)
     lines.append("")
-    if pools is not None and (Path(pools) / TABLE_POOLS).is_file():
-        lines += _pools_rows(pd.read_csv(Path(pools) / TABLE_POOLS), Path(pools))
+    tables = {k: Path(f) for k, f in (pools or {}).items() if (Path(f) / TABLE_POOLS).is_file()}
+    if tables:
+        lines += _pools_rows(tables)
     if photos is not None and (Path(photos) / TRANSFER).is_file():
         vocab = read_vocabulary(next(iter(found.values())))
         lines += _transfer_rows(pd.read_csv(Path(photos) / TRANSFER), Path(photos), vocab)
@@ -147,47 +149,57 @@ def results_section(
     return "\n".join(lines) + "\n"
 
 
-def _pools_rows(table: pd.DataFrame, pools: Path) -> list[str]:
-    """Per budget, task and category of the cross-pool snapshot (`table_pools.csv`,
-    `bench.report.pools`): the leader across pools, its paired difference from
-    `colmap-b` and, for a selection, from its own pool's top-B."""
-    vocab = read_vocabulary(pools)
+def _pools_rows(tables: dict[str, Path]) -> list[str]:
+    """Per snapshot (`{label: folder}` of those with a `table_pools.csv`,
+    `bench.report.pools`), budget and task: each category's leader across pools, its paired
+    difference from `colmap-b` and, for a selection, from its own pool's top-B."""
+    first = next(iter(tables.values()))
+    vocab = read_vocabulary(first)
+    pools = sorted({p for f in tables.values() for p in pd.read_csv(f / TABLE_POOLS)["pool"]})
+    where = ", ".join(f"{f.as_posix()}/README.md ({label})" for label, f in tables.items())
     out = [
-        f"Which detector and which selection ({pools.as_posix()}/README.md: one grid on the",
-        f"pools {', '.join(f'`{p}`' for p in sorted(set(table['pool'])))} (detector/matcher),",
-        "sparse renders): per budget, task and category, the leader across pools, minus",
-        "`colmap-b` and, for a selection, minus its own pool's top-B (paired over the cells):",
+        "Which detector and which selection, from grids on several pools (a pool: its",
+        f"detector/matcher; {', '.join(f'`{p}`' for p in pools)}): per budget and task, each",
+        "category's leader across pools, minus `colmap-b` and minus its own pool's top-B",
+        f"(paired over the cells; `itself`: it is that top-B). Their pages: {where}.",
         "",
-        "| B | task (metric) | sees | leads (pool) | - `colmap-b` | - its pool's top-B |",
-        "|---|---|---|---|---|---|",
+        "| on | B | task (metric) | `image` leads (pool) | - `colmap-b` | - own top-B "
+        "| `views` leads (pool) | - `colmap-b` | - own top-B |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
-    lower = vocab.lower_better()
-    tasks = list(vocab.tasks)
-    order = table.assign(
-        task_order=[
-            tasks.index(t) if t in tasks else len(tasks)
-            for t in (_task(vocab, m) for m in table["metric"])
+    lower, tasks = vocab.lower_better(), list(vocab.tasks)
+    for label, folder in tables.items():
+        table = pd.read_csv(folder / TABLE_POOLS)
+        order = [
+            tasks.index(_task(vocab, m)) if _task(vocab, m) in tasks else 99
+            for m in table["metric"]
         ]
-    )
-    for (budget, _, metric, sees), at in order.groupby(
-        ["budget", "task_order", "metric", "sees"], sort=True
-    ):
-        best = at.sort_values("mean", ascending=metric in lower).iloc[0]
-        diffs = at[at["method"] == best["method"]].set_index("vs")
-        cells = [
-            "itself" if vs == best["method"] else _pooled_diff(diffs, vs)
-            for vs in ("colmap-b", _own_top_b(table, budget, metric, best["pool"]))
-        ]
-        out.append(
-            f"| {budget} | {_task(vocab, metric)} ({metric}) | {sees} | `{best['method']}` "
-            f"{_num(best['mean'])} ({best['pool']}) | {cells[0]} | {cells[1]} |"
-        )
+        table = table.assign(task_order=order)
+        for (budget, _, metric), at in table.groupby(["budget", "task_order", "metric"], sort=True):
+            cells = []
+            for sees in ("image", "views"):
+                of = at[at["sees"] == sees]
+                if of.empty:
+                    cells += ["n/a"] * 3
+                    continue
+                best = of.sort_values("mean", ascending=metric in lower).iloc[0]
+                diffs = of[of["method"] == best["method"]].set_index("vs")
+                cells.append(f"`{best['method']}` {_num(best['mean'])} ({best['pool']})")
+                cells += [
+                    "itself" if vs == best["method"] else _pooled_diff(diffs, vs)
+                    for vs in ("colmap-b", _own_top_b(at, best["pool"]))
+                ]
+            out.append(
+                f"| {label} | {budget} | {_task(vocab, metric)} ({metric}) | "
+                + " | ".join(cells)
+                + " |"
+            )
     return out + [""]
 
 
-def _own_top_b(table: pd.DataFrame, budget: int, metric: str, pool: str) -> str:
-    """The pool's own top-B peer in `table_pools.csv` (`colmap-b` for SIFT's)."""
-    at = table[(table["budget"] == budget) & (table["metric"] == metric)]
+def _own_top_b(at: pd.DataFrame, pool: str) -> str:
+    """The pool's own top-B peer in `table_pools.csv`'s rows of one budget and metric
+    (`colmap-b` for SIFT's)."""
     peer = at[(at["pool"] == pool) & (at["role"] == "peer")]["method"]
     return str(peer.iloc[0]) if len(peer) else "colmap-b"
 
