@@ -9,7 +9,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from bench import BenchError
+from bench import ROOT, BenchError
 from bench.frontend import plugins
 from bench.frontend.features import DetectorConfig
 from bench.frontend.pools import POOLS, PoolSpec
@@ -222,3 +222,16 @@ def test_a_cross_pool_snapshots_grid_is_repeated_with_its_pools(tmp_path):
     assert argv[argv.index("--pools") + 1] == "sift,aliked,aliked+ratio"
     assert "--pools" not in snapshot_grid(tmp_path, rows[rows["pool"] != "aliked"])
     assert "--pools" not in snapshot_grid(tmp_path, rows.drop(columns=["pool", "matcher"]))
+
+
+def test_a_cross_pool_snapshots_settings_are_read_with_its_pooled_methods_own_settings():
+    """A grid on pools records `track-first:aliked`'s own settings; reading them back (a
+    snapshot's origin, `bench verdict`) declared no pooled name and refused the folder, so
+    `bench publish` recorded no origin."""
+    from bench.binding import read_settings
+    from bench.cli.common import settings_config
+
+    settings = read_settings(ROOT / "results" / "published-pools")
+    assert "track-first:aliked" in settings["methods"]
+    cfg = settings_config(settings)
+    assert cfg.policy_config("track-first:aliked") == cfg.policy_config("track-first")

@@ -253,12 +253,16 @@ def settings_config(settings: dict):
     from bench.render.config import RenderConfig
     from bench.unit import declared  # noqa: F401 (every method's own settings, first)
     from bench.unit.config import RunConfig
+    from bench.unit.pooled import SEPARATOR, known
 
     def text(v) -> str:
         return "none" if v is None else ",".join(map(str, v)) if isinstance(v, list) else str(v)
 
     config = RunConfig(render=None if settings.get("render") is None else RenderConfig())
     own_of = settings.get(OWN_SETTINGS, {})  # a method declared since has its defaults
+    for method in own_of:  # `track-first:aliked`: declared where it is met (a grid on pools)
+        if SEPARATOR in method:
+            known(method)
     own = {f"{m}.{k}": v for m, d in own_of.items() for k, v in d.items()}
     shared = {k: v for k, v in settings.items() if k != OWN_SETTINGS and v is not None}
     config = apply_settings(config, [f"{k}={text(v)}" for k, v in (flatten(shared) | own).items()])

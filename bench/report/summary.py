@@ -159,9 +159,10 @@ def _pools_rows(tables: dict[str, Path]) -> list[str]:
     where = ", ".join(f"{f.as_posix()}/README.md ({label})" for label, f in tables.items())
     out = [
         "Which detector and which selection, from grids on several pools (a pool: its",
-        f"detector/matcher; {', '.join(f'`{p}`' for p in pools)}): per budget and task, each",
-        "category's leader across pools, minus `colmap-b` and minus its own pool's top-B",
-        f"(paired over the cells; `itself`: it is that top-B). Their pages: {where}.",
+        f"detector/matcher; {', '.join(f'`{p}`' for p in pools)}):",
+        "per budget and task, each category's leader across pools, minus `colmap-b` and",
+        "minus its own pool's top-B (paired over the cells; `itself`: it is that top-B; SIFT's",
+        f"is `colmap-b`). Pages: {where}.",
         "",
         "| on | B | task (metric) | `image` leads (pool) | - `colmap-b` | - own top-B "
         "| `views` leads (pool) | - `colmap-b` | - own top-B |",
