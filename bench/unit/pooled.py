@@ -141,7 +141,7 @@ def placement(methods, specs, own: PoolSpec) -> tuple[tuple[str, ...], list[str]
         here = [on_pool(method, s, own) for s in specs]
         names += [n for n in here if n is not None]
         off = [str(s) for s, n in zip(specs, here) if n is None]
-        if off:
+        if off and SEPARATOR not in method:  # a pooled name names its one pool itself
             said.append(f"{method} (its pool: {m.pool}) not on {', '.join(off)}")
     if said:
         said = ["methods bound to one pool run on it alone: " + "; ".join(said)]
