@@ -79,9 +79,18 @@ def test_placement_runs_pool_methods_on_each_pool_and_says_what_runs_on_none():
     names, said = pooled.placement(("octave-scale", "disk-b"), specs[:2], own)
     assert names == ("octave-scale", "aliked-b")  # SIFT's octaves: on SIFT's pool alone
     assert "octave-scale (its pool: sift) not on aliked; disk-b" in said[0]
-    pooled.known("quadtree:aliked")  # as the grid's check declares it
-    names, said = pooled.placement(("quadtree:aliked", "quadtree"), specs[:2], own)
-    assert names == ("quadtree:aliked", "quadtree", "aliked-b")
+    for name in ("quadtree:aliked", "aliked-b:aliked+ratio"):  # as bench reproduce names them
+        pooled.known(name)  # as the grid's check declares it
+    names, said = pooled.placement(
+        ("quadtree:aliked", "aliked-b:aliked+ratio", "quadtree"), specs, own
+    )
+    assert names == (
+        "quadtree:aliked",  # on its own pool alone
+        "aliked-b:aliked+ratio",
+        "quadtree",
+        "quadtree:aliked+ratio",
+        "aliked-b",
+    )
     assert "quadtree" not in said[0]  # a pooled name names its one pool itself
 
 

@@ -118,6 +118,8 @@ def on_pool(method: str, spec: PoolSpec, own: PoolSpec) -> str | None:
     m = METHODS[method]
     if m.kind not in POOLED_KINDS:
         return None
+    if SEPARATOR in method:  # a pooled name: on its own pool and matcher alone
+        return method if spec == PoolSpec(m.pool, m.matcher) else None
     if m.pool:  # bound to one detector: under its name with its matcher, or on the run's pool
         if m.pool != spec.pool:
             return None
