@@ -106,5 +106,9 @@ def test_the_cross_pool_leaders_come_from_the_published_pools_table(tmp_path):
     row += "[+0.200, +0.600] above | itself | `track-first:aliked` 0.950 (aliked/lightglue) | "
     assert row + "+0.450 [+0.300, +0.600] above | +0.050 [-0.010, +0.110] tied |" in said
     assert "`quadtree:aliked`" not in said  # not its category's leader
+    both = results_section(
+        {"sparse": sparse}, None, None, {"renders": tmp_path, "photos": tmp_path}
+    )
+    assert "renders and photographs: in sfm at 256 they agree on `aliked-b`." in both
     missing = {"renders": tmp_path / "none"}
     assert "Which detector" not in results_section({"sparse": sparse}, None, None, missing)

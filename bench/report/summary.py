@@ -169,6 +169,7 @@ def _pools_rows(tables: dict[str, Path]) -> list[str]:
         "|---|---|---|---|---|---|---|---|---|",
     ]
     lower, tasks = vocab.lower_better(), list(vocab.tasks)
+    leaders: dict = {}
     for label, folder in tables.items():
         table = pd.read_csv(folder / TABLE_POOLS)
         order = [
@@ -181,7 +182,7 @@ def _pools_rows(tables: dict[str, Path]) -> list[str]:
             for sees in ("image", "views"):
                 of = at[at["sees"] == sees]
                 if of.empty:
-                    cells += ["n/a"] * 3
+                    cells += ["not run", "", ""]
                     continue
                 best = of.sort_values("mean", ascending=metric in lower).iloc[0]
                 diffs = of[of["method"] == best["method"]].set_index("vs")
@@ -195,7 +196,27 @@ def _pools_rows(tables: dict[str, Path]) -> list[str]:
                 + " | ".join(cells)
                 + " |"
             )
-    return out + [""]
+            leaders.setdefault((budget, metric), {})[label] = cells[0].split(" ")[0]
+    return out + ["", *_agreement(leaders, vocab), ""]
+
+
+def _agreement(leaders: dict, vocab: Vocabulary) -> list[str]:
+    """Where the snapshots share a budget and task: whether their `image` leaders are the
+    same method."""
+    said = []
+    for (budget, metric), by in leaders.items():
+        if len(by) < 2:
+            continue
+        task = _task(vocab, metric)
+        names = set(by.values())
+        said.append(
+            f"in {task} at {budget} they agree on {names.pop()}"
+            if len(names) == 1
+            else f"in {task} at {budget} " + ", ".join(f"the {k} name {v}" for k, v in by.items())
+        )
+    return (
+        ["Own-image leaders on renders and photographs: " + "; ".join(said) + "."] if said else []
+    )
 
 
 def _own_top_b(at: pd.DataFrame, pool: str) -> str:
