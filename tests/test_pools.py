@@ -237,7 +237,23 @@ def test_a_cross_pool_snapshots_grid_is_repeated_with_its_pools(tmp_path):
     assert "--pools" not in snapshot_grid(tmp_path, rows.drop(columns=["pool", "matcher"]))
 
 
-def test_a_cross_pool_snapshots_settings_are_read_with_its_pooled_methods_own_settings():
+@pytest.fixture
+def forgets_declared_names():
+    """Methods the test declares are forgotten after it: a method's own settings enter every
+    `config.json` this process writes, which later tests compare with their own."""
+    from bench.frontend.policies import MULTIVIEW, POLICIES
+
+    registries = (METHODS, pooled.SETTINGS, POLICIES, MULTIVIEW, plugins.ORIGIN)
+    before = [set(r) for r in registries]
+    yield
+    for registry, names in zip(registries, before):
+        for name in set(registry) - names:
+            del registry[name]
+
+
+def test_a_cross_pool_snapshots_settings_are_read_with_its_pooled_methods_own_settings(
+    forgets_declared_names,
+):
     """A grid on pools records `track-first:aliked`'s own settings; reading them back (a
     snapshot's origin, `bench verdict`) declared no pooled name and refused the folder, so
     `bench publish` recorded no origin."""
