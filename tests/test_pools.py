@@ -264,3 +264,21 @@ def test_a_cross_pool_snapshots_settings_are_read_with_its_pooled_methods_own_se
     assert "track-first:aliked" in settings["methods"]
     cfg = settings_config(settings)
     assert cfg.policy_config("track-first:aliked") == cfg.policy_config("track-first")
+
+
+def test_a_peer_whose_pool_is_not_installed_is_not_paired_and_says_why(monkeypatch):
+    """`bench verdict examples/my_pool.py` on a clone without the `learned` extra stopped
+    on the cross-pool snapshot's `aliked-b` rows (their protocol names ALIKED's package
+    versions); they are left unpaired with one line, and the verdict goes on."""
+    from dataclasses import replace
+
+    from bench.binding import read_settings
+    from bench.cli.common import settings_config
+    from bench.frontend.pools import POOLS
+    from bench.harness.origin import protocol_changes, read_origin
+
+    snapshot = ROOT / "results" / "published-pools"
+    monkeypatch.setitem(POOLS, "aliked", replace(POOLS["aliked"], packages=("no-such-package",)))
+    cfg = settings_config(read_settings(snapshot))
+    said = protocol_changes(read_origin(snapshot), cfg, [("aliked-b", "sfm"), ("colmap-b", "sfm")])
+    assert "the aliked pool needs the `learned` extra" in said["aliked-b", "sfm"]

@@ -145,7 +145,13 @@ def protocol_changes(origin: dict, cfg: RunConfig, pairs) -> dict[tuple[str, str
         then = origin["protocols"].get(_pair(method, task))
         if then is None:
             out[method, task] = f"the snapshot records no protocol of {method}'s {task} rows"
-        elif method not in METHODS or then != protocol_hash(cfg, method, task):
+            continue
+        try:
+            same = method in METHODS and then == protocol_hash(cfg, method, task)
+        except BenchError as e:  # its pool's packages are not installed here
+            out[method, task] = f"{method}'s {task} rows: {e}"
+            continue
+        if not same:
             out[method, task] = (
                 f"{method}'s {task} rows were computed under another protocol (settings, "
                 "libraries or the fields that decide a row) than this checkout's"
