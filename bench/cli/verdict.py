@@ -189,7 +189,8 @@ def _judge(args, module: Path, methods: list[str], snap: Snapshot, base: Path) -
         )
         if read_settings(snapshot)["render"] is not None:
             again = base / f"reproduce-{name}"
-            _reproduce_peers(args, snapshot, published, peers, budgets, again)
+            paired = [p for p in peers if p not in refused]  # none it cannot compute here
+            _reproduce_peers(args, snapshot, published, paired, budgets, again)
         else:
             print("  (its peers are not computed again on photographs: `bench reproduce` a regime)")
     else:
