@@ -266,7 +266,9 @@ def test_a_cross_pool_snapshots_settings_are_read_with_its_pooled_methods_own_se
     assert cfg.policy_config("track-first:aliked") == cfg.policy_config("track-first")
 
 
-def test_a_peer_whose_pool_is_not_installed_is_not_paired_and_says_why(monkeypatch):
+def test_a_peer_whose_pool_is_not_installed_is_not_paired_and_says_why(
+    monkeypatch, forgets_declared_names
+):
     """`bench verdict examples/my_pool.py` on a clone without the `learned` extra stopped
     on the cross-pool snapshot's `aliked-b` rows (their protocol names ALIKED's package
     versions); they are left unpaired with one line, and the verdict goes on."""
