@@ -187,9 +187,11 @@ def _pools_rows(tables: dict[str, Path]) -> list[str]:
                 best = of.sort_values("mean", ascending=metric in lower).iloc[0]
                 diffs = of[of["method"] == best["method"]].set_index("vs")
                 cells.append(f"`{best['method']}` {_num(best['mean'])} ({best['pool']})")
+                others = [v for v in diffs.index.dropna() if v not in ("colmap-b", "")]
+                own = best["method"] if best["role"] == "peer" else next(iter(others), "colmap-b")
                 cells += [
                     "itself" if vs == best["method"] else _pooled_diff(diffs, vs)
-                    for vs in ("colmap-b", _own_top_b(at, best["pool"]))
+                    for vs in ("colmap-b", own)  # own: its pool's top-B, as table_pools paired it
                 ]
             out.append(
                 f"| {label} | {budget} | {_task(vocab, metric)} ({metric}) | "
@@ -217,13 +219,6 @@ def _agreement(leaders: dict, vocab: Vocabulary) -> list[str]:
     return (
         ["Own-image leaders on renders and photographs: " + "; ".join(said) + "."] if said else []
     )
-
-
-def _own_top_b(at: pd.DataFrame, pool: str) -> str:
-    """The pool's own top-B peer in `table_pools.csv`'s rows of one budget and metric
-    (`colmap-b` for SIFT's)."""
-    peer = at[(at["pool"] == pool) & (at["role"] == "peer")]["method"]
-    return str(peer.iloc[0]) if len(peer) else "colmap-b"
 
 
 def _pooled_diff(diffs: pd.DataFrame, vs: str) -> str:
